@@ -1,0 +1,6 @@
+"""Planners (thesis ch. 3): exact grid A* and the modified A* over the robot's
+own (cell, heading) lattice, with the expert controller that follows it."""
+
+from agents.planning.astar import PathResult, astar, distance_field, path_length
+
+__all__ = ["PathResult", "astar", "distance_field", "path_length"]
