@@ -1,0 +1,120 @@
+"""NNQL hyper-parameters: one flat dataclass (thesis ch. 4, cleanrl-style)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+TARGET_UPDATES = ("soft", "hard")
+EXPLORATIONS = ("boltzmann", "epsilon")
+LOSS_FUNCTIONS = ("l2", "smooth_l1", "l1")
+ACTIVATION_NAMES = ("relu", "tanh", "elu")
+
+
+@dataclass
+class NNQLConfig:
+    """Neural-network Q-learning: Q-network, replay, loss, target network and exploration.
+
+    Exploration schedules are functions of the learner's update count (the policy
+    version), so local training and distributed actors, which only see versioned
+    weights, explore the same way.
+    """
+
+    hidden_sizes: tuple[int, ...] = (128, 128)
+    """widths of the Q-network's hidden layers (MLP over range sensors + goal features)"""
+    activation: str = "relu"
+    """hidden activation: relu, tanh or elu"""
+    lr: float = 1e-3
+    """Adam learning rate"""
+    gamma: float = 0.98
+    """discount factor"""
+    batch_size: int = 128
+    """transitions per gradient update"""
+    replay_capacity: int = 100_000
+    """replay buffer size in transitions (oldest overwritten first)"""
+    learning_starts: int = 2_000
+    """transitions in replay before the first update"""
+    utd_ratio: float = 0.125
+    """gradient updates per inserted transition (update-to-data ratio; 0.125 = one per 8)"""
+    prioritized: bool = False
+    """prioritized replay (TorchRL PrioritizedSampler) instead of uniform sampling"""
+    priority_alpha: float = 0.3
+    """priority exponent; TorchRL's DQNLoss writes the squared TD error, so 0.3 acts like 0.6 on |td|"""
+    priority_beta: float = 0.4
+    """importance-sampling exponent of prioritized replay"""
+    priority_eps: float = 1e-6
+    """added to priorities so no transition becomes unsampleable"""
+    target_update: str = "soft"
+    """target network update: soft (Polyak, tau each update) or hard (copy every target_period updates)"""
+    target_tau: float = 0.005
+    """Polyak factor of soft target updates"""
+    target_period: int = 500
+    """updates between hard target copies"""
+    double_q: bool = True
+    """double Q-learning: the online network picks the next action, the target network values it"""
+    sarsa: bool = False
+    """SARSA variant: bootstrap on the next action actually taken (needs next_action in transitions)"""
+    loss_function: str = "smooth_l1"
+    """TD loss: l2, smooth_l1 (Huber) or l1"""
+    grad_clip: float = 10.0
+    """max global gradient norm (0 disables clipping)"""
+    exploration: str = "boltzmann"
+    """behaviour policy: boltzmann (softmax over Q / temperature, the thesis' policy) or epsilon (greedy)"""
+    temperature_start: float = 0.5
+    """Boltzmann temperature at version 0"""
+    temperature_end: float = 0.02
+    """Boltzmann temperature after temperature_decay_updates (geometric decay)"""
+    temperature_decay_updates: int = 20_000
+    """updates over which the temperature decays"""
+    epsilon_start: float = 1.0
+    """epsilon at version 0 (exploration='epsilon')"""
+    epsilon_end: float = 0.05
+    """epsilon after epsilon_decay_updates (linear decay)"""
+    epsilon_decay_updates: int = 10_000
+    """updates over which epsilon decays"""
+    seed: int = 0
+    """seeds network initialisation and replay sampling"""
+    torch_threads: int = 1
+    """torch intra-op threads for the learner (small MLPs are fastest on one)"""
+
+    def __post_init__(self) -> None:
+        self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)
+        checks = {
+            "activation": (self.activation, ACTIVATION_NAMES),
+            "target_update": (self.target_update, TARGET_UPDATES),
+            "exploration": (self.exploration, EXPLORATIONS),
+            "loss_function": (self.loss_function, LOSS_FUNCTIONS),
+        }
+        for name, (value, allowed) in checks.items():
+            if value not in allowed:
+                raise ValueError(f"NNQLConfig.{name}={value!r}: expected one of {allowed}")
+        if not self.hidden_sizes or min(self.hidden_sizes) < 1:
+            raise ValueError(f"NNQLConfig.hidden_sizes={self.hidden_sizes}: need positive widths")
+        if not 0.0 < self.gamma <= 1.0:
+            raise ValueError(f"NNQLConfig.gamma={self.gamma}: expected 0 < gamma <= 1")
+        if self.batch_size < 1 or self.replay_capacity < self.batch_size:
+            raise ValueError("NNQLConfig: need 1 <= batch_size <= replay_capacity")
+        if self.utd_ratio <= 0:
+            raise ValueError(f"NNQLConfig.utd_ratio={self.utd_ratio}: expected > 0")
+        if not 0.0 < self.target_tau <= 1.0 or self.target_period < 1:
+            raise ValueError("NNQLConfig: need 0 < target_tau <= 1 and target_period >= 1")
+        if min(self.temperature_start, self.temperature_end) <= 0:
+            raise ValueError("NNQLConfig: Boltzmann temperatures must be > 0")
+        if self.sarsa and self.double_q:
+            raise ValueError("NNQLConfig: sarsa bootstraps on the taken action; set double_q=False")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able copy (tuples become lists)."""
+        data = dataclasses.asdict(self)
+        data["hidden_sizes"] = list(self.hidden_sizes)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> NNQLConfig:
+        """Inverse of to_dict; unknown keys are an error so typos do not pass silently."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ValueError(f"NNQLConfig: unknown field(s) {unknown}")
+        return cls(**data)

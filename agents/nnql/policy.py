@@ -1,0 +1,222 @@
+"""The NNQL control policy for actors and evaluation: numpy only, built from weights.
+
+Actors never hold a learner: they get a ``dict[str, np.ndarray]`` of weights (from a
+WeightsUpdate or a policy directory) plus the architecture dict, and act on a batch
+of observations at once. Exploration is the thesis' stochastic policy - Boltzmann
+(softmax of Q / temperature) with a decaying temperature - or epsilon-greedy; greedy
+for evaluation. No torch import here, so an actor process starts fast.
+
+On disk a policy is a directory with ``model.safetensors`` (the weights) and
+``config.json`` (model name, kind, architecture, version).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.nnql.config import NNQLConfig
+
+MODEL_NAME = "nnql"
+POLICY_KIND = "q_network"
+WEIGHTS_FILE = "model.safetensors"
+CONFIG_FILE = "config.json"
+MODES = ("greedy", "boltzmann", "epsilon")
+
+
+# ---------------------------------------------------------------- pure maths
+
+
+def q_layers(weights: dict[str, np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(W^T, b) per linear layer, in order, from ``"<index>.weight"/"<index>.bias"`` names."""
+    indices = sorted({int(name.split(".")[0]) for name in weights})
+    layers = []
+    for index in indices:
+        weight = np.ascontiguousarray(np.asarray(weights[f"{index}.weight"], dtype=np.float32).T)
+        bias = np.asarray(weights[f"{index}.bias"], dtype=np.float32)
+        layers.append((weight, bias))
+    return layers
+
+
+def mlp_forward(layers: list[tuple[np.ndarray, np.ndarray]], activation: str, obs: np.ndarray) -> np.ndarray:
+    """Q-values (N, n_actions) of a batch of observations (N, obs_dim)."""
+    x = np.asarray(obs, dtype=np.float32)
+    for i, (weight, bias) in enumerate(layers):
+        x = x @ weight + bias
+        if i < len(layers) - 1:
+            if activation == "relu":
+                np.maximum(x, 0.0, out=x)
+            elif activation == "tanh":
+                np.tanh(x, out=x)
+            elif activation == "elu":
+                x = np.where(x > 0, x, np.expm1(np.minimum(x, 0.0)))
+            else:
+                raise ValueError(f"unknown activation {activation!r}")
+    return x
+
+
+def boltzmann_probabilities(q_values: np.ndarray, temperature: float) -> np.ndarray:
+    """softmax(Q / temperature) along the last axis, numerically stable."""
+    if temperature <= 0:
+        raise ValueError(f"temperature must be > 0, got {temperature}")
+    logits = (q_values - q_values.max(axis=-1, keepdims=True)) / temperature
+    exp = np.exp(logits)
+    return exp / exp.sum(axis=-1, keepdims=True)
+
+
+def temperature_at(config: NNQLConfig, version: int) -> float:
+    """Boltzmann temperature after ``version`` updates: geometric decay from start to end."""
+    frac = min(max(version, 0) / max(config.temperature_decay_updates, 1), 1.0)
+    return float(config.temperature_start * (config.temperature_end / config.temperature_start) ** frac)
+
+
+def epsilon_at(config: NNQLConfig, version: int) -> float:
+    """Epsilon after ``version`` updates: linear decay from start to end."""
+    frac = min(max(version, 0) / max(config.epsilon_decay_updates, 1), 1.0)
+    return float(config.epsilon_start + frac * (config.epsilon_end - config.epsilon_start))
+
+
+# ---------------------------------------------------------------- the policy
+
+
+class NNQLPolicy:
+    """Vectorised Q-network policy: ``policy(obs (N, obs_dim)) -> actions (N,) int64``.
+
+    mode "greedy" (argmax Q, ties to the lowest action), "boltzmann" (sample from
+    softmax(Q / temperature)) or "epsilon" (uniform with probability epsilon, else
+    greedy). ``explore_as(config, version)`` sets mode and parameter from the config's
+    schedules, which is what actors call when new weights arrive.
+    """
+
+    def __init__(
+        self,
+        weights: dict[str, np.ndarray],
+        architecture: dict[str, Any],
+        *,
+        mode: str = "greedy",
+        temperature: float = 1.0,
+        epsilon: float = 0.0,
+        version: int = 0,
+        seed: int | None = None,
+    ):
+        if mode not in MODES:
+            raise ValueError(f"unknown policy mode {mode!r}; expected one of {MODES}")
+        self.architecture = dict(architecture)
+        self.mode = mode
+        self.temperature = float(temperature)
+        self.epsilon = float(epsilon)
+        self.rng = np.random.default_rng(seed)
+        self.set_weights(weights, version)
+
+    def set_weights(self, weights: dict[str, np.ndarray], version: int | None = None) -> None:
+        """Swap in new weights (same architecture); shapes are checked."""
+        layers = q_layers(weights)
+        sizes = [
+            self.architecture["obs_dim"],
+            *self.architecture["hidden_sizes"],
+            self.architecture["n_actions"],
+        ]
+        expected = list(itertools.pairwise(sizes))
+        got = [w.shape for w, _ in layers]
+        if got != expected or any(b.shape != (w.shape[1],) for w, b in layers):
+            raise ValueError(f"weights do not fit the architecture: layer shapes {got}, expected {expected}")
+        self.layers = layers
+        if version is not None:
+            self.version = int(version)
+
+    def explore_as(self, config: NNQLConfig, version: int) -> None:
+        """Behaviour-policy exploration for policy version ``version`` (actors, local training)."""
+        self.mode = config.exploration
+        self.temperature = temperature_at(config, version)
+        self.epsilon = epsilon_at(config, version)
+
+    def q_values(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs, dtype=np.float32)
+        if obs.ndim != 2 or obs.shape[1] != self.architecture["obs_dim"]:
+            raise ValueError(f"expected observations (N, {self.architecture['obs_dim']}), got {obs.shape}")
+        return mlp_forward(self.layers, self.architecture["activation"], obs)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        q = self.q_values(obs)
+        greedy = q.argmax(axis=1)
+        if self.mode == "greedy":
+            return greedy.astype(np.int64)
+        if self.mode == "epsilon":
+            explore = self.rng.random(len(q)) < self.epsilon
+            random_actions = self.rng.integers(0, q.shape[1], size=len(q))
+            return np.where(explore, random_actions, greedy).astype(np.int64)
+        probs = boltzmann_probabilities(q, self.temperature)
+        cumulative = probs.cumsum(axis=1)
+        draws = self.rng.random((len(q), 1)) * cumulative[:, -1:]
+        return np.minimum((draws > cumulative).sum(axis=1), q.shape[1] - 1).astype(np.int64)
+
+    def greedy(self) -> NNQLPolicy:
+        """A greedy copy sharing the weights (for evaluation)."""
+        policy = NNQLPolicy.__new__(NNQLPolicy)
+        policy.__dict__.update(self.__dict__)
+        policy.mode = "greedy"
+        return policy
+
+    # ------------------------------------------------------------ files
+
+    def save(self, path: str | Path, **metadata: Any) -> Path:
+        """Write ``model.safetensors`` + ``config.json`` into directory ``path``."""
+        weights = {}
+        indices = range(0, 2 * len(self.layers), 2)
+        for index, (weight, bias) in zip(indices, self.layers, strict=True):
+            weights[f"{index}.weight"] = np.ascontiguousarray(weight.T)
+            weights[f"{index}.bias"] = bias
+        return save_policy_dir(path, weights, self.architecture, self.version, **metadata)
+
+    @classmethod
+    def load(cls, path: str | Path, **kwargs: Any) -> NNQLPolicy:
+        """Read a policy directory written by ``save``/``save_policy_dir`` (greedy unless told)."""
+        weights, config = load_policy_dir(path)
+        kwargs.setdefault("version", config.get("version", 0))
+        return cls(weights, config["architecture"], **kwargs)
+
+
+def save_policy_dir(
+    path: str | Path,
+    weights: dict[str, np.ndarray],
+    architecture: dict[str, Any],
+    version: int,
+    **metadata: Any,
+) -> Path:
+    """Weights as safetensors plus a JSON config; files appear atomically (temp + rename)."""
+    from safetensors.numpy import save_file
+
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    config = {
+        "model": MODEL_NAME,
+        "kind": POLICY_KIND,
+        "version": int(version),
+        "architecture": dict(architecture),
+        **metadata,
+    }
+    tensors = {name: np.ascontiguousarray(value, dtype=np.float32) for name, value in weights.items()}
+    save_file(tensors, str(path / (WEIGHTS_FILE + ".tmp")))
+    os.replace(path / (WEIGHTS_FILE + ".tmp"), path / WEIGHTS_FILE)
+    (path / (CONFIG_FILE + ".tmp")).write_text(json.dumps(config, indent=2, sort_keys=True) + "\n")
+    os.replace(path / (CONFIG_FILE + ".tmp"), path / CONFIG_FILE)
+    return path
+
+
+def load_policy_dir(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """(weights, config) of a policy directory; a clear error if it is not an NNQL policy."""
+    from safetensors.numpy import load_file
+
+    path = Path(path)
+    config_path, weights_path = path / CONFIG_FILE, path / WEIGHTS_FILE
+    if not config_path.is_file() or not weights_path.is_file():
+        raise FileNotFoundError(f"{path}: expected {CONFIG_FILE} and {WEIGHTS_FILE}")
+    config = json.loads(config_path.read_text())
+    if config.get("model") != MODEL_NAME:
+        raise ValueError(f"{config_path}: model is {config.get('model')!r}, not {MODEL_NAME!r}")
+    return load_file(str(weights_path)), config
