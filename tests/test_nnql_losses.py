@@ -29,10 +29,10 @@ def make_learner(**overrides) -> NNQLLearner:
 def make_batch(n: int = 16, seed: int = 0) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
     return {
-        "observation": rng.standard_normal((n, OBS_DIM)).astype(np.float32),
+        "obs": rng.standard_normal((n, OBS_DIM)).astype(np.float32),
         "action": rng.integers(0, N_ACTIONS, n),
         "reward": rng.standard_normal(n).astype(np.float32),
-        "next_observation": rng.standard_normal((n, OBS_DIM)).astype(np.float32),
+        "next_obs": rng.standard_normal((n, OBS_DIM)).astype(np.float32),
         "terminated": np.arange(n) % 3 == 0,
         "truncated": np.arange(n) % 5 == 0,  # truncated transitions still bootstrap
         "next_action": rng.integers(0, N_ACTIONS, n),
@@ -65,8 +65,8 @@ def squared_td_errors(learner: NNQLLearner, batch: dict[str, np.ndarray]) -> tor
 
 
 def expected_errors(learner, batch, next_value_fn) -> torch.Tensor:
-    q_now, _ = q_online_and_target(learner, batch["observation"])
-    q_next_online, q_next_target = q_online_and_target(learner, batch["next_observation"])
+    q_now, _ = q_online_and_target(learner, batch["obs"])
+    q_next_online, q_next_target = q_online_and_target(learner, batch["next_obs"])
     predicted = q_now.gather(1, torch.as_tensor(batch["action"]).view(-1, 1)).squeeze(1)
     next_value = next_value_fn(q_next_online, q_next_target)
     target = td_target(

@@ -14,10 +14,10 @@ OBS_DIM, N_ACTIONS = 6, 3
 
 def random_batch(rng: np.random.Generator, n: int, next_action: bool = False) -> dict[str, np.ndarray]:
     batch = {
-        "observation": rng.random((n, OBS_DIM), dtype=np.float32),
+        "obs": rng.random((n, OBS_DIM), dtype=np.float32),
         "action": rng.integers(0, N_ACTIONS, n),
         "reward": rng.standard_normal(n).astype(np.float32),
-        "next_observation": rng.random((n, OBS_DIM), dtype=np.float32),
+        "next_obs": rng.random((n, OBS_DIM), dtype=np.float32),
         "terminated": rng.random(n) < 0.2,
         "truncated": rng.random(n) < 0.1,
     }
@@ -45,9 +45,9 @@ def test_flat_batch_becomes_torchrl_layout():
     assert td["action"].dtype == torch.int64
     expected_done = batch["terminated"] | batch["truncated"]
     assert np.array_equal(td["next", "done"].squeeze(-1).numpy(), expected_done)
-    np.testing.assert_array_equal(td["next", "observation"].numpy(), batch["next_observation"])
+    np.testing.assert_array_equal(td["next", "observation"].numpy(), batch["next_obs"])
     with pytest.raises(ValueError, match="observations"):
-        transitions_to_tensordict({**batch, "observation": batch["observation"][:, :3]}, OBS_DIM)
+        transitions_to_tensordict({**batch, "obs": batch["obs"][:, :3]}, OBS_DIM)
     with pytest.raises(KeyError, match="reward"):
         transitions_to_tensordict({k: v for k, v in batch.items() if k != "reward"}, OBS_DIM)
 
@@ -110,3 +110,13 @@ def test_sarsa_learner_requires_next_action():
         learner.add(random_batch(rng, 8))
     learner.add(random_batch(rng, 100, next_action=True))
     assert np.isfinite(learner.update()["losses/td_loss"])
+
+
+def test_message_objects_and_tensordicts_are_accepted():
+    from types import SimpleNamespace
+
+    batch = random_batch(np.random.default_rng(6), 12)
+    message = SimpleNamespace(actor="a1", policy_version=3, **batch)  # the shape of a TransitionBatch
+    from_message = transitions_to_tensordict(message, OBS_DIM)
+    assert (from_message == transitions_to_tensordict(batch, OBS_DIM)).all()
+    assert (transitions_to_tensordict(from_message, OBS_DIM) == from_message).all()

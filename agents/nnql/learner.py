@@ -6,8 +6,9 @@ it from an in-process vector env. One update (``train_step``) is sample -> loss 
 backward -> clip -> Adam step -> target update -> priority update.
 
 Transitions come as a TensorDict in TorchRL's layout (``observation``, ``action``,
-``("next", "observation"|"reward"|"done"|"terminated"|"truncated")``) or as a flat
-dict of arrays (see ``TRANSITION_FIELDS``), N transitions per call.
+``("next", "observation"|"reward"|"done"|"terminated"|"truncated")``), as a flat
+dict of arrays (see ``TRANSITION_FIELDS``) or as any object with those attributes (a
+protocols TransitionBatch), N transitions per call.
 """
 
 from __future__ import annotations
@@ -29,37 +30,45 @@ from agents.nnql.losses import PRIORITY_KEY, make_loss
 from agents.nnql.networks import QNetwork, make_q_actor
 from agents.nnql.policy import NNQLPolicy, save_policy_dir
 
-TRANSITION_FIELDS = ("observation", "action", "reward", "next_observation", "terminated", "truncated")
-"""Flat transition batch: float32 (N, obs_dim), int (N,), float (N,), float32 (N, obs_dim), bool (N,),
+TRANSITION_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "truncated")
+"""Flat transition batch (the field names of protocols' TransitionBatch): float32 (N, obs_dim), int (N,),
+float (N,), float32 (N, obs_dim) - the true next observation, terminal one at episode ends -, bool (N,),
 bool (N,); plus ``next_action`` int (N,) for the SARSA variant."""
 CHECKPOINT_STATE = "learner.pt"
 CHECKPOINT_REPLAY = "replay"
 CHECKPOINT_POLICY = "policy"
 
 
-def transitions_to_tensordict(batch: Mapping[str, Any] | TensorDictBase, obs_dim: int) -> TensorDict:
-    """A flat dict of arrays (or a TorchRL-layout TensorDict) as a replay-ready TensorDict."""
+def _flat_fields(batch: Any) -> dict[str, Any]:
+    """The flat fields of a TorchRL-layout TensorDict, a mapping, or an object with those attributes."""
     if isinstance(batch, TensorDictBase):
-        n = batch.batch_size[0]
-        get = batch.get
         flat = {
-            "observation": get("observation"),
-            "action": get("action"),
-            "reward": get(("next", "reward")),
-            "next_observation": get(("next", "observation")),
-            "terminated": get(("next", "terminated")),
-            "truncated": get(("next", "truncated"), torch.zeros(n, dtype=torch.bool)),
+            "obs": batch.get("observation"),
+            "action": batch.get("action"),
+            "reward": batch.get(("next", "reward")),
+            "next_obs": batch.get(("next", "observation")),
+            "terminated": batch.get(("next", "terminated")),
+            "truncated": batch.get(("next", "truncated"), torch.zeros(batch.batch_size[0], dtype=torch.bool)),
         }
         if ("next", "action") in batch.keys(include_nested=True):
-            flat["next_action"] = get(("next", "action"))
-    else:
-        missing = [name for name in TRANSITION_FIELDS if name not in batch]
-        if missing:
-            raise KeyError(f"transition batch lacks {missing}")
-        flat = dict(batch)
+            flat["next_action"] = batch.get(("next", "action"))
+        return flat
+    if not isinstance(batch, Mapping):  # e.g. a protocols.messages.TransitionBatch
+        batch = {
+            name: getattr(batch, name) for name in (*TRANSITION_FIELDS, "next_action") if hasattr(batch, name)
+        }
+    missing = [name for name in TRANSITION_FIELDS if name not in batch]
+    if missing:
+        raise KeyError(f"transition batch lacks {missing}")
+    return dict(batch)
+
+
+def transitions_to_tensordict(batch: Any, obs_dim: int) -> TensorDict:
+    """A transition batch (see ``_flat_fields``) as a replay-ready TensorDict in TorchRL's layout."""
+    flat = _flat_fields(batch)
     n = len(flat["action"])
-    obs = torch.as_tensor(np.asarray(flat["observation"], dtype=np.float32))
-    next_obs = torch.as_tensor(np.asarray(flat["next_observation"], dtype=np.float32))
+    obs = torch.as_tensor(np.asarray(flat["obs"], dtype=np.float32))
+    next_obs = torch.as_tensor(np.asarray(flat["next_obs"], dtype=np.float32))
     if obs.shape != (n, obs_dim) or next_obs.shape != (n, obs_dim):
         raise ValueError(
             f"observations must be ({n}, {obs_dim}); got {tuple(obs.shape)}, {tuple(next_obs.shape)}"
@@ -135,7 +144,7 @@ class NNQLLearner:
         """Policy version: the number of gradient updates so far."""
         return self.updates
 
-    def add(self, batch: Mapping[str, Any] | TensorDictBase) -> int:
+    def add(self, batch: Any) -> int:
         """Insert a batch of transitions; returns how many were added."""
         td = transitions_to_tensordict(batch, self.architecture["obs_dim"])
         if self.config.sarsa and ("next", "action") not in td.keys(include_nested=True):
