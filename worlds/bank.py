@@ -1,0 +1,197 @@
+"""Maps and tasks packed into flat arrays for the compiled kernel.
+
+A :class:`MapBank` holds every map an environment may use (flat ``blocked`` and
+gap-field arrays with per-map offsets and sizes) and a table of *entries* (map,
+start, goal, and the candidate cells for random starts, goals and disc positions:
+the free cells of the start's 4-connected region). The first ``n_pool`` entries
+are the task pool an environment draws its episodes from; tasks given explicitly
+to ``reset`` are appended after them.
+
+The pool is drawn once from a :class:`worlds.tasks.TaskSampler` with a fixed seed
+and shared (read-only) by every environment built from the same spec, so a single
+env and a vector env see the same pool, and building 1024 single envs for a
+baseline costs one pool.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+
+from worlds.maps import GridMap, Task, components
+from worlds.robot import gap_field
+from worlds.tasks import TaskSampler
+
+MAX_EXTRA_ENTRIES = 4096
+"""explicit tasks kept before unused ones are dropped"""
+
+
+class MapBank:
+    def __init__(self) -> None:
+        self.grids: list[GridMap] = []
+        self._grid_index: dict[tuple, int] = {}
+        self._regions: dict[tuple[int, int], tuple[int, int]] = {}
+        self._labels: list[np.ndarray] = []
+        self._entry_index: dict[tuple[int, tuple[int, int], tuple[int, int]], int] = {}
+        self.n_pool = 0
+        self.pool_tasks: list[Task] = []
+        self.pool_resample = False
+        self.pool_min_distance = 0.0
+        self._blocked: list[np.ndarray] = []
+        self._gap: list[np.ndarray] = []
+        self._cand: list[np.ndarray] = []
+        self._cand_size = 0
+        self._map_size = 0
+        self._moff: list[int] = []
+        self._entries: list[tuple[int, int, int, int, int, int, int, float, int]] = []
+
+    def add_pool(self, tasks: list[Task], resample: bool, min_distance: float) -> tuple[int, int]:
+        """Append a task pool (before any explicit task); returns its (first entry, size)."""
+        if len(self._entries) != self.n_pool:
+            raise RuntimeError("pools must be added before explicit tasks")
+        first = len(self._entries)
+        for task in tasks:
+            self._add_entry(task, resample, min_distance)
+        self.n_pool = len(self._entries)
+        self._pack()
+        return first, len(tasks)
+
+    # ------------------------------------------------------------------ building
+    def _map_index(self, grid: GridMap) -> int:
+        key = (grid.shape, grid.cell_size, grid.blocked.tobytes())  # same map built twice shares a slot
+        if key in self._grid_index:
+            return self._grid_index[key]
+        m = len(self.grids)
+        self.grids.append(grid)
+        self._grid_index[key] = m
+        self._blocked.append(grid.blocked.ravel().astype(np.uint8))
+        self._gap.append(gap_field(grid).ravel())
+        self._labels.append(components(grid))
+        self._moff.append(self._map_size)
+        self._map_size += grid.blocked.size
+        return m
+
+    def _region(self, m: int, start: tuple[int, int]) -> tuple[int, int]:
+        label = int(self._labels[m][start])
+        if (m, label) not in self._regions:
+            cells = np.flatnonzero(self._labels[m].ravel() == label).astype(np.int64)
+            self._regions[(m, label)] = (self._cand_size, len(cells))
+            self._cand.append(cells)
+            self._cand_size += len(cells)
+        return self._regions[(m, label)]
+
+    def _add_entry(self, task: Task, resample: bool, min_distance: float) -> int:
+        m = self._map_index(task.grid)
+        key = (m, task.start, task.goal)
+        if key in self._entry_index and not resample:
+            return self._entry_index[key]
+        c_off, c_n = self._region(m, task.start)
+        self._entries.append((m, *task.start, *task.goal, c_off, c_n, min_distance, int(resample)))
+        index = len(self._entries) - 1
+        if not resample:
+            self._entry_index[key] = index
+        return index
+
+    def _pack(self) -> None:
+        self.blocked = np.concatenate(self._blocked)
+        self.gap = np.concatenate(self._gap)
+        self.moff = np.asarray(self._moff, dtype=np.int64)
+        self.mh = np.asarray([g.height for g in self.grids], dtype=np.int64)
+        self.mw = np.asarray([g.width for g in self.grids], dtype=np.int64)
+        self.mcell = np.asarray([g.cell_size for g in self.grids], dtype=np.float64)
+        self.cand = np.concatenate(self._cand)
+        e = self._entries
+        self.emap = np.asarray([t[0] for t in e], dtype=np.int64)
+        self.estart = np.asarray([t[1:3] for t in e], dtype=np.int64).reshape(-1, 2)
+        self.egoal = np.asarray([t[3:5] for t in e], dtype=np.int64).reshape(-1, 2)
+        self.ecoff = np.asarray([t[5] for t in e], dtype=np.int64)
+        self.ecn = np.asarray([t[6] for t in e], dtype=np.int64)
+        self.emind = np.asarray([t[7] for t in e], dtype=np.float64)
+        self.eres = np.asarray([t[8] for t in e], dtype=np.uint8)
+
+    # ------------------------------------------------------------------ use
+    def add_tasks(self, tasks: list[Task], in_use: np.ndarray) -> tuple[list[int], np.ndarray | None]:
+        """Entries for explicit tasks (used as given, never resampled). When too many extras
+        piled up, extras not in ``in_use`` are dropped first; the returned array (or None)
+        then maps old entry indices to new ones for the caller's robots."""
+        remap = None
+        if len(self._entries) - self.n_pool + len(tasks) > MAX_EXTRA_ENTRIES:
+            remap = self._drop_unused(in_use)
+        indices = [self._add_entry(t, False, 0.0) for t in tasks]
+        self._pack()
+        return indices, remap
+
+    def _drop_unused(self, in_use: np.ndarray) -> np.ndarray:
+        keep = np.zeros(len(self._entries), dtype=bool)
+        keep[: self.n_pool] = True
+        keep[np.asarray(in_use, dtype=np.int64)] = True
+        remap = np.cumsum(keep) - 1
+        self._entries = [e for e, k in zip(self._entries, keep, strict=True) if k]
+        self._entry_index = {key: int(remap[i]) for key, i in self._entry_index.items() if keep[i]}
+        return remap
+
+    def entry_task(self, index: int) -> Task:
+        m, sr, sc, gr, gc = self._entries[index][:5]
+        return Task(self.grids[m], (sr, sc), (gr, gc), self.grids[m].name)
+
+    def kernel_maps(self) -> tuple:
+        return (self.blocked, self.gap, self.moff, self.mh, self.mw, self.mcell)
+
+    def kernel_entries(self) -> tuple:
+        return (self.emap, self.estart, self.egoal, self.ecoff, self.ecn, self.emind, self.eres, self.cand)
+
+
+_POOLS: OrderedDict[tuple, MapBank] = OrderedDict()
+_POOL_CACHE_SIZE = 8
+
+
+def pool_bank(sampler: TaskSampler, size: int, seed: int) -> MapBank:
+    """The bank of ``sampler``'s task pool: its tasks when finite, else ``size`` draws, draw ``k``
+    with ``np.random.default_rng([seed, k])``. Cached per (spec, size, seed): share it read-only,
+    :meth:`MapBank.add_tasks` on a copy (see :func:`private_copy`)."""
+    key = (sampler.key if not sampler.key.startswith("callable@") else id(sampler), size, seed)
+    if key in _POOLS:
+        _POOLS.move_to_end(key)
+        return _POOLS[key]
+    tasks = list(sampler.tasks or [sampler(np.random.default_rng([seed, k])) for k in range(size)])
+    bank = MapBank()
+    bank.add_pool(tasks, sampler.resample, sampler.min_distance)
+    bank.pool_tasks, bank.pool_resample, bank.pool_min_distance = (
+        tasks,
+        sampler.resample,
+        sampler.min_distance,
+    )
+    _POOLS[key] = bank
+    while len(_POOLS) > _POOL_CACHE_SIZE:
+        _POOLS.popitem(last=False)
+    return bank
+
+
+def private_copy(bank: MapBank) -> MapBank:
+    """A bank that can take extra tasks without touching the shared one (lists copied,
+    packed arrays rebuilt on the next add)."""
+    clone = object.__new__(MapBank)
+    clone.__dict__.update(bank.__dict__)
+    for name in ("grids", "_blocked", "_gap", "_cand", "_moff", "_entries", "_labels"):
+        setattr(clone, name, list(getattr(bank, name)))
+    for name in ("_grid_index", "_regions", "_entry_index"):
+        setattr(clone, name, dict(getattr(bank, name)))
+    return clone
+
+
+def merged_bank(samplers: list[TaskSampler], size: int, seed: int) -> tuple[MapBank, np.ndarray, np.ndarray]:
+    """One bank holding the pools of several samplers (one per robot, repeats shared);
+    returns it with each robot's (first pool entry, pool size)."""
+    pools = [pool_bank(s, size, seed) for s in samplers]
+    if all(p is pools[0] for p in pools):
+        lo, n = 0, pools[0].n_pool
+        return pools[0], np.full(len(samplers), lo, dtype=np.int64), np.full(len(samplers), n, dtype=np.int64)
+    bank = MapBank()
+    ranges: dict[int, tuple[int, int]] = {}
+    for p in pools:
+        if id(p) not in ranges:
+            ranges[id(p)] = bank.add_pool(p.pool_tasks, p.pool_resample, p.pool_min_distance)
+    lo = np.asarray([ranges[id(p)][0] for p in pools], dtype=np.int64)
+    n = np.asarray([ranges[id(p)][1] for p in pools], dtype=np.int64)
+    return bank, lo, n

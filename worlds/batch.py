@@ -1,0 +1,165 @@
+"""State and preallocated buffers of a batch of robots, stepped by :mod:`worlds.kernel`.
+
+Both :class:`worlds.env.NavigationEnv` (one robot) and
+:class:`worlds.vector_env.NavigationVectorEnv` (N robots) are thin layers over this
+class, so their dynamics are the same code.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from worlds import kernel
+from worlds.bank import merged_bank, private_copy
+from worlds.config import NavConfig
+from worlds.maps import Task
+from worlds.obstacles import DiscObstacles
+from worlds.tasks import TaskSampler
+
+
+class NavBatch:
+    """``n`` robots, robot ``i`` drawing its episodes from ``samplers[i]``'s task pool."""
+
+    def __init__(self, n: int, config: NavConfig, samplers: list[TaskSampler]) -> None:
+        if n < 1:
+            raise ValueError(f"need at least one robot, got {n}")
+        if len(samplers) != n:
+            raise ValueError(f"need one task sampler per robot: {len(samplers)} for {n} robots")
+        self.n, self.config = n, config
+        self.bank, pool_lo, pool_n = merged_bank(samplers, config.pool_size, config.pool_seed)
+        self._bank_is_shared = True
+        self.turns = np.asarray(config.robot.turns, dtype=np.float64)
+        angles = config.sensors.beam_angles
+        self.beam_c, self.beam_s = np.cos(angles), np.sin(angles)
+        self.params = kernel.make_params(config)
+        self.obs_dim = config.sensors.n_beams + 3
+        f8, i8 = np.float64, np.int64
+        self.x, self.y, self.theta, self.gx, self.gy = (np.zeros(n, f8) for _ in range(5))
+        self.steps, self.ent, self.outcome = np.zeros(n, i8), np.zeros(n, i8), np.zeros(n, i8)
+        self.path_length, self.goal_dist = np.zeros(n, f8), np.zeros(n, f8)
+        self.start_cell, self.goal_cell = np.zeros((n, 2), i8), np.zeros((n, 2), i8)
+        self.rng = np.zeros(n, np.uint64)
+        self.pool_lo, self.pool_n = pool_lo, pool_n
+        self._alloc_discs(max(config.obstacles.count, 1))
+        self.obs = np.zeros((n, self.obs_dim), np.float32)
+        self.reward = np.zeros(n, f8)
+        self.terminated, self.truncated = np.zeros(n, bool), np.zeros(n, bool)
+        self.final_obs = np.zeros((n, self.obs_dim), np.float32)
+        self.final_outcome, self.final_steps, self.final_entry = (
+            np.zeros(n, i8),
+            np.zeros(n, i8),
+            np.zeros(n, i8),
+        )
+        self.final_path_length, self.final_pose = np.zeros(n, f8), np.zeros((n, 3), f8)
+        self.final_start, self.final_goal = np.zeros((n, 2), i8), np.zeros((n, 2), i8)
+        self.done = np.zeros(n, bool)
+
+    def _alloc_discs(self, capacity: int, keep: int = 0) -> None:
+        old = getattr(self, "disc_arrays", None)
+        arrays = [np.zeros((self.n, capacity), np.float64) for _ in range(5)]
+        arrays.append(np.zeros((self.n, capacity), np.bool_))
+        arrays += [np.zeros((self.n, capacity), np.float64) for _ in range(4)]
+        count = np.zeros(self.n, np.int64)
+        if old is not None and keep:
+            for new, prev in zip(arrays, old[:10], strict=True):
+                new[:, :keep] = prev[:, :keep]
+            count[:] = old[10]
+        self.disc_arrays = (*arrays, count)
+        self.capacity = capacity
+
+    # ----------------------------------------------------------------- kernel views
+    def _robots(self) -> tuple:
+        motion = (self.x, self.y, self.theta, self.gx, self.gy, self.steps, self.path_length, self.goal_dist)
+        return (
+            *motion,
+            self.ent,
+            self.start_cell,
+            self.goal_cell,
+            self.outcome,
+            self.rng,
+            self.pool_lo,
+            self.pool_n,
+        )
+
+    def _finals(self) -> tuple:
+        return (self.final_obs, self.final_outcome, self.final_path_length, self.final_steps, self.final_pose,
+                self.final_entry, self.final_start, self.final_goal, self.done)  # fmt: skip
+
+    # ----------------------------------------------------------------- operations
+    def seed(self, indices: np.ndarray, states: np.ndarray) -> None:
+        """Set the random streams of robots ``indices`` (see :func:`worlds.rng.seed_state`)."""
+        self.rng[np.asarray(indices)] = np.asarray(states, dtype=np.uint64)
+
+    def reset(
+        self,
+        indices: np.ndarray,
+        tasks: list[Task | None] | None = None,
+        obstacles: list[DiscObstacles | None] | None = None,
+    ) -> None:
+        """Start new episodes for robots ``indices``: given tasks/discs where not None, drawn otherwise."""
+        indices = np.asarray(indices, dtype=np.int64)
+        forced = np.full(len(indices), -1, dtype=np.int64)
+        if tasks is not None and any(t is not None for t in tasks):
+            if self._bank_is_shared:
+                self.bank, self._bank_is_shared = private_copy(self.bank), False
+            chosen = [(k, t) for k, t in enumerate(tasks) if t is not None]
+            entries, remap = self.bank.add_tasks([t for _, t in chosen], self.ent)
+            if remap is not None:
+                self.ent[:] = remap[self.ent]
+            forced[[k for k, _ in chosen]] = entries
+        keep = np.zeros(len(indices), dtype=np.bool_)
+        if obstacles is not None:
+            needed = max((len(o) for o in obstacles if o is not None), default=0)
+            if needed > self.capacity:
+                self._alloc_discs(needed, keep=self.capacity)
+            ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby, ocount = self.disc_arrays
+            for k, disc in enumerate(obstacles):
+                if disc is None:
+                    continue
+                i, m = indices[k], len(disc)
+                keep[k] = True
+                ox[i, :m], oy[i, :m] = disc.position.T
+                ovx[i, :m], ovy[i, :m] = disc.velocity.T
+                orad[i, :m] = disc.radius
+                opat[i, :m] = disc.waypoints is not None
+                if disc.waypoints is not None:
+                    oax[i, :m], oay[i, :m] = disc.waypoints[:, 0].T
+                    obx[i, :m], oby[i, :m] = disc.waypoints[:, 1].T
+                ocount[i] = m
+        kernel.reset_some(
+            indices, forced, keep, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
+            self.disc_arrays, self.params, self.beam_c, self.beam_s, self.obs,
+        )  # fmt: skip
+
+    def step(self, actions: np.ndarray, autoreset: bool) -> int:
+        """Step every robot with ``actions`` (n,) ints; returns how many episodes ended."""
+        actions = np.asarray(actions, dtype=np.int64).reshape(self.n)
+        if actions.min() < 0 or actions.max() >= len(self.turns):
+            raise ValueError(f"actions must be integers in [0, {len(self.turns)})")
+        return kernel.step_all(
+            actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
+            self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.obs, self.reward,
+            self.terminated, self.truncated, self._finals(),
+        )  # fmt: skip
+
+    # ----------------------------------------------------------------- reading state
+    def pose(self) -> np.ndarray:
+        return np.stack([self.x, self.y, self.theta], axis=1)
+
+    def task(self, i: int) -> Task:
+        """The task robot ``i`` is driving now (its start and goal may differ from its pool entry's)."""
+        return self._task(int(self.ent[i]), self.start_cell[i], self.goal_cell[i])
+
+    def final_task(self, i: int) -> Task:
+        """The task of robot ``i``'s episode that ended in the last auto-reset step."""
+        return self._task(int(self.final_entry[i]), self.final_start[i], self.final_goal[i])
+
+    def _task(self, entry: int, start: np.ndarray, goal: np.ndarray) -> Task:
+        grid = self.bank.grids[int(self.bank.emap[entry])]
+        return Task(grid, (int(start[0]), int(start[1])), (int(goal[0]), int(goal[1])), grid.name)
+
+    def discs(self, i: int) -> np.ndarray:
+        """Robot ``i``'s moving discs now, ``(k, 3)``: x, y, radius."""
+        ox, oy, _, _, orad, *_, ocount = self.disc_arrays
+        k = int(ocount[i])
+        return np.stack([ox[i, :k], oy[i, :k], orad[i, :k]], axis=1)
