@@ -1,0 +1,109 @@
+"""numpy arrays as a msgpack extension type.
+
+Payload layout of extension :data:`ARRAY_EXT_CODE` (all little-endian)::
+
+    u8 dtype code | u8 ndim | 2 zero bytes | ndim x u32 shape | zero padding to 8 bytes | raw data
+
+The header is padded to a multiple of 8 bytes so the decoded array is aligned,
+and decoding is zero-copy: the array is ``np.frombuffer`` over the bytes
+msgpack hands to the extension hook (so decoded arrays are read-only).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import msgpack
+import numpy as np
+
+from protocols.errors import ProtocolError
+
+ARRAY_EXT_CODE = 1
+
+_DTYPE_BY_CODE: dict[int, np.dtype] = {
+    1: np.dtype("|b1"),
+    2: np.dtype("|u1"),
+    3: np.dtype("|i1"),
+    4: np.dtype("<u2"),
+    5: np.dtype("<i2"),
+    6: np.dtype("<u4"),
+    7: np.dtype("<i4"),
+    8: np.dtype("<u8"),
+    9: np.dtype("<i8"),
+    10: np.dtype("<f2"),
+    11: np.dtype("<f4"),
+    12: np.dtype("<f8"),
+}
+_CODE_BY_DTYPE: dict[np.dtype, int] = {dt: code for code, dt in _DTYPE_BY_CODE.items()}
+_new_ext = tuple.__new__
+_BOOL_CODE = 1
+MAX_WIRE_NDIM = 32
+_HEADERS = [struct.Struct(f"<BBxx{ndim}I") for ndim in range(MAX_WIRE_NDIM + 1)]
+_OFFSETS = [(header.size + 7) // 8 * 8 for header in _HEADERS]
+
+
+def pack_array(array: np.ndarray) -> msgpack.ExtType:
+    """The extension value for ``array`` (converted to little-endian C order if needed)."""
+    code = _CODE_BY_DTYPE.get(array.dtype)
+    if code is None:
+        if array.dtype.str.startswith(">"):
+            return pack_array(array.astype(array.dtype.newbyteorder("<")))
+        raise ProtocolError("dtype", f"cannot send arrays of dtype {array.dtype}")
+    ndim = array.ndim
+    if ndim > MAX_WIRE_NDIM:
+        raise ProtocolError("shape", f"cannot send an array with {ndim} dimensions")
+    header = bytearray(_OFFSETS[ndim])
+    try:
+        _HEADERS[ndim].pack_into(header, 0, code, ndim, *array.shape)
+    except struct.error:
+        raise ProtocolError("shape", f"cannot send an array of shape {array.shape}") from None
+    if not array.flags.c_contiguous:
+        array = np.ascontiguousarray(array)
+    # tuple.__new__ skips ExtType's pure-Python argument checks (both are known good here),
+    # a measurable share of encoding time with seven arrays per message.
+    return _new_ext(msgpack.ExtType, (ARRAY_EXT_CODE, b"".join((header, array.data))))
+
+
+def unpack_array(payload: bytes) -> np.ndarray:
+    """Inverse of :func:`pack_array`; raises :class:`ProtocolError` on any inconsistency."""
+    size = len(payload)
+    if size < 4:
+        raise ProtocolError("malformed", f"array extension of {size} bytes is too short")
+    code, ndim = payload[0], payload[1]
+    dtype = _DTYPE_BY_CODE.get(code)
+    if dtype is None:
+        raise ProtocolError("dtype", f"unknown array dtype code {code}")
+    if ndim > MAX_WIRE_NDIM:
+        raise ProtocolError("shape", f"array with {ndim} dimensions")
+    offset = _OFFSETS[ndim]
+    if size < offset:
+        raise ProtocolError("malformed", "array extension shorter than its header")
+    shape = _HEADERS[ndim].unpack_from(payload)[2:]
+    count = math.prod(shape)
+    if count * dtype.itemsize != size - offset:
+        raise ProtocolError(
+            "shape",
+            f"array of shape {shape} and dtype {dtype} needs {count * dtype.itemsize} bytes, "
+            f"got {size - offset}",
+        )
+    array = np.ndarray(shape, dtype, payload, offset)
+    if code == _BOOL_CODE and count and np.maximum.reduce(array.view(np.uint8), axis=None) > 1:
+        raise ProtocolError("malformed", "boolean array holds bytes other than 0 and 1")
+    return array
+
+
+def ext_hook(code: int, payload: bytes) -> np.ndarray:
+    """msgpack ``ext_hook``: only the array extension exists on the wire."""
+    if code != ARRAY_EXT_CODE:
+        raise ProtocolError("malformed", f"unknown msgpack extension type {code}")
+    return unpack_array(payload)
+
+
+def default(obj: object) -> object:
+    """msgpack ``default`` hook: arrays become the extension, numpy scalars plain numbers."""
+    if isinstance(obj, np.ndarray):
+        return pack_array(obj)
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise ProtocolError("type", f"cannot encode a value of type {type(obj).__name__}")
