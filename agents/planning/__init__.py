@@ -2,5 +2,14 @@
 own (cell, heading) lattice, with the expert controller that follows it."""
 
 from agents.planning.astar import PathResult, astar, distance_field, path_length
+from agents.planning.lattice import LatticeConfig, LatticePlan, plan_lattice
 
-__all__ = ["PathResult", "astar", "distance_field", "path_length"]
+__all__ = [
+    "LatticeConfig",
+    "LatticePlan",
+    "PathResult",
+    "astar",
+    "distance_field",
+    "path_length",
+    "plan_lattice",
+]
