@@ -1,0 +1,130 @@
+"""Pictures of evaluations: learned paths beside grid A*'s, and learning curves.
+
+Both write PNG files with matplotlib's Agg backend (no display needed).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from agents.evaluation.runner import EpisodeRecord, EvalResult
+from agents.planning.astar import astar
+from worlds.outcomes import OUTCOME_NAMES, Outcome
+from worlds.render import draw
+
+OUTCOME_COLOURS = {
+    Outcome.GOAL: "tab:blue",
+    Outcome.COLLISION_STATIC: "tab:red",
+    Outcome.COLLISION_DYNAMIC: "tab:orange",
+    Outcome.TIMEOUT: "tab:gray",
+}
+
+
+def _pick(episodes: Sequence[EpisodeRecord], n: int) -> list[EpisodeRecord]:
+    """Up to ``n`` episodes, successes and failures in proportion, in evaluation order."""
+    wins = [e for e in episodes if e.outcome == Outcome.GOAL]
+    losses = [e for e in episodes if e.outcome != Outcome.GOAL]
+    n_loss = min(len(losses), max(int(bool(losses)), round(n * len(losses) / max(len(episodes), 1))))
+    n_win = min(len(wins), n - n_loss)
+    n_loss = min(len(losses), n - n_win)
+    chosen = {id(e) for e in wins[:n_win] + losses[:n_loss]}
+    return [e for e in episodes if id(e) in chosen]
+
+
+def plot_paths(
+    result: EvalResult, family: str, out: str | Path, n_episodes: int = 6, label: str = "learned"
+) -> Path:
+    """One PNG for ``family``: for each of ``n_episodes`` episodes, the policy's path (coloured by
+    outcome) in one panel and grid A*'s shortest path beside it."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    episodes = _pick(result.episodes[family], n_episodes)
+    if not episodes:
+        raise ValueError(f"no episodes for family {family!r}")
+    per_row = min(3, len(episodes))
+    rows = int(np.ceil(len(episodes) / per_row))
+    fig, axes = plt.subplots(rows, 2 * per_row, figsize=(4.2 * per_row, 2.3 * rows + 0.6), squeeze=False)
+    for ax in axes.ravel():
+        ax.set_visible(False)
+    for k, ep in enumerate(episodes):
+        left, right = axes[k // per_row, 2 * (k % per_row)], axes[k // per_row, 2 * (k % per_row) + 1]
+        left.set_visible(True)
+        right.set_visible(True)
+        grid, task = ep.task.grid, ep.task
+        draw(left, grid, start=task.start, goal=task.goal)
+        colour = OUTCOME_COLOURS.get(Outcome(ep.outcome), "black")
+        left.plot(ep.trajectory[:, 0], ep.trajectory[:, 1], "-", color=colour, lw=1.6)
+        left.set_title(f"{label}: {OUTCOME_NAMES[ep.outcome]}, {ep.path_length:.1f} m", fontsize=8)
+        draw(right, grid, start=task.start, goal=task.goal)
+        path = astar(grid, task.start, task.goal).path or []
+        xy = np.array([grid.cell_center(c) for c in path])
+        if len(xy):
+            right.plot(xy[:, 0], xy[:, 1], "--", color="tab:green", lw=1.6)
+        right.set_title(f"A*: {ep.shortest:.1f} m  ({task.map_id})", fontsize=8)
+        for ax in (left, right):
+            ax.set_xlabel("")
+            ax.set_ylabel("")
+            ax.tick_params(labelsize=6)
+    metrics = result.metrics[family]
+    fig.suptitle(
+        f"{family}: success {100 * metrics.success.value:.0f}% of {metrics.episodes}, SPL {metrics.spl:.2f}",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def plot_learning_curves(
+    points: Sequence[tuple[float, dict]],
+    out: str | Path,
+    metric: str = "success",
+    xlabel: str = "policy version",
+) -> Path:
+    """Plot ``metric`` per family against x. ``points`` are ``(x, metrics)`` pairs where
+    ``metrics`` is ``EvalResult.to_dict()["metrics"]`` (or an EvalReport's); rates are drawn
+    with their 95% interval as a band."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    if not points:
+        raise ValueError("no points to plot")
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    families = sorted({f for _, m in points for f in m})
+    for family in families:
+        xs, ys, lo, hi = [], [], [], []
+        for x, metrics in sorted(points, key=lambda p: p[0]):
+            value = metrics.get(family, {}).get(metric)
+            if value is None:
+                continue
+            xs.append(x)
+            if isinstance(value, dict):
+                ys.append(value["value"])
+                lo.append(value["low"])
+                hi.append(value["high"])
+            else:
+                ys.append(value)
+        (line,) = ax.plot(xs, ys, "o-", ms=3, label=family)
+        if lo:
+            ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.2)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(metric)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

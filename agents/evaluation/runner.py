@@ -1,0 +1,266 @@
+"""Fixed, seeded evaluation sets and the batched runner that measures a policy on them.
+
+Evaluation sets (``make_eval_set``), all reproducible from ``(family, n_episodes, seed)``:
+
+* ``unseen``: generated maps never used in training. Training maps (``worlds.tasks``)
+  use generator seeds in ``[0, TRAIN_SEEDS)``; episode ``i`` of set seed ``s`` uses the map
+  seed ``TRAIN_SEEDS + s * SEED_STRIDE + i``, so the two never meet. Families go round
+  robin over ``families`` (default ``worlds.tasks.MIXED_FAMILIES``: rects, discs, rooms),
+  ``size`` x ``size`` cells, start and goal from ``worlds.generators.generate_task``.
+* ``dynamic``: the same maps and tasks with ``obstacles`` moving discs (default 4,
+  bouncing) placed by the environment from the episode seed.
+* ``movingai``: the MovingAI arena map (``/work/shared/data/movingai`` or ``path``) with
+  its scenarios, ``n_episodes`` of them drawn without replacement from the set seed.
+
+Every episode also carries its environment seed (``s * SEED_STRIDE + i``), which fixes
+the start heading, the noise and the moving discs.
+
+``evaluate(policy, eval_set)`` runs each wave of up to ``max_batch`` episodes as one
+``NavigationVectorEnv`` batch, robot ``i`` on task ``i`` (robots that finish early keep
+driving auto-reset episodes that are ignored), records each first episode's trajectory
+and returns an :class:`EvalResult`: per-family :class:`~agents.evaluation.metrics.FamilyMetrics`
+and per-episode :class:`EpisodeRecord`. ``EvalResult.to_dict()`` is JSON-ready.
+
+A ``Policy`` is any callable mapping an observation batch ``(n, obs_dim)`` float32 to
+actions ``(n,)`` int64, greedy for evaluation (see ``agents.imitation.policy.load_policy``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from agents.evaluation.metrics import FamilyMetrics, point_clearance, summarize
+from agents.planning.astar import astar
+from worlds.config import NavConfig, ObstacleConfig
+from worlds.generators import generate_task
+from worlds.maps import Task, clearance, load_movingai, load_scenarios
+from worlds.outcomes import OUTCOME_NAMES
+from worlds.tasks import MIXED_FAMILIES, TRAIN_SEEDS, TaskSampler
+
+Policy = Callable[[np.ndarray], np.ndarray]
+EVAL_FAMILIES = ("unseen", "dynamic", "movingai")
+SEED_STRIDE = 1_000_003
+"""seeds of set ``s`` start at ``s * SEED_STRIDE``: sets with different seeds never share an episode"""
+MOVINGAI_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "movingai"
+
+
+@dataclass(frozen=True)
+class EvalSet:
+    """A fixed list of tasks with their env seeds and the moving-disc settings."""
+
+    family: str
+    tasks: tuple[Task, ...]
+    seeds: tuple[int, ...]
+    shortest: np.ndarray
+    """grid A* length (m) of each task"""
+    obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
+
+    def __len__(self) -> int:
+        return len(self.tasks)
+
+
+def make_eval_set(
+    family: str,
+    n_episodes: int,
+    seed: int = 0,
+    size: int = 16,
+    families: Sequence[str] = MIXED_FAMILIES,
+    obstacles: ObstacleConfig | None = None,
+    path: str | Path | None = None,
+) -> EvalSet:
+    """The evaluation set ``family`` (``unseen``, ``dynamic`` or ``movingai``; see the module
+    docstring). ``obstacles`` overrides the moving discs of ``dynamic`` (default 4 bouncing)."""
+    if family not in EVAL_FAMILIES:
+        raise ValueError(f"unknown evaluation family {family!r}; choose one of {', '.join(EVAL_FAMILIES)}")
+    if n_episodes < 1:
+        raise ValueError(f"n_episodes must be positive, got {n_episodes}")
+    base = seed * SEED_STRIDE
+    if family == "movingai":
+        root = Path(path) if path else MOVINGAI_DIR / "arena.map.scen"
+        scen_path = root if root.suffix == ".scen" else root / "arena.map.scen"
+        grid = load_movingai(scen_path.parent / scen_path.name.removesuffix(".scen"))
+        scenarios = load_scenarios(scen_path, grid)
+        picks = np.random.default_rng([seed, 7]).permutation(len(scenarios))
+        if n_episodes > len(scenarios):
+            raise ValueError(f"{scen_path} has {len(scenarios)} scenarios, asked for {n_episodes}")
+        tasks = [Task(grid, scenarios[k].start, scenarios[k].goal, grid.name) for k in picks[:n_episodes]]
+        discs = ObstacleConfig(count=0)
+    else:
+        tasks = [
+            generate_task(families[i % len(families)], size, size, TRAIN_SEEDS + base + i)
+            for i in range(n_episodes)
+        ]
+        discs = (obstacles or ObstacleConfig(count=4)) if family == "dynamic" else ObstacleConfig(count=0)
+    shortest = np.array([astar(t.grid, t.start, t.goal).length for t in tasks])
+    if not np.isfinite(shortest).all():
+        raise ValueError(f"evaluation set {family!r} holds a task without a grid path")
+    seeds = tuple(base + i for i in range(n_episodes))
+    return EvalSet(family, tuple(tasks), seeds, shortest, discs)
+
+
+@dataclass
+class EpisodeRecord:
+    """One evaluated episode."""
+
+    task: Task
+    seed: int
+    outcome: int
+    path_length: float
+    steps: int
+    shortest: float
+    min_clearance: float
+    trajectory: np.ndarray
+    """poses ``(steps + 1, 3)``: x, y, theta"""
+
+    def to_dict(self, with_trajectory: bool = False) -> dict:
+        out = {
+            "map_id": self.task.map_id,
+            "start": list(self.task.start),
+            "goal": list(self.task.goal),
+            "seed": self.seed,
+            "outcome": OUTCOME_NAMES[self.outcome],
+            "path_length": round(self.path_length, 4),
+            "steps": self.steps,
+            "shortest": round(self.shortest, 4),
+            "min_clearance": round(self.min_clearance, 4),
+        }
+        if with_trajectory:
+            out["trajectory"] = np.round(self.trajectory, 3).tolist()
+        return out
+
+
+@dataclass
+class EvalResult:
+    """Metrics and episodes per evaluation family."""
+
+    metrics: dict[str, FamilyMetrics] = field(default_factory=dict)
+    episodes: dict[str, list[EpisodeRecord]] = field(default_factory=dict)
+
+    def to_dict(self, with_episodes: bool = True, with_trajectories: bool = False) -> dict:
+        out: dict = {"metrics": {name: m.to_dict() for name, m in self.metrics.items()}}
+        if with_episodes:
+            out["episodes"] = {
+                name: [e.to_dict(with_trajectories) for e in eps] for name, eps in self.episodes.items()
+            }
+        return out
+
+    def table(self) -> str:
+        """The metrics as a fixed-width text table, one row per family."""
+
+        def pct(rate) -> str:
+            return f"{100 * rate.value:5.1f} [{100 * rate.low:4.1f},{100 * rate.high:5.1f}]"
+
+        def num(v: float, fmt: str = "5.2f") -> str:
+            return format(v, fmt) if math.isfinite(v) else "  -  "
+
+        head = (
+            f"{'family':<9} {'n':>4}  {'success % [95% CI]':<19} {'coll.static %':<19} "
+            f"{'coll.dynamic %':<19} {'timeout %':<19} {'SPL':>5} {'len/A*':>6} {'steps':>6} {'clear.m':>7}"
+        )
+        rows = [head, "-" * len(head)]
+        for name, m in self.metrics.items():
+            rows.append(
+                f"{name:<9} {m.episodes:>4}  {pct(m.success):<19} {pct(m.collision_static):<19} "
+                f"{pct(m.collision_dynamic):<19} {pct(m.timeout):<19} {num(m.spl):>5} "
+                f"{num(m.path_ratio, '6.3f'):>6} {num(m.time_to_goal, '6.1f'):>6} "
+                f"{num(m.min_clearance_mean, '7.3f'):>7}"
+            )
+        return "\n".join(rows)
+
+
+def _fixed_sampler(tasks: Sequence[Task], key: str) -> TaskSampler:
+    """A sampler over exactly ``tasks`` so the env's task pool holds nothing else."""
+    pool = list(tasks)
+    return TaskSampler(lambda rng: pool[int(rng.integers(len(pool)))], key, tasks=pool)
+
+
+def _run_wave(policy: Policy, config: NavConfig, tasks: list[Task], seeds: list[int], key: str):
+    from worlds.vector_env import NavigationVectorEnv
+
+    n = len(tasks)
+    env = NavigationVectorEnv(n, config, maps=_fixed_sampler(tasks, key))
+    obs, _ = env.reset(seed=list(seeds), options={"tasks": list(tasks)})
+    trajectories = [[pose] for pose in env.poses()]
+    dynamic = config.obstacles.count > 0
+    disc_gap = np.full(n, np.inf)
+    if dynamic:
+        disc_gap = np.array([_disc_gap(env, i, trajectories[i][0]) for i in range(n)])
+    finals: dict[int, tuple[int, float, int]] = {}
+    while len(finals) < n:
+        actions = np.asarray(policy(obs), dtype=np.int64).reshape(n)
+        obs, _, _, _, info = env.step(actions)
+        done = info.get("_final_obs", np.zeros(n, bool))
+        poses = env.poses()
+        for i in range(n):
+            if i in finals:
+                continue
+            if done[i]:
+                fi = info["final_info"]
+                trajectories[i].append(fi["pose"][i].copy())
+                finals[i] = (int(fi["outcome"][i]), float(fi["path_length"][i]), int(fi["steps"][i]))
+            else:
+                trajectories[i].append(poses[i].copy())
+                if dynamic:
+                    disc_gap[i] = min(disc_gap[i], _disc_gap(env, i, poses[i]))
+    return finals, [np.asarray(t) for t in trajectories], disc_gap
+
+
+def _disc_gap(env, i: int, pose: np.ndarray) -> float:
+    """Distance from robot ``i``'s centre to the nearest moving disc's edge (inf without discs)."""
+    discs = env.batch.discs(i)
+    if len(discs) == 0:
+        return math.inf
+    return float((np.hypot(discs[:, 0] - pose[0], discs[:, 1] - pose[1]) - discs[:, 2]).min())
+
+
+def evaluate(
+    policy: Policy,
+    eval_sets: EvalSet | Sequence[EvalSet],
+    config: NavConfig | None = None,
+    max_batch: int = 128,
+) -> EvalResult:
+    """Run ``policy`` on every episode of ``eval_sets`` and compute the metrics. ``config`` is
+    the robot/sensor/reward setting the policy was trained with (default ``NavConfig()``);
+    each set's moving-disc settings replace its ``obstacles``."""
+    sets = [eval_sets] if isinstance(eval_sets, EvalSet) else list(eval_sets)
+    base = config or NavConfig()
+    result = EvalResult()
+    for es in sets:
+        cfg = replace(base, obstacles=es.obstacles)
+        records: list[EpisodeRecord] = []
+        for lo in range(0, len(es), max_batch):
+            hi = min(lo + max_batch, len(es))
+            tasks, seeds = list(es.tasks[lo:hi]), list(es.seeds[lo:hi])
+            finals, trajectories, disc_gap = _run_wave(
+                policy, cfg, tasks, seeds, f"eval:{es.family}:{seeds[0]}"
+            )
+            for k, task in enumerate(tasks):
+                outcome, length, steps = finals[k]
+                traj = trajectories[k]
+                static = point_clearance(task.grid, traj[:, :2], clearance(task.grid)).min()
+                records.append(
+                    EpisodeRecord(
+                        task,
+                        seeds[k],
+                        outcome,
+                        length,
+                        steps,
+                        float(es.shortest[lo + k]),
+                        float(min(static, disc_gap[k])),
+                        traj,
+                    )
+                )
+        result.episodes[es.family] = records
+        result.metrics[es.family] = summarize(
+            outcomes=np.array([r.outcome for r in records]),
+            shortest=np.array([r.shortest for r in records]),
+            taken=np.array([r.path_length for r in records]),
+            steps=np.array([r.steps for r in records]),
+            min_clearance=np.array([r.min_clearance for r in records]),
+        )
+    return result
