@@ -1,0 +1,186 @@
+"""Shared parts of the tabular learners (thesis ch. 2.4): config, schedules,
+exploration, sampling from the grid world's dynamics, results.
+
+The learners run whole episodes in compiled code against the arrays of
+``worlds.gridworld.GridDynamics`` (the same arrays ``GridWorldEnv.step`` uses),
+so a learner given a ``GridWorldEnv`` learns exactly that env's MDP, at
+millions of steps per second. Episodes start at the env's start cell, or at a
+uniformly random non-goal state when the env has none (exploring starts), and
+are cut after the env's ``max_steps``. Randomness comes from numba's generator,
+seeded from ``config.seed``, so a run is reproducible.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from worlds.gridworld import GridDynamics, GridWorldEnv
+
+EXPLORATIONS = ("epsilon-greedy", "boltzmann")
+ALPHA_SCHEDULES = ("constant", "visits")
+Progress = Callable[[int], None]
+"""Called with the number of episodes finished so far."""
+
+
+@dataclass(frozen=True)
+class TabularConfig:
+    """Control by SARSA, Q-learning or Monte Carlo."""
+
+    episodes: int = 20000
+    """Number of episodes."""
+    gamma: float = 0.95
+    """Discount factor."""
+    alpha: float = 0.5
+    """Step size (its first value under the "visits" schedule)."""
+    alpha_schedule: str = "visits"
+    """"constant", or "visits": alpha / n(s, a) ** alpha_power after n visits of (s, a)."""
+    alpha_power: float = 0.6
+    """Exponent of the "visits" schedule, in (0.5, 1] for convergence (1 = sample average)."""
+    exploration: str = "epsilon-greedy"
+    """"epsilon-greedy" (random action with probability epsilon) or "boltzmann" (softmax of Q/temperature)."""
+    explore_start: float = 1.0
+    """Epsilon, or temperature, in the first episode."""
+    explore_end: float = 0.01
+    """Epsilon, or temperature, at the end of the decay and after it."""
+    explore_decay: float = 0.7
+    """Fraction of the episodes over which exploration decays geometrically from start to end."""
+    seed: int = 0
+    """Seed of the learner's random generator."""
+
+    def __post_init__(self) -> None:
+        if self.episodes < 1:
+            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
+        if not 0.0 <= self.gamma <= 1.0:
+            raise ValueError(f"gamma must be in [0, 1], got {self.gamma}")
+        if not 0.0 < self.alpha <= 1.0:
+            raise ValueError(f"alpha must be in (0, 1], got {self.alpha}")
+        if self.alpha_schedule not in ALPHA_SCHEDULES:
+            raise ValueError(f"alpha_schedule must be one of {ALPHA_SCHEDULES}, got {self.alpha_schedule!r}")
+        if not 0.0 < self.alpha_power <= 1.0:
+            raise ValueError(f"alpha_power must be in (0, 1], got {self.alpha_power}")
+        if self.exploration not in EXPLORATIONS:
+            raise ValueError(f"exploration must be one of {EXPLORATIONS}, got {self.exploration!r}")
+        if not (self.explore_start > 0 and self.explore_end > 0):
+            raise ValueError("explore_start and explore_end must be positive")
+        if self.exploration == "epsilon-greedy" and max(self.explore_start, self.explore_end) > 1:
+            raise ValueError("epsilon (explore_start, explore_end) must be in (0, 1]")
+        if not 0.0 <= self.explore_decay <= 1.0:
+            raise ValueError(f"explore_decay must be in [0, 1], got {self.explore_decay}")
+
+
+@dataclass(frozen=True)
+class TabularResult:
+    """Learned action values and the learning curve."""
+
+    q: np.ndarray
+    """``(S, A)`` action values."""
+    returns: np.ndarray
+    """Undiscounted return of each episode."""
+    lengths: np.ndarray
+    """Steps of each episode."""
+
+    @property
+    def policy(self) -> np.ndarray:
+        return np.argmax(self.q, axis=1)
+
+    @property
+    def values(self) -> np.ndarray:
+        return self.q.max(axis=1)
+
+
+def exploration_schedule(config: TabularConfig) -> np.ndarray:
+    """Epsilon or temperature of every episode: geometric decay, then constant."""
+    n = config.episodes
+    decay = max(1, round(config.explore_decay * n))
+    t = np.minimum(np.arange(n) / decay, 1.0)
+    return config.explore_start * (config.explore_end / config.explore_start) ** t
+
+
+def grid_dynamics(env: GridWorldEnv) -> tuple[GridDynamics, int, int]:
+    """``(dynamics, start state or -1 for exploring starts, max_steps)`` of a (wrapped) GridWorldEnv."""
+    base = getattr(env, "unwrapped", env)
+    if not isinstance(base, GridWorldEnv):
+        raise TypeError(
+            f"the tabular learners need a worlds.gridworld.GridWorldEnv, got {type(base).__name__}"
+        )
+    start = -1 if base.start_state is None else base.start_state
+    return base.dynamics, start, base.max_steps
+
+
+def run_in_chunks(run: Callable[[int, int], None], episodes: int, progress: Progress | None) -> None:
+    """Call ``run(first, last)`` over consecutive episode ranges, reporting progress between them."""
+    chunk = episodes if progress is None else max(1, math.ceil(episodes / 100))
+    for first in range(0, episodes, chunk):
+        last = min(episodes, first + chunk)
+        run(first, last)
+        if progress is not None:
+            progress(last)
+
+
+@njit(cache=True)
+def seed_numba(seed: int) -> None:
+    """Seed numba's generator (separate from numpy's)."""
+    np.random.seed(seed)
+
+
+@njit(cache=True)
+def start_state(start: int, n_states: int, goal: int) -> int:
+    if start >= 0:
+        return start
+    draw = np.random.randint(n_states - 1)
+    return draw + 1 if draw >= goal else draw
+
+
+@njit(cache=True)
+def greedy(q_row) -> int:
+    """Argmax with ties broken uniformly at random."""
+    best = q_row.max()
+    count = 0
+    for a in range(q_row.shape[0]):
+        if q_row[a] == best:
+            count += 1
+    pick = np.random.randint(count)
+    for a in range(q_row.shape[0]):
+        if q_row[a] == best:
+            if pick == 0:
+                return a
+            pick -= 1
+    return 0
+
+
+@njit(cache=True)
+def explore(q_row, boltzmann: bool, param: float) -> int:
+    """Epsilon-greedy (``param`` = epsilon) or Boltzmann (``param`` = temperature) action."""
+    n = q_row.shape[0]
+    if not boltzmann:
+        if np.random.random() < param:
+            return np.random.randint(n)
+        return greedy(q_row)
+    weights = np.exp((q_row - q_row.max()) / param)
+    u = np.random.random() * weights.sum()
+    acc = 0.0
+    for a in range(n):
+        acc += weights[a]
+        if u < acc:
+            return a
+    return n - 1
+
+
+@njit(cache=True)
+def sample_index(cum_row) -> int:
+    """Draw an index from a cumulative distribution."""
+    u = np.random.random() * cum_row[-1]
+    for a in range(cum_row.shape[0]):
+        if u < cum_row[a]:
+            return a
+    return cum_row.shape[0] - 1
+
+
+@njit(cache=True)
+def step_size(alpha: float, by_visits: bool, power: float, visits: int) -> float:
+    return alpha / visits**power if by_visits else alpha

@@ -1,0 +1,100 @@
+"""Q-learning (Watkins 1989; thesis ch. 2.4): off-policy TD control,
+``Q(s, a) += alpha * (r + gamma * max_a' Q(s', a') - Q(s, a))``."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from agents.tabular.common import (
+    Progress,
+    TabularConfig,
+    TabularResult,
+    exploration_schedule,
+    explore,
+    grid_dynamics,
+    run_in_chunks,
+    sample_index,
+    seed_numba,
+    start_state,
+    step_size,
+)
+from worlds.gridworld import GridWorldEnv
+
+
+@njit(cache=True)
+def _episodes(
+    q,
+    visits,
+    successor,
+    reward,
+    cum_prob,
+    goal,
+    start,
+    max_steps,
+    gamma,
+    alpha,
+    by_visits,
+    power,
+    boltzmann,
+    explore_params,
+    returns,
+    lengths,
+    first,
+):
+    for i in range(explore_params.shape[0]):
+        s = start_state(start, successor.shape[0], goal)
+        total = 0.0
+        t = 0
+        while t < max_steps and s != goal:
+            a = explore(q[s], boltzmann, explore_params[i])
+            b = sample_index(cum_prob[a])
+            nxt = successor[s, b]
+            r = reward[s, b]
+            visits[s, a] += 1
+            target = r if nxt == goal else r + gamma * q[nxt].max()
+            q[s, a] += step_size(alpha, by_visits, power, visits[s, a]) * (target - q[s, a])
+            total += r
+            s = nxt
+            t += 1
+        returns[first + i] = total
+        lengths[first + i] = t
+
+
+def q_learning(
+    env: GridWorldEnv, config: TabularConfig | None = None, progress: Progress | None = None
+) -> TabularResult:
+    """Learn ``Q*`` of a grid-world env by Q-learning."""
+    config = config or TabularConfig()
+    dyn, start, max_steps = grid_dynamics(env)
+    q = np.zeros((dyn.n_states, dyn.n_actions))
+    visits = np.zeros(q.shape, dtype=np.int64)
+    cum_prob = np.cumsum(dyn.outcome_prob, axis=1)
+    params = exploration_schedule(config)
+    returns = np.zeros(config.episodes)
+    lengths = np.zeros(config.episodes, dtype=np.int64)
+    seed_numba(config.seed)
+
+    def run(first: int, last: int) -> None:
+        _episodes(
+            q,
+            visits,
+            dyn.successor,
+            dyn.reward,
+            cum_prob,
+            dyn.goal_state,
+            start,
+            max_steps,
+            config.gamma,
+            config.alpha,
+            config.alpha_schedule == "visits",
+            config.alpha_power,
+            config.exploration == "boltzmann",
+            params[first:last],
+            returns,
+            lengths,
+            first,
+        )
+
+    run_in_chunks(run, config.episodes, progress)
+    return TabularResult(q, returns, lengths)
