@@ -158,16 +158,16 @@ def _datasets_root(root: Path) -> Iterator[None]:
             os.environ["MINARI_DATASETS_PATH"] = old
 
 
-def _split(path: str | Path) -> tuple[Path, str]:
-    path = Path(path).resolve()
-    from minari.dataset.minari_dataset import parse_dataset_id
+def dataset_location(path: str | Path) -> tuple[Path, str]:
+    """``(datasets root, dataset id)`` of a dataset directory; Minari wants ids like ``expert-v0``."""
+    from minari.dataset.minari_dataset import DATASET_ID_RE
 
-    try:
-        parse_dataset_id(path.name)
-    except ValueError:
+    path = Path(path).resolve()
+    match = DATASET_ID_RE.fullmatch(path.name)
+    if not match or match.group("version") is None:
         raise DemoFormatError(
-            f"{path}: the directory name must be a Minari dataset id such as 'expert' or 'expert-v0'"
-        ) from None
+            f"{path}: the directory name must be a Minari dataset id NAME-vVERSION, such as 'expert-v0'"
+        )
     return path.parent, path.name
 
 
@@ -184,7 +184,7 @@ def write_demos(
     import minari
     from minari.data_collector import EpisodeBuffer
 
-    root, dataset_id = _split(path)
+    root, dataset_id = dataset_location(path)
     target = root / dataset_id
     if target.exists():
         if not overwrite:
@@ -287,7 +287,7 @@ def load_demos(path: str | Path) -> list[Demo]:
     :func:`write_demos` or ``navlearn demos generate``)."""
     import minari
 
-    root, dataset_id = _split(path)
+    root, dataset_id = dataset_location(path)
     target = root / dataset_id
     if not (target / "data").is_dir():
         raise DemoFormatError(f"{target}: not a Minari dataset (no data/ directory)")
@@ -326,7 +326,7 @@ def dataset_info(path: str | Path) -> dict:
     """The dataset-level metadata (Minari's plus navlearn's ``navlearn`` JSON, decoded)."""
     import minari
 
-    root, dataset_id = _split(path)
+    root, dataset_id = dataset_location(path)
     with _datasets_root(root):
         metadata = dict(minari.load_dataset(dataset_id).storage.metadata)
     metadata["navlearn"] = json.loads(metadata.get("navlearn", "{}"))

@@ -97,4 +97,4 @@ def test_missing_corrupted_and_foreign_files_give_clear_errors(tmp_path, monkeyp
     with pytest.raises(DemoFormatError, match="not a navlearn demonstration set"):
         load_demos(foreign_root / "other-v0")
     with pytest.raises(DemoFormatError, match="dataset id"):
-        load_demos(tmp_path / "bad name!")
+        load_demos(tmp_path / "no-version")
