@@ -1,0 +1,41 @@
+"""Flow control on the wire: the learner's acknowledgement of an actor's transition batches.
+
+The learner acknowledges every batch it inserts into replay on ``acks/<actor>``.
+An actor keeps at most a window of unacknowledged batches in flight, so a learner
+whose rate limiter holds inserts back slows its actors down instead of dropping
+their data (Reverb's blocking inserts, over the network). Importing this module
+registers the ``ack`` kind with the codec.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from protocols.checks import BodyReader
+from protocols.messages import Message, register
+
+
+@register
+@dataclass(kw_only=True, eq=False)
+class Ack(Message):
+    """The newest transition batch of ``actor`` the learner accepted into replay."""
+
+    KIND: ClassVar[str] = "ack"
+    VERSION: ClassVar[int] = 1
+    actor: str
+    accepted_seq: int
+    """Envelope ``seq`` of that batch."""
+    policy_version: int
+    """The learner's policy version when it accepted the batch."""
+
+    @classmethod
+    def read_body(cls, body: BodyReader) -> dict[str, Any]:
+        return {
+            "actor": body.string("actor"),
+            "accepted_seq": body.integer("accepted_seq"),
+            "policy_version": body.integer("policy_version"),
+        }
+
+
+__all__ = ["Ack"]

@@ -1,0 +1,67 @@
+"""`navlearn learner`: the NNQL learner service (hosts the Zenoh router unless told to connect)."""
+
+from __future__ import annotations
+
+import argparse
+
+from agents.nnql.config import NNQLConfig
+from services.learner import LearnerConfig
+from services.options import add_options
+from services.transport import add_zenoh_args
+
+DESCRIPTION = """\
+Run the learner: it takes transition batches from actors (navlearn/<run>/transitions/*) and
+demonstrations (demos/*) over Zenoh, validates them, inserts them into TorchRL replay buffers,
+trains the NNQL Q-network at a bounded update-to-data ratio (--utd-ratio, after --learning-starts
+transitions; a Reverb-style rate limiter holds inserts back when the learner falls behind, and
+actors wait for its acknowledgements), broadcasts versioned weights on weights/<model> every
+--broadcast-every updates (late joiners query the same key), serves status/learner, and
+checkpoints model, optimiser, counters and replay every --checkpoint-every seconds and on
+SIGTERM/SIGINT, resuming from the newest checkpoint on start.
+
+By default it hosts the Zenoh router on tcp/127.0.0.1:7447 (--listen changes it; use
+--listen tcp/0.0.0.0:7447 to let actors on other hosts in). With --connect it joins an
+existing router as a client instead. Logs to stdout.
+"""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "learner",
+        help="run the NNQL learner service",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_options(parser, LearnerConfig, "NAVLEARN_LEARNER", "learner service")
+    add_options(parser, NNQLConfig, "NAVLEARN_NNQL", "NNQL hyper-parameters")
+    parser.add_argument("--verbose", action="store_true", help="debug logging")
+    add_zenoh_args(parser, default_mode="router")
+    parser.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    import sys
+
+    from services.learner import run_learner
+    from services.options import OptionError, options_from_args
+    from services.process import setup_logging, stop_on_signals
+    from services.transport import TransportError, settings_from_args
+
+    try:
+        config = options_from_args(LearnerConfig, args, "NAVLEARN_LEARNER")
+        nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL")
+        settings = settings_from_args(args)
+        if args.zenoh_mode is None and settings.connect:
+            settings.mode = (
+                "client"  # --connect (or NAVLEARN_CONNECT): join that router instead of hosting one
+            )
+    except (OptionError, TransportError) as exc:
+        print(f"navlearn learner: {exc}", file=sys.stderr)
+        return 2
+    setup_logging(args.verbose)
+    stop = stop_on_signals()
+    try:
+        return run_learner(config, nnql, settings, stop)
+    except (TransportError, ValueError) as exc:
+        print(f"navlearn learner: {exc}", file=sys.stderr)
+        return 2

@@ -1,0 +1,99 @@
+"""What every service process does the same way: logging, stop signals, joining Zenoh, scalars.
+
+Kept apart from the service classes (Sample Factory's split): a service object
+gets an open session and a stop event; these helpers make them.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import sys
+import threading
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+from services.transport import TransportError, ZenohSettings, open_session
+
+log = logging.getLogger("navlearn.process")
+
+
+def setup_logging(verbose: bool = False) -> None:
+    """Log lines to stdout (what supervisord and systemd collect); quiet third-party loggers."""
+    sys.stdout.reconfigure(line_buffering=True)  # a pipe or file otherwise holds lines back
+    logging.basicConfig(
+        stream=sys.stdout,
+        level=logging.DEBUG if verbose else logging.INFO,
+        format="%(asctime)s %(name)s %(levelname)s %(message)s",
+        force=True,
+    )
+    os.environ.setdefault("RL_LOGGING_LEVEL", "WARNING")  # torchrl sets its level from it when imported
+    for noisy in ("torchrl", "matplotlib", "PIL", "numba"):
+        logging.getLogger(noisy).setLevel(logging.WARNING)
+    # Decoded arrays are read-only views of the received bytes; torch warns when wrapping them,
+    # but the replay buffer copies them on insert, so nothing ever writes through the view.
+    warnings.filterwarnings("ignore", message="The given NumPy array is not writable")
+    import zenoh
+
+    zenoh.init_log_from_env_or("error")
+
+
+def stop_on_signals() -> threading.Event:
+    """An event set by SIGTERM or SIGINT (the main loop polls it and stops cleanly)."""
+    stop = threading.Event()
+
+    def handler(signum: int, _frame: Any) -> None:
+        if not stop.is_set():
+            log.info("received %s, stopping", signal.Signals(signum).name)
+        stop.set()
+
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(signum, handler)
+    return stop
+
+
+def connect(settings: ZenohSettings, stop: threading.Event, retry_every: float = 1.0):
+    """Open a session, retrying while no router answers, until ``stop`` is set (then None).
+
+    The outer retry loop of SEED RL's actor: a process may start before its router.
+    ``settings.connect_timeout`` (0 = forever) bounds the total wait.
+    """
+    start = last_log = time.monotonic()
+    while not stop.is_set():
+        try:
+            return open_session(settings, connect_timeout=retry_every)
+        except TransportError as exc:
+            waited = time.monotonic() - start
+            if "Unable to connect" not in str(exc) or settings.mode == "router":
+                raise
+            if settings.connect_timeout and waited >= settings.connect_timeout:
+                raise TransportError(f"no Zenoh router answered within {waited:.0f} s: {exc}") from None
+            if time.monotonic() - last_log >= 10:
+                log.info("still waiting for a Zenoh router at %s (%.0f s)", settings.connect, waited)
+                last_log = time.monotonic()
+    return None
+
+
+class Scalars:
+    """TensorBoard scalars (``torch.utils.tensorboard``); does nothing without a directory."""
+
+    def __init__(self, logdir: str | Path | None) -> None:
+        self.writer = None
+        if logdir:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self.writer = SummaryWriter(str(logdir), flush_secs=10)
+
+    def add(self, values: dict[str, float], step: int, wall_time: float | None = None) -> None:
+        if self.writer is None:
+            return
+        for name, value in values.items():
+            if value is not None:
+                self.writer.add_scalar(name, float(value), global_step=int(step), walltime=wall_time)
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
