@@ -13,9 +13,9 @@ from protocols.limits import Limits
 
 INT64_MAX = 2**63 - 1
 INT64_MIN = -(2**63)
-FLOAT_DTYPES = (np.dtype("<f2"), np.dtype("<f4"), np.dtype("<f8"))
-INT_DTYPES = tuple(np.dtype(s) for s in ("|u1", "|i1", "<u2", "<i2", "<u4", "<i4", "<u8", "<i8"))
-TENSOR_DTYPES = (*FLOAT_DTYPES, *INT_DTYPES, np.dtype("|b1"))
+FLOAT_DTYPES = frozenset(np.dtype(s) for s in ("<f2", "<f4", "<f8"))
+INT_DTYPES = frozenset(np.dtype(s) for s in ("|u1", "|i1", "<u2", "<i2", "<u4", "<i4", "<u8", "<i8"))
+TENSOR_DTYPES = FLOAT_DTYPES | INT_DTYPES | {np.dtype("|b1")}
 
 JSONLike = None | bool | int | float | str | list["JSONLike"] | dict[str, "JSONLike"]
 
@@ -46,12 +46,6 @@ def check_float(value: object, what: str, *, finite: bool = True) -> float:
     if finite and not math.isfinite(value):
         raise ProtocolError("nonfinite", f"{what} = {value} is not finite")
     return float(value)
-
-
-def check_finite_array(array: np.ndarray, what: str) -> None:
-    if array.dtype.kind == "f" and array.size and not np.isfinite(array).all():
-        bad = int(np.size(array) - np.count_nonzero(np.isfinite(array)))
-        raise ProtocolError("nonfinite", f"{what} holds {bad} NaN or infinite values")
 
 
 def check_json(value: object, what: str, limits: Limits, depth: int = 0) -> JSONLike:
@@ -119,7 +113,11 @@ class BodyReader:
 
     def array(self, name: str, dtypes: Collection[np.dtype], ndim: int, *, finite: bool = True) -> np.ndarray:
         """An array field with one of ``dtypes`` and ``ndim`` dimensions, at most ``max_batch`` rows."""
-        return check_array(self.raw(name), self.what(name), self.limits, dtypes, ndim, finite=finite)
+        value = self.raw(name)
+        try:
+            return check_array(value, name, self.limits, dtypes, ndim, finite=finite)
+        except ProtocolError as exc:  # name the field in full only when it failed
+            raise ProtocolError(exc.reason, f"{self.kind}.{exc.message}") from None
 
     def json_map(self, name: str, *, optional: bool = False) -> dict | None:
         value = self.raw(name)
@@ -158,28 +156,36 @@ class BodyReader:
 def check_array(
     value: object, what: str, limits: Limits, dtypes: Collection[np.dtype], ndim: int, *, finite: bool = True
 ) -> np.ndarray:
-    if not isinstance(value, np.ndarray):
+    """``value`` if it is an array with one of ``dtypes``, ``ndim`` dimensions, at most ``max_batch``
+    rows and (``finite``, float dtypes) no NaN or infinity."""
+    if type(value) is not np.ndarray:
         raise ProtocolError("type", f"{what} must be an array, got {type(value).__name__}")
     if value.dtype not in dtypes:
-        raise ProtocolError(
-            "dtype", f"{what} has dtype {value.dtype}, expected one of {[str(d) for d in dtypes]}"
-        )
+        allowed = sorted(str(d) for d in dtypes)
+        raise ProtocolError("dtype", f"{what} has dtype {value.dtype}, expected one of {allowed}")
     if value.ndim != ndim:
         raise ProtocolError("shape", f"{what} has shape {value.shape}, expected {ndim} dimensions")
     if ndim and value.shape[0] > limits.max_batch:
         raise ProtocolError("oversize", f"{what} has {value.shape[0]} rows (limit {limits.max_batch})")
-    if finite:
-        check_finite_array(value, what)
+    if finite and value.dtype.kind == "f" and value.size and not np.isfinite(value).all():
+        bad = value.size - np.count_nonzero(np.isfinite(value))
+        raise ProtocolError("nonfinite", f"{what} holds {bad} NaN or infinite values")
     return value
 
 
 def check_actions(actions: np.ndarray, what: str, limits: Limits) -> None:
+    """Integer ``actions`` lie in [0, n_actions) (only >= 0 when n_actions is None)."""
     if not actions.size:
         return
-    low, high = int(actions.min()), int(actions.max())
-    if low < 0 or (limits.n_actions is not None and high >= limits.n_actions):
+    if limits.n_actions is None:
+        ok = actions.min() >= 0
+    else:  # one pass: negatives become huge unsigned values
+        ok = actions.view(actions.dtype.str.replace("i", "u")).max() < limits.n_actions
+    if not ok:
         bound = "inf" if limits.n_actions is None else limits.n_actions
-        raise ProtocolError("action_range", f"{what} spans [{low}, {high}], outside [0, {bound})")
+        raise ProtocolError(
+            "action_range", f"{what} spans [{actions.min()}, {actions.max()}], outside [0, {bound})"
+        )
 
 
 def check_rows(what: str, expected: int, *arrays: tuple[str, np.ndarray]) -> None:

@@ -14,8 +14,9 @@ from __future__ import annotations
 import threading
 
 import msgpack
+import numpy as np
 
-from protocols.arrays import default, ext_hook
+from protocols.arrays import array_parts, default, ext_hook
 from protocols.checks import BodyReader, check_int, check_string
 from protocols.errors import ProtocolError
 from protocols.limits import DEFAULT_LIMITS, Limits
@@ -36,25 +37,47 @@ def _packer() -> msgpack.Packer:
 
 def encode(message: Message) -> bytes:
     """The wire bytes of ``message`` (validated by the receiver, not here)."""
-    if type(message).KIND not in KINDS or KINDS[type(message).KIND] is not type(message):
+    if KINDS.get(type(message).KIND) is not type(message):
         raise ProtocolError("kind", f"{type(message).__name__} is not a registered message kind")
-    envelope = {
-        "v": message.VERSION,
-        "k": message.KIND,
-        "s": message.sender,
-        "n": message.seq,
-        "b": message.to_body(),
-    }
     packer = _packer()
+    parts: list[bytes | memoryview] = []
     try:
-        packer.pack(envelope)
-        return packer.bytes()
+        packer.pack_map_header(5)
+        for key, value in (
+            ("v", message.VERSION),
+            ("k", message.KIND),
+            ("s", message.sender),
+            ("n", message.seq),
+        ):
+            packer.pack(key)
+            packer.pack(value)
+        packer.pack("b")
+        _write_map(message.to_body(), packer, parts)
+        parts.append(packer.bytes())
+        return b"".join(parts)
     except ProtocolError:
         raise
     except (TypeError, ValueError, OverflowError) as exc:
         raise ProtocolError("type", f"cannot encode {message.KIND}: {exc}") from exc
     finally:
         packer.reset()
+
+
+def _write_map(mapping: dict, packer: msgpack.Packer, parts: list[bytes | memoryview]) -> None:
+    """Pack ``mapping``, splicing arrays (at this level or in maps of arrays) straight into ``parts``."""
+    packer.pack_map_header(len(mapping))
+    for key, value in mapping.items():
+        packer.pack(key)
+        if isinstance(value, np.ndarray):
+            head, data = array_parts(value)
+            parts.append(packer.bytes())
+            packer.reset()
+            parts.append(head)
+            parts.append(data)
+        elif isinstance(value, dict) and any(isinstance(v, np.ndarray) for v in value.values()):
+            _write_map(value, packer, parts)
+        else:
+            packer.pack(value)  # arrays nested deeper still go through the ``default`` hook
 
 
 def decode(data: bytes | bytearray | memoryview, limits: Limits = DEFAULT_LIMITS) -> Message:

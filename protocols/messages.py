@@ -27,10 +27,10 @@ from protocols.checks import (
 )
 from protocols.errors import ProtocolError
 
-F32 = (np.dtype("<f4"),)
-I64 = (np.dtype("<i8"),)
-I32 = (np.dtype("<i4"),)
-BOOL = (np.dtype("|b1"),)
+F32 = frozenset({np.dtype("<f4")})
+I64 = frozenset({np.dtype("<i8")})
+I32 = frozenset({np.dtype("<i4")})
+BOOL = frozenset({np.dtype("|b1")})
 DEMO_SOURCES = ("astar", "human", "file")
 KINDS: dict[str, type[Message]] = {}
 
@@ -128,13 +128,13 @@ class TransitionBatch(Message):
 
 
 _TRANSITION_DTYPES = {
-    "env_ids": I32[0],
-    "obs": F32[0],
-    "action": I64[0],
-    "reward": F32[0],
-    "next_obs": F32[0],
-    "terminated": BOOL[0],
-    "truncated": BOOL[0],
+    "env_ids": np.dtype("<i4"),
+    "obs": np.dtype("<f4"),
+    "action": np.dtype("<i8"),
+    "reward": np.dtype("<f4"),
+    "next_obs": np.dtype("<f4"),
+    "terminated": np.dtype("|b1"),
+    "truncated": np.dtype("|b1"),
 }
 
 
@@ -241,12 +241,12 @@ class DemoBatch(Message):
 
 
 _DEMO_DTYPES = {
-    "episode_lengths": I32[0],
-    "obs": F32[0],
-    "actions": I64[0],
-    "rewards": F32[0],
-    "terminations": BOOL[0],
-    "truncations": BOOL[0],
+    "episode_lengths": np.dtype("<i4"),
+    "obs": np.dtype("<f4"),
+    "actions": np.dtype("<i8"),
+    "rewards": np.dtype("<f4"),
+    "terminations": np.dtype("|b1"),
+    "truncations": np.dtype("|b1"),
 }
 
 
