@@ -9,8 +9,10 @@ objects and read back with ``minari.load_dataset``.
 
 One Minari episode per demonstration, holding the robot's own observations
 (``T + 1`` rows, the reset observation first), actions, rewards,
-terminations and truncations (``T`` rows), per-step infos ``pose`` (``T + 1``
-rows of ``x, y, theta``) and per-episode metadata stored as Minari episode
+terminations and truncations (``T`` rows), per-step infos aligned with the
+observations (``T + 1`` rows): ``pose`` (``x, y, theta``) and, when the
+actions were perturbed, ``expert_action`` (what the expert would have done at
+that observation; -1 on the last row), and per-episode metadata stored as Minari episode
 options (``options/<key>`` attributes):
 
 =========== ==========================================================
@@ -76,6 +78,13 @@ class Demo:
     poses: np.ndarray
     metadata: dict = field(default_factory=dict)
     grid: GridMap | None = None
+    expert_actions: np.ndarray | None = None
+    """the expert's own choice at each step (differs from ``actions`` where noise was injected)"""
+
+    @property
+    def labels(self) -> np.ndarray:
+        """The expert's choices when recorded, else the actions taken."""
+        return self.actions if self.expert_actions is None else self.expert_actions
 
     def __len__(self) -> int:
         return len(self.actions)
@@ -101,6 +110,7 @@ def make_demo(
     seed: int | None,
     noise: float,
     outcome: int,
+    expert_actions: Iterable | None = None,
 ) -> Demo:
     """Build a :class:`Demo` from one recorded episode, checking its shapes."""
     if source not in SOURCES:
@@ -122,6 +132,7 @@ def make_demo(
             "outcome": int(outcome),
         },
         grid=task.grid,
+        expert_actions=None if expert_actions is None else np.asarray(expert_actions, dtype=np.int64),
     )
     _check_demo(demo, "new demonstration")
     return demo
@@ -142,6 +153,10 @@ def _check_demo(demo: Demo, where: str) -> None:
         raise DemoFormatError(f"{where}: poses have shape {demo.poses.shape}, expected ({t + 1}, 3)")
     if not (np.isfinite(demo.observations).all() and np.isfinite(demo.poses).all()):
         raise DemoFormatError(f"{where}: non-finite observations or poses")
+    if demo.expert_actions is not None and demo.expert_actions.shape != (t,):
+        raise DemoFormatError(
+            f"{where}: expert_actions have shape {demo.expert_actions.shape}, expected ({t},)"
+        )
 
 
 @contextlib.contextmanager
@@ -216,7 +231,7 @@ def write_demos(
                 rewards=list(demo.rewards),
                 terminations=list(demo.terminations),
                 truncations=list(demo.truncations),
-                infos={"pose": demo.poses},
+                infos=_infos(demo),
             )
         )
     root.mkdir(parents=True, exist_ok=True)
@@ -236,6 +251,13 @@ def write_demos(
             {"navlearn_format": FORMAT_VERSION, "navlearn": json.dumps(extra_metadata or {}, sort_keys=True)}
         )
     return target
+
+
+def _infos(demo: Demo) -> dict[str, np.ndarray]:
+    infos = {"pose": demo.poses}
+    if demo.expert_actions is not None:
+        infos["expert_action"] = np.append(demo.expert_actions, -1)
+    return infos
 
 
 def _read_demo(episode, meta: dict, where: str, obs_dim: int) -> Demo:
@@ -261,6 +283,9 @@ def _read_demo(episode, meta: dict, where: str, obs_dim: int) -> Demo:
         terminations=np.asarray(episode.terminations, dtype=bool),
         truncations=np.asarray(episode.truncations, dtype=bool),
         poses=np.asarray(infos["pose"], dtype=np.float64),
+        expert_actions=(
+            np.asarray(infos["expert_action"], dtype=np.int64)[:-1] if "expert_action" in infos else None
+        ),
         metadata={
             "map_id": str(options["map_id"]),
             "start": start,

@@ -34,6 +34,7 @@ def _demos(n: int = 4) -> list:
                 seed=100 + i,
                 noise=0.3,
                 outcome=1,
+                expert_actions=rng.integers(0, 5, steps) if i % 2 else None,
             )
         )
     return out
@@ -51,6 +52,8 @@ def test_round_trip(tmp_path):
         np.testing.assert_array_equal(a.terminations, b.terminations)
         np.testing.assert_array_equal(a.truncations, b.truncations)
         np.testing.assert_allclose(a.poses, b.poses)
+        np.testing.assert_array_equal(a.labels, b.labels)
+        assert (a.expert_actions is None) == (b.expert_actions is None)
         assert a.metadata == b.metadata
         assert b.grid == a.grid and b.task() == a.task()
     assert dataset_info(path)["navlearn"] == {"maps": "toy"}

@@ -6,7 +6,9 @@ observations, actions, rewards, terminations and truncations, with its poses and
 task, as an :class:`agents.demos.Demo`. With ``noise > 0`` each step takes, with
 that probability, a random action among those that do not hit a wall, standing
 in for an imperfect human demonstrator; the expert replans from wherever that
-leaves the robot, and the action actually taken is the one recorded.
+leaves the robot. The action actually taken is the one recorded, and the
+expert's own choice is kept beside it (``Demo.expert_actions``): imperfect demos
+for NIRL, and the corrective labels DART (Laskey et al. 2017) trains on.
 """
 
 from __future__ import annotations
@@ -43,10 +45,11 @@ def record_episode(
     task = info["task"]
     expert.reset(task, info["pose"])
     observations, poses = [obs], [info["pose"]]
-    actions, rewards, terms, truncs = [], [], [], []
+    actions, chosen, rewards, terms, truncs = [], [], [], [], []
     done = False
     while not done:
         action = expert.act(info["pose"], obs)
+        chosen.append(action)
         if noise > 0 and rng.random() < noise:
             safe = expert.safe_actions(info["pose"])
             if len(safe):
@@ -60,7 +63,18 @@ def record_episode(
         truncs.append(truncated)
         done = terminated or truncated
     demo = make_demo(
-        observations, actions, rewards, terms, truncs, poses, task, "astar", seed, noise, info["outcome"]
+        observations,
+        actions,
+        rewards,
+        terms,
+        truncs,
+        poses,
+        task,
+        "astar",
+        seed,
+        noise,
+        info["outcome"],
+        chosen,
     )
     return demo, expert.replans
 
