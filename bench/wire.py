@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import pickle
 import socket
@@ -76,7 +77,7 @@ def make_weights(
 ) -> WeightsUpdate:
     sizes = [obs_dim, hidden, hidden, n_actions]
     tensors = {}
-    for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
+    for i, (a, b) in enumerate(itertools.pairwise(sizes)):
         tensors[f"layers.{i}.weight"] = rng.standard_normal((b, a)).astype(np.float32)
         tensors[f"layers.{i}.bias"] = np.zeros(b, np.float32)
     return WeightsUpdate(
@@ -149,15 +150,17 @@ def peer_main(endpoint: str) -> None:
             state["bytes"] += nbytes
             state["last"] = now
 
-    def consume(subscriber, handle) -> None:
-        # Samples wait in the subscriber's FIFO channel (filled by Zenoh's own threads without the GIL)
-        # and are handled here, as a service would; iteration ends when the subscriber is undeclared.
-        for sample in subscriber:
+    def subscriber(handle):
+        # Decoding runs in Zenoh's callback thread, as a service's subscriber would (a FIFO channel
+        # drained by a Python thread was slower here: the two threads contend for the GIL).
+        def on_sample(sample) -> None:
             data = sample.payload.to_bytes()
             try:
                 count(len(data), handle(data))
             except ValueError:
                 state["rejected"] += 1
+
+        return on_sample
 
     echo_pub = session.declare_publisher(ECHO_BACK, congestion_control=zenoh.CongestionControl.BLOCK)
 
@@ -179,10 +182,12 @@ def peer_main(endpoint: str) -> None:
             print(json.dumps(state), flush=True)
             state.update(count=0, transitions=0, bytes=0, first=0.0, last=0.0, rejected=0)
 
-    subs = [session.declare_subscriber(END, on_end), session.declare_subscriber(ECHO, on_echo)]
-    for key, handle in ((RAW, lambda data: 0), (MSG, lambda data: len(decode(data, LIMITS)))):
-        subs.append(session.declare_subscriber(key, zenoh.handlers.FifoChannel(256)))
-        threading.Thread(target=consume, args=(subs[-1], handle), daemon=True).start()
+    subs = [
+        session.declare_subscriber(END, on_end),
+        session.declare_subscriber(ECHO, on_echo),
+        session.declare_subscriber(RAW, subscriber(lambda data: 0)),
+        session.declare_subscriber(MSG, subscriber(lambda data: len(decode(data, LIMITS)))),
+    ]
     print("ready", flush=True)
     sys.stdin.read()  # runs until the parent closes our stdin
     for sub in subs:

@@ -119,6 +119,19 @@ class BodyReader:
         except ProtocolError as exc:  # name the field in full only when it failed
             raise ProtocolError(exc.reason, f"{self.kind}.{exc.message}") from None
 
+    def arrays(self, schema: dict[str, tuple[Collection[np.dtype], int]]) -> dict[str, np.ndarray]:
+        """Several array fields at once, ``schema`` mapping name -> (dtypes, ndim); the hot path."""
+        body, limits, out = self.body, self.limits, {}
+        for name, (dtypes, ndim) in schema.items():
+            if name not in body:
+                raise ProtocolError("field", f"{self.kind}.{name} is missing")
+            try:
+                out[name] = check_array(body[name], name, limits, dtypes, ndim)
+            except ProtocolError as exc:
+                raise ProtocolError(exc.reason, f"{self.kind}.{exc.message}") from None
+        self._read.update(schema)
+        return out
+
     def json_map(self, name: str, *, optional: bool = False) -> dict | None:
         value = self.raw(name)
         if optional and value is None:

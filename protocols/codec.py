@@ -11,6 +11,7 @@ Nothing is ever unpickled.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 
 import msgpack
@@ -24,6 +25,7 @@ from protocols.messages import KINDS, Message
 
 _ENVELOPE_KEYS = frozenset("vksnb")
 _local = threading.local()
+_FIELD_NAMES: dict[type, frozenset[str]] = {}
 
 
 def _packer() -> msgpack.Packer:
@@ -121,10 +123,23 @@ def _message_from_envelope(envelope: object, limits: Limits) -> Message:
     seq = check_int(envelope["n"], "envelope seq", 0)
     body = BodyReader(kind, envelope["b"], limits)
     try:
-        kwargs = cls.read_body(body)
+        fields = cls.read_body(body)
         body.finish()
-        return cls(**kwargs, sender=sender, seq=seq)
     except ProtocolError:
         raise
     except Exception as exc:  # a schema check that tripped on an unexpected value: still the sender's fault
         raise ProtocolError("malformed", f"{kind} body: {type(exc).__name__}: {exc}") from None
+    return _trusted(cls, fields, sender, seq)
+
+
+def _trusted(cls: type[Message], fields: dict, sender: str, seq: int) -> Message:
+    """The message from checked fields, skipping ``__init__``/``__post_init__`` (their conversions
+    are no-ops on checked values, and a measurable share of decoding a transition batch)."""
+    names = _FIELD_NAMES.get(cls)
+    if names is None:
+        names = _FIELD_NAMES[cls] = frozenset(f.name for f in dataclasses.fields(cls)) - {"sender", "seq"}
+    if fields.keys() != names:
+        raise AssertionError(f"{cls.__name__}.read_body returned {sorted(fields)}, not its fields")
+    message = object.__new__(cls)
+    message.__dict__.update(fields, sender=sender, seq=seq)
+    return message

@@ -103,18 +103,10 @@ class TransitionBatch(Message):
 
     @classmethod
     def read_body(cls, body: BodyReader) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "actor": body.string("actor"),
-            "model": body.string("model"),
-            "policy_version": body.integer("policy_version"),
-            "env_ids": body.array("env_ids", I32, 1),
-            "obs": body.array("obs", F32, 2),
-            "action": body.array("action", I64, 1),
-            "reward": body.array("reward", F32, 1),
-            "next_obs": body.array("next_obs", F32, 2),
-            "terminated": body.array("terminated", BOOL, 1),
-            "truncated": body.array("truncated", BOOL, 1),
-        }
+        out: dict[str, Any] = body.arrays(_TRANSITION_SCHEMA)
+        out["actor"] = body.string("actor")
+        out["model"] = body.string("model")
+        out["policy_version"] = body.integer("policy_version")
         n, obs_dim = out["obs"].shape
         if not 1 <= obs_dim <= body.limits.max_obs_dim:
             raise ProtocolError("shape", f"transitions.obs has dimension {obs_dim}")
@@ -122,20 +114,21 @@ class TransitionBatch(Message):
             raise ProtocolError(
                 "shape", f"transitions: next_obs {out['next_obs'].shape} differs from obs {out['obs'].shape}"
             )
-        check_rows("transitions", n, *((k, out[k]) for k in _TRANSITION_DTYPES))
+        check_rows("transitions", n, *((k, out[k]) for k in _TRANSITION_SCHEMA))
         check_actions(out["action"], "transitions.action", body.limits)
         return out
 
 
-_TRANSITION_DTYPES = {
-    "env_ids": np.dtype("<i4"),
-    "obs": np.dtype("<f4"),
-    "action": np.dtype("<i8"),
-    "reward": np.dtype("<f4"),
-    "next_obs": np.dtype("<f4"),
-    "terminated": np.dtype("|b1"),
-    "truncated": np.dtype("|b1"),
+_TRANSITION_SCHEMA = {
+    "env_ids": (I32, 1),
+    "obs": (F32, 2),
+    "action": (I64, 1),
+    "reward": (F32, 1),
+    "next_obs": (F32, 2),
+    "terminated": (BOOL, 1),
+    "truncated": (BOOL, 1),
 }
+_TRANSITION_DTYPES = {name: next(iter(dtypes)) for name, (dtypes, _) in _TRANSITION_SCHEMA.items()}
 
 
 @dataclass(kw_only=True)
@@ -211,17 +204,10 @@ class DemoBatch(Message):
 
     @classmethod
     def read_body(cls, body: BodyReader) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "source": body.string("source", choices=DEMO_SOURCES),
-            "quality": body.string("quality", optional=True),
-            "episode_lengths": body.array("episode_lengths", I32, 1),
-            "obs": body.array("obs", F32, 2),
-            "actions": body.array("actions", I64, 1),
-            "rewards": body.array("rewards", F32, 1),
-            "terminations": body.array("terminations", BOOL, 1),
-            "truncations": body.array("truncations", BOOL, 1),
-            "episodes": [_read_episode(m, i, body) for i, m in enumerate(body.list("episodes"))],
-        }
+        out: dict[str, Any] = body.arrays(_DEMO_SCHEMA)
+        out["source"] = body.string("source", choices=DEMO_SOURCES)
+        out["quality"] = body.string("quality", optional=True)
+        out["episodes"] = [_read_episode(m, i, body) for i, m in enumerate(body.list("episodes"))]
         lengths = out["episode_lengths"]
         if lengths.size and int(lengths.min()) < 1:
             raise ProtocolError("shape", "demos.episode_lengths must all be >= 1")
@@ -240,14 +226,15 @@ class DemoBatch(Message):
         return out
 
 
-_DEMO_DTYPES = {
-    "episode_lengths": np.dtype("<i4"),
-    "obs": np.dtype("<f4"),
-    "actions": np.dtype("<i8"),
-    "rewards": np.dtype("<f4"),
-    "terminations": np.dtype("|b1"),
-    "truncations": np.dtype("|b1"),
+_DEMO_SCHEMA = {
+    "episode_lengths": (I32, 1),
+    "obs": (F32, 2),
+    "actions": (I64, 1),
+    "rewards": (F32, 1),
+    "terminations": (BOOL, 1),
+    "truncations": (BOOL, 1),
 }
+_DEMO_DTYPES = {name: next(iter(dtypes)) for name, (dtypes, _) in _DEMO_SCHEMA.items()}
 
 
 def _read_episode(value: object, index: int, body: BodyReader) -> EpisodeMeta:

@@ -43,7 +43,7 @@ def test_every_kind_round_trips(strategy, data) -> None:
 
 
 def test_registry_holds_the_five_kinds() -> None:
-    assert set(KINDS) == {"transitions", "demos", "weights", "eval", "status"}
+    assert {"transitions", "demos", "weights", "eval", "status"} <= set(KINDS)  # later modules add more
 
 
 def test_decoded_arrays_are_read_only_views_of_the_received_bytes() -> None:
