@@ -87,3 +87,21 @@ def test_no_plan_cases():
     # starting inside a wall is not a plan either
     inside = plan_lattice(grid, (0.5, 0.5, 0.0), m["G"], ROBOT.turns, ROBOT.step, ROBOT.radius, 0.5)
     assert not inside.found and inside.expanded == 0
+
+
+def test_collision_rule_matches_the_env():
+    from agents.planning.lattice import _sweep_hits
+
+    rng = np.random.default_rng(5)
+    grid = GridMap(rng.random((10, 12)) < 0.25, cell_size=1.0)
+    start = rng.uniform([0, 0], [12, 10], size=(3000, 2))
+    heading = rng.uniform(-np.pi, np.pi, 3000)
+    end = start + 0.5 * np.column_stack([np.cos(heading), np.sin(heading)])
+    expected = collides(grid, start[:, 0], start[:, 1], end[:, 0], end[:, 1], ROBOT.radius)
+    no_discs = np.zeros((0, 3))
+    got = [
+        _sweep_hits(grid.blocked, 1.0, no_discs, ROBOT.radius, *a, *b)
+        for a, b in zip(start, end, strict=True)
+    ]
+    assert 0.2 < expected.mean() < 0.95  # both outcomes well represented
+    np.testing.assert_array_equal(got, expected)

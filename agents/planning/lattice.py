@@ -11,8 +11,8 @@ This planner searches what the robot can actually do, hybrid-A* style
   metres times ``heading_bins`` heading sectors - and the cheapest pose
   reaching a bin is the one kept;
 * a successor is dropped when the robot disc, swept along the step, touches a
-  blocked cell or the border (``worlds.robot.capsule_hits_grid``, the env's own
-  test) or comes within a known moving disc;
+  blocked cell or the border (the rule of ``worlds.robot.collides``, checked
+  against it in the tests) or comes within a known moving disc;
 * a step costs its length, times ``1 + clearance_weight * ((safe_gap - gap) /
   safe_gap)^2`` when the gap between the disc and the nearest obstacle is
   below ``safe_gap``, so paths keep away from walls, plus ``turn_weight`` per
@@ -34,7 +34,6 @@ from numba import njit
 
 from agents.planning.astar import distance_field
 from worlds.maps import Cell, GridMap
-from worlds.robot import capsule_hits_grid, gap_field
 
 
 @dataclass(frozen=True)
@@ -119,11 +118,55 @@ def _point_segment_sq(px, py, ax, ay, bx, by):
 
 
 @njit(cache=True)
-def _sweep_hits(flat, gap_cells, blocked, cell_size, discs, radius, x0, y0, x1, y1):
-    """The env's collision rule for one step: the disc swept from (x0, y0) to (x1, y1)."""
+def _point_box_sq(px, py, x0, y0, x1, y1):
+    dx = max(x0 - px, 0.0, px - x1)
+    dy = max(y0 - py, 0.0, py - y1)
+    return dx * dx + dy * dy
+
+
+@njit(cache=True)
+def _segment_box_sq(ax, ay, bx, by, x0, y0, x1, y1):
+    """Squared distance between segment a-b and the box [x0, x1] x [y0, y1]; 0 when they meet."""
+    t_lo, t_hi = 0.0, 1.0
+    meets = True
+    for p, d, lo, hi in ((ax, bx - ax, x0, x1), (ay, by - ay, y0, y1)):  # slab test
+        if d == 0.0:
+            if p < lo or p > hi:
+                meets = False
+        else:
+            t0, t1 = (lo - p) / d, (hi - p) / d
+            t_lo, t_hi = max(t_lo, min(t0, t1)), min(t_hi, max(t0, t1))
+    if meets and t_lo <= t_hi:
+        return 0.0
+    # disjoint convex shapes: the closest pair includes an end point or a box corner
+    best = min(_point_box_sq(ax, ay, x0, y0, x1, y1), _point_box_sq(bx, by, x0, y0, x1, y1))
+    for cx, cy in ((x0, y0), (x1, y0), (x0, y1), (x1, y1)):
+        best = min(best, _point_segment_sq(cx, cy, ax, ay, bx, by))
+    return best
+
+
+@njit(cache=True)
+def _sweep_hits(blocked, cell_size, discs, radius, x0, y0, x1, y1):
+    """The env's collision rule for one step (``worlds.robot.collides``): the disc swept from
+    (x0, y0) to (x1, y1) touches a blocked cell or leaves the map; or meets a known disc."""
     height, width = blocked.shape
-    if capsule_hits_grid(flat, 0, height, width, cell_size, gap_cells, x0, y0, x1, y1, radius):
+    if min(x0, x1) - radius < 0.0 or min(y0, y1) - radius < 0.0:
         return True
+    if max(x0, x1) + radius > width * cell_size or max(y0, y1) + radius > height * cell_size:
+        return True
+    r_sq = radius * radius
+    for r in range(
+        max(int((min(y0, y1) - radius) / cell_size), 0),
+        min(int((max(y0, y1) + radius) / cell_size), height - 1) + 1,
+    ):
+        for c in range(
+            max(int((min(x0, x1) - radius) / cell_size), 0),
+            min(int((max(x0, x1) + radius) / cell_size), width - 1) + 1,
+        ):
+            if blocked[r, c]:
+                box = (c * cell_size, r * cell_size, (c + 1) * cell_size, (r + 1) * cell_size)
+                if _segment_box_sq(x0, y0, x1, y1, box[0], box[1], box[2], box[3]) < r_sq:
+                    return True
     for i in range(discs.shape[0]):
         reach = discs[i, 2] + radius
         if _point_segment_sq(discs[i, 0], discs[i, 1], x0, y0, x1, y1) < reach * reach:
@@ -176,9 +219,7 @@ def _heap_pop(hf, hb, size):
 
 
 @njit(cache=True)
-def _search(
-    blocked, flat, gap_cells, cell_size, field, discs, sx, sy, sth, gx, gy, turns, step, radius, tol, params
-):
+def _search(blocked, cell_size, field, discs, sx, sy, sth, gx, gy, turns, step, radius, tol, params):
     res, n_head, w_clear, safe, w_turn, w_h, max_exp = params
     n_head = int(n_head)
     height, width = blocked.shape
@@ -199,7 +240,7 @@ def _search(
         hb_ = math.floor((_wrap(th) + math.pi) / sector + 0.5) % n_head
         return (int(y / res) * bw + int(x / res)) * n_head + hb_
 
-    if _sweep_hits(flat, gap_cells, blocked, cell_size, discs, radius, sx, sy, sx, sy):
+    if _sweep_hits(blocked, cell_size, discs, radius, sx, sy, sx, sy):
         return parent, act, pose, -1, 0, g
     start = bin_of(sx, sy, sth)
     g[start] = 0.0
@@ -223,7 +264,7 @@ def _search(
             dy = step * math.sin(nth)
             nx = x + dx
             ny = y + dy
-            if _sweep_hits(flat, gap_cells, blocked, cell_size, discs, radius, x, y, nx, ny):
+            if _sweep_hits(blocked, cell_size, discs, radius, x, y, nx, ny):
                 continue
             gap = _gap(blocked, cell_size, discs, radius, nx, ny, safe)
             h_cell = field[int(ny / cell_size), int(nx / cell_size)]
@@ -283,8 +324,6 @@ def plan_lattice(
     )
     parent, act, pose, end, expanded, g = _search(
         grid.blocked,
-        grid.blocked.ravel().astype(np.uint8),
-        gap_field(grid).ravel(),
         float(grid.cell_size),
         np.asarray(field, dtype=np.float64),
         discs,
