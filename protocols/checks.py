@@ -161,7 +161,7 @@ class BodyReader:
         return value
 
     def finish(self) -> None:
-        unknown = set(self.body) - self._read
+        unknown = self.body.keys() - self._read
         if unknown:
             raise ProtocolError("field", f"unexpected {self.kind} fields {sorted(map(str, unknown))}")
 

@@ -86,7 +86,7 @@ def decode(data: bytes | bytearray | memoryview, limits: Limits = DEFAULT_LIMITS
     """The message in ``data``, fully validated against ``limits``; raises only ProtocolError."""
     if not isinstance(data, bytes | bytearray | memoryview):
         raise ProtocolError("type", f"expected bytes, got {type(data).__name__}")
-    size = memoryview(data).nbytes
+    size = len(data) if isinstance(data, bytes) else memoryview(data).nbytes
     if size > limits.max_message_bytes:
         raise ProtocolError("oversize", f"message of {size} bytes (limit {limits.max_message_bytes})")
     try:
@@ -110,7 +110,7 @@ def decode(data: bytes | bytearray | memoryview, limits: Limits = DEFAULT_LIMITS
 
 
 def _message_from_envelope(envelope: object, limits: Limits) -> Message:
-    if not isinstance(envelope, dict) or set(envelope) != _ENVELOPE_KEYS:
+    if not isinstance(envelope, dict) or envelope.keys() != _ENVELOPE_KEYS:
         raise ProtocolError("malformed", "not a navlearn envelope (a map with keys v, k, s, n, b)")
     kind = envelope["k"]
     cls = KINDS.get(kind) if isinstance(kind, str) else None

@@ -115,7 +115,7 @@ def add_zenoh_args(
 ) -> None:
     """Add the Zenoh flags (one argument group) to ``parser``; ``modes=("router",)`` hides --mode."""
     group = parser.add_argument_group("Zenoh", "every flag also reads the environment variable named in it")
-    parser.set_defaults(zenoh_default_mode=default_mode, zenoh_modes=modes)
+    parser.set_defaults(zenoh_default_mode=default_mode)
     for name, (flag, text) in _FLAGS.items():
         if len(modes) == 1 and name in ("mode", "run", "connect_timeout"):
             continue  # a stand-alone router has no mode choice, no run and does not wait for anyone

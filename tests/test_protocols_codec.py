@@ -34,7 +34,7 @@ LIMITS = Limits(n_actions=N_ACTIONS)
 @pytest.mark.parametrize(
     "strategy", [transition_batches(), demo_batches(), weights_updates(), eval_reports(), learner_statuses()]
 )
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=40, deadline=None)
 @given(data=st.data())
 def test_every_kind_round_trips(strategy, data) -> None:
     message = data.draw(strategy)

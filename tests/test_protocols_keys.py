@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from protocols import keys
@@ -25,6 +25,7 @@ def test_builders() -> None:
     assert keys.alive_role("run1", "actor") == "navlearn/run1/alive/actor/*"
 
 
+@settings(max_examples=50)
 @given(run=good_names, name=good_names, role=good_names)
 def test_parse_inverts_every_builder(run: str, name: str, role: str) -> None:
     for channel, key in (
