@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
+from dataclasses import replace
 
 from services.transport import ZenohSettings, build_config, open_session
 
@@ -19,8 +20,10 @@ def run_router(settings: ZenohSettings, stop: threading.Event) -> int:
     """Serve as a Zenoh router until ``stop`` is set; returns the exit code."""
     import zenoh
 
-    settings = ZenohSettings(**{**settings.__dict__, "mode": "router"})
+    settings = replace(settings, mode="router")
     listen = json.loads(build_config(settings).get_json("listen/endpoints"))
+    if isinstance(listen, dict):  # a config file may give endpoints per mode
+        listen = listen.get("router", [])
     with open_session(settings) as session:
         log.info("router %s listening on %s", session.zid(), ", ".join(listen))
 
