@@ -1,0 +1,231 @@
+"""`navlearn train --local`: NNQL in one process - a vector env, the rollout, the learner.
+
+The same classes the distributed services use (``VectorRollout`` on the actor side,
+``NNQLLearner`` on the learner side), wired in-process: every step of N robots goes
+into the replay buffer, the update-to-data ratio decides how many updates follow, and
+the behaviour policy takes the new weights and exploration right away (no policy lag).
+It is also the baseline of the learner overhead benchmark (``TrainResult`` rates).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import deque
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.nnql.config import NNQLConfig
+from agents.nnql.learner import NNQLLearner
+from agents.nnql.rollout import EpisodeEnd, VectorRollout
+
+SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
+CURVE_EVERY = 2_000
+"""robot-steps between learning-curve points"""
+
+
+@dataclass
+class LocalTrainConfig:
+    """Budget, environment and outputs of one local training run."""
+
+    steps: int = 200_000
+    """robot-steps (transitions) to collect, summed over the vector env"""
+    envs: int = 16
+    """robots stepped together in the vector env"""
+    maps: str = "mixed:16"
+    """training map spec (worlds.tasks.parse_map_spec)"""
+    seed: int = 0
+    """seeds the env, the learner and the exploration"""
+    out: str = "runs/nnql-local"
+    """output directory: policy (model.safetensors + config.json), curve.png, curve.jsonl, summary.json"""
+    eval_every: int = 50_000
+    """robot-steps between greedy evaluations on held-out maps (0: only the final one)"""
+    eval_episodes: int = 50
+    """episodes of each periodic evaluation"""
+    final_eval_episodes: int = 100
+    """episodes of the final evaluation ("unseen" family: generated maps never trained on)"""
+    progress: bool = True
+    """show a progress bar"""
+
+
+@dataclass
+class TrainResult:
+    """What a run produced: rates for the overhead benchmark, curve points, final evaluation."""
+
+    env_steps: int
+    updates: int
+    wall_time: float
+    env_steps_per_s: float
+    updates_per_s: float
+    update_time: float
+    """seconds spent inside learner updates (sample + loss + step)"""
+    curve: list[dict[str, float]] = field(default_factory=list)
+    final_eval: dict[str, Any] | None = None
+    """FamilyMetrics.to_dict() of the final greedy evaluation on the "unseen" set (seed 0)"""
+    final_table: str = ""
+    out: str | None = None
+    learner: NNQLLearner | None = field(default=None, repr=False)
+    """the trained learner (not serialised)"""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "learner"}
+
+
+VALIDATION_SEED = 1
+"""periodic evaluations use the held-out set of this seed; the final one uses seed 0, the reported set"""
+
+
+def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None) -> Any:
+    """Greedy evaluation on the shared held-out "unseen" set (agents.evaluation) -> EvalResult."""
+    from agents.evaluation.runner import evaluate, make_eval_set
+
+    return evaluate(policy.greedy(), make_eval_set("unseen", episodes, seed=seed), config=nav)
+
+
+def train_local(
+    run: LocalTrainConfig,
+    nnql: NNQLConfig | None = None,
+    nav: Any = None,
+) -> TrainResult:
+    """Train NNQL for ``run.steps`` robot-steps; writes the outputs to ``run.out`` if set."""
+    from worlds.vector_env import NavigationVectorEnv
+
+    nnql = nnql or NNQLConfig(seed=run.seed)
+    env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
+    obs_dim = int(env.single_observation_space.shape[0])
+    n_actions = int(env.single_action_space.n)
+    learner = NNQLLearner(nnql, obs_dim, n_actions)
+    policy = learner.policy(seed=run.seed)
+    policy.explore_as(nnql, learner.version)
+    rollout = VectorRollout(env, policy, with_next_action=nnql.sarsa)
+    rollout.reset(seed=run.seed)
+
+    recent: deque[EpisodeEnd] = deque(maxlen=200)
+    curve: list[dict[str, float]] = []
+    metrics: dict[str, float] = {}
+    update_time = 0.0
+    next_point, next_eval = 0, run.eval_every if run.eval_every > 0 else run.steps + 1
+    bar = _progress_bar(run)
+    start = last_postfix = time.perf_counter()
+    while rollout.steps < run.steps:
+        batch, ended = rollout.step()
+        recent.extend(ended)
+        learner.add(batch)
+        due = learner.updates_due()
+        if due:
+            t0 = time.perf_counter()
+            for _ in range(due):
+                metrics = learner.update()
+            update_time += time.perf_counter() - t0
+            policy.set_weights(learner.get_weights(), learner.version)
+            policy.explore_as(nnql, learner.version)
+        now = time.perf_counter()
+        if rollout.steps >= next_point or rollout.steps >= run.steps:
+            curve.append(_curve_point(rollout.steps, now - start, learner, recent, policy, metrics))
+            next_point += CURVE_EVERY
+        if next_eval <= rollout.steps < run.steps:
+            report = evaluate_policy(policy, run.eval_episodes, VALIDATION_SEED, nav)
+            curve[-1]["eval_success"] = report.metrics["unseen"].success.value
+            next_eval += run.eval_every
+        if bar is not None:
+            bar.update(rollout.num_envs)
+            if now - last_postfix > 1.0:
+                bar.set_postfix_str(_postfix(curve[-1], learner.updates, update_time), refresh=False)
+                last_postfix = now
+    wall = time.perf_counter() - start
+    if bar is not None:
+        bar.close()
+    env.close()
+
+    result = TrainResult(
+        env_steps=rollout.steps,
+        updates=learner.updates,
+        wall_time=wall,
+        env_steps_per_s=rollout.steps / wall,
+        updates_per_s=learner.updates / update_time if update_time else 0.0,
+        update_time=update_time,
+        curve=curve,
+        learner=learner,
+    )
+    if run.final_eval_episodes > 0:
+        report = evaluate_policy(policy, run.final_eval_episodes, 0, nav)
+        result.final_eval = report.to_dict(with_episodes=False)["metrics"]["unseen"]
+        result.final_table = report.table()
+        curve[-1]["eval_success"] = report.metrics["unseen"].success.value
+    if run.out:
+        result.out = str(write_outputs(Path(run.out), learner, result, run, nnql))
+    return result
+
+
+def _curve_point(steps, wall, learner, recent, policy, metrics) -> dict[str, float]:
+    outcomes = [e.outcome for e in recent]
+    point = {
+        "env_steps": float(steps),
+        "wall_time": float(wall),
+        "updates": float(learner.updates),
+        "train_success": float(np.mean([o == SUCCESS_OUTCOME for o in outcomes])) if outcomes else 0.0,
+        "episode_return": float(np.mean([e.episode_return for e in recent])) if recent else 0.0,
+        "temperature": policy.temperature,
+        "epsilon": policy.epsilon,
+    }
+    point.update({k: v for k, v in metrics.items() if k.startswith("losses/")})
+    return point
+
+
+def _progress_bar(run: LocalTrainConfig):
+    if not run.progress:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=run.steps, unit="step", unit_scale=True, desc="nnql", dynamic_ncols=True)
+
+
+def _postfix(point: dict[str, float], updates: int, update_time: float) -> str:
+    ups = updates / update_time if update_time else 0.0
+    text = f"updates {updates} ({ups:.0f}/s) success {point['train_success']:.0%}"
+    text += f" T {point['temperature']:.3f}"
+    if "eval_success" in point:
+        text += f" eval {point['eval_success']:.0%}"
+    return text
+
+
+def write_outputs(out: Path, learner: NNQLLearner, result: TrainResult, run, nnql: NNQLConfig) -> Path:
+    """Policy files, the learning curve (JSON lines + PNG) and a summary in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    learner.save_policy(out, env_steps=result.env_steps, maps=run.maps)
+    with open(out / "curve.jsonl", "w") as fh:
+        for point in result.curve:
+            fh.write(json.dumps(point) + "\n")
+    summary = {"run": asdict(run), "nnql": nnql.to_dict(), **result.to_dict()}
+    summary.pop("curve")
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    plot_curve(result.curve, out / "curve.png")
+    return out
+
+
+def plot_curve(curve: list[dict[str, float]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = [p["env_steps"] for p in curve]
+    fig, (ax_s, ax_l) = plt.subplots(1, 2, figsize=(10, 3.6))
+    ax_s.plot(steps, [p["train_success"] for p in curve], label="training episodes (last 200)")
+    evals = [(p["env_steps"], p["eval_success"]) for p in curve if "eval_success" in p]
+    if evals:
+        ax_s.plot(*zip(*evals, strict=True), "o-", label="greedy, unseen maps")
+    ax_s.set(xlabel="robot-steps", ylabel="success rate", ylim=(0, 1.02), title="NNQL success")
+    ax_s.legend(loc="lower right")
+    ax_s.grid(alpha=0.3)
+    if any("losses/td_loss" in p for p in curve):
+        ax_l.plot(steps, [p.get("losses/td_loss", np.nan) for p in curve])
+        ax_l.set_yscale("log")
+    ax_l.set(xlabel="robot-steps", ylabel="TD loss", title="learner")
+    ax_l.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

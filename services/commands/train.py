@@ -1,0 +1,105 @@
+"""`navlearn train --local`: NNQL trained in one process (vector env + learner)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from agents.nnql.config import NNQLConfig
+
+
+def register(subparsers) -> None:
+    defaults = NNQLConfig()
+    parser = subparsers.add_parser(
+        "train",
+        help="train NNQL in one process (--local)",
+        description=(
+            "Train the NNQL policy (neural-network Q-learning, thesis ch. 4) in one process: a vector "
+            "env of N robots, a TorchRL replay buffer and the learner, with the Boltzmann exploration "
+            "schedule. Writes the policy (model.safetensors + config.json, loadable by "
+            "`navlearn evaluate --policy DIR`), curve.png, curve.jsonl and summary.json to --out, then "
+            "prints the greedy evaluation on 100 held-out generated maps. Distributed training "
+            "(actors + learner over Zenoh) is `navlearn up`."
+        ),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    parser.add_argument("--local", action="store_true", help="train in this process (required)")
+    parser.add_argument("--steps", type=int, default=300_000, help="robot-steps to collect (all robots)")
+    parser.add_argument("--envs", type=int, default=16, help="robots stepped together")
+    parser.add_argument("--maps", default="mixed:16", help="training map spec: mixed:16, rooms:20, x.map ...")
+    parser.add_argument("--out", default="runs/nnql-local", help="output directory")
+    parser.add_argument("--seed", type=int, default=0, help="seed of env, network and exploration")
+    parser.add_argument(
+        "--eval-every", type=int, default=100_000, help="robot-steps between evaluations (0: at the end only)"
+    )
+    parser.add_argument("--eval-episodes", type=int, default=50, help="episodes per periodic evaluation")
+    parser.add_argument(
+        "--final-eval-episodes", type=int, default=100, help="episodes of the final evaluation (0: skip)"
+    )
+    parser.add_argument(
+        "--hidden",
+        default=",".join(str(h) for h in defaults.hidden_sizes),
+        help="hidden layer widths, comma-separated",
+    )
+    parser.add_argument("--lr", type=float, default=defaults.lr, help="Adam learning rate")
+    parser.add_argument("--batch-size", type=int, default=defaults.batch_size, help="transitions per update")
+    parser.add_argument(
+        "--utd-ratio", type=float, default=defaults.utd_ratio, help="gradient updates per transition"
+    )
+    parser.add_argument("--prioritized", action="store_true", help="prioritized replay (PrioritizedSampler)")
+    parser.add_argument("--sarsa", action="store_true", help="SARSA: bootstrap on the next action taken")
+    parser.add_argument(
+        "--epsilon-greedy", action="store_true", help="epsilon-greedy exploration instead of Boltzmann"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.local:
+        print("navlearn train: only --local exists; distributed training is `navlearn up`", file=sys.stderr)
+        return 2
+    try:
+        hidden = tuple(int(h) for h in args.hidden.split(",") if h.strip())
+        nnql = NNQLConfig(
+            hidden_sizes=hidden,
+            lr=args.lr,
+            batch_size=args.batch_size,
+            utd_ratio=args.utd_ratio,
+            prioritized=args.prioritized,
+            sarsa=args.sarsa,
+            double_q=not args.sarsa,
+            exploration="epsilon" if args.epsilon_greedy else "boltzmann",
+            seed=args.seed,
+        )
+        if args.steps < 1 or args.envs < 1:
+            raise ValueError("--steps and --envs must be positive")
+        from worlds.tasks import parse_map_spec
+
+        parse_map_spec(args.maps)
+    except ValueError as err:
+        print(f"navlearn train: {err}", file=sys.stderr)
+        return 2
+
+    from agents.nnql.train_local import LocalTrainConfig, train_local
+
+    run_config = LocalTrainConfig(
+        steps=args.steps,
+        envs=args.envs,
+        maps=args.maps,
+        seed=args.seed,
+        out=args.out,
+        eval_every=args.eval_every,
+        eval_episodes=args.eval_episodes,
+        final_eval_episodes=args.final_eval_episodes,
+        progress=not args.no_progress,
+    )
+    result = train_local(run_config, nnql)
+    print(
+        f"{result.env_steps} robot-steps, {result.updates} updates in {result.wall_time:.0f} s "
+        f"({result.env_steps_per_s:.0f} steps/s, learner {result.updates_per_s:.0f} updates/s)"
+    )
+    if result.final_table:
+        print(result.final_table)
+    print(f"wrote {result.out}")
+    return 0
