@@ -66,7 +66,7 @@ def plot_paths(
         xy = np.array([grid.cell_center(c) for c in path])
         if len(xy):
             right.plot(xy[:, 0], xy[:, 1], "--", color="tab:green", lw=1.6)
-        right.set_title(f"A*: {ep.shortest:.1f} m  ({task.map_id})", fontsize=8)
+        right.set_title(f"A*: {ep.shortest:.1f} m", fontsize=8)
         for ax in (left, right):
             ax.set_xlabel("")
             ax.set_ylabel("")
