@@ -1,7 +1,10 @@
 """SARSA (Rummery & Niranjan 1994; thesis ch. 2.4): on-policy TD control,
 ``Q(s, a) += alpha * (r + gamma * Q(s', a') - Q(s, a))`` with ``a'`` drawn from
 the same exploring policy. With exploration decaying towards greedy (GLIE) it
-converges to ``Q*``."""
+converges to ``Q*``. Its targets change as the policy improves, so with
+epsilon-greedy exploration a constant step size (``alpha_schedule="constant"``)
+tracks them better than the visit-count schedule, whose steps shrink on the
+pairs it visits most (tests/test_tabular_learners.py uses alpha 0.1)."""
 
 from __future__ import annotations
 
