@@ -1,27 +1,31 @@
 """Maps and tasks packed into flat arrays for the compiled kernel.
 
-A :class:`MapBank` holds every map an environment may use (flat ``blocked`` and
-gap-field arrays with per-map offsets and sizes) and a table of *entries* (map,
-start, goal, and the candidate cells for random starts, goals and disc positions:
-the free cells of the start's 4-connected region). The first ``n_pool`` entries
-are the task pool an environment draws its episodes from; tasks given explicitly
-to ``reset`` are appended after them.
+A :class:`MapBank` holds every map an environment may use (their
+:func:`worlds.fields.kernel_field` arrays end to end, with per-map offsets and sizes)
+and a table of *entries*: map, start, goal, and the candidate cells for random starts,
+goals and disc positions (the free cells of the start's 4-connected region). The first
+``n_pool`` entries are the task pools environments draw their episodes from; tasks given
+explicitly to ``reset`` are appended after them.
 
-The pool is drawn once from a :class:`worlds.tasks.TaskSampler` with a fixed seed
-and shared (read-only) by every environment built from the same spec, so a single
-env and a vector env see the same pool, and building 1024 single envs for a
-baseline costs one pool.
+A pool is drawn once from a :class:`worlds.tasks.TaskSampler` with a fixed seed and
+shared (read-only) by every environment built from the same spec, so a single env and a
+vector env see the same pool, and building 1024 single envs for a baseline costs one pool.
 """
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 
 import numpy as np
 
+from worlds.fields import kernel_field
 from worlds.maps import GridMap, Task, components
-from worlds.robot import gap_field
 from worlds.tasks import TaskSampler
+
+# columns of MapBank.etab, one row per entry (kept together: one cache line per reset)
+E_MAP, E_SR, E_SC, E_GR, E_GC, E_COFF, E_CN, E_RESAMPLE, E_MIN_D2 = range(9)
+"""E_MIN_D2: least squared start-goal distance of resampled endpoints, in cells^2, rounded up"""
 
 MAX_EXTRA_ENTRIES = 4096
 """explicit tasks kept before unused ones are dropped"""
@@ -38,8 +42,7 @@ class MapBank:
         self.pool_tasks: list[Task] = []
         self.pool_resample = False
         self.pool_min_distance = 0.0
-        self._blocked: list[np.ndarray] = []
-        self._gap: list[np.ndarray] = []
+        self._field: list[np.ndarray] = []
         self._cand: list[np.ndarray] = []
         self._cand_size = 0
         self._map_size = 0
@@ -65,17 +68,17 @@ class MapBank:
         m = len(self.grids)
         self.grids.append(grid)
         self._grid_index[key] = m
-        self._blocked.append(grid.blocked.ravel().astype(np.uint8))
-        self._gap.append(gap_field(grid).ravel())
+        field = kernel_field(grid).ravel()
+        self._field.append(field)
         self._labels.append(components(grid))
         self._moff.append(self._map_size)
-        self._map_size += grid.blocked.size
+        self._map_size += field.size
         return m
 
     def _region(self, m: int, start: tuple[int, int]) -> tuple[int, int]:
         label = int(self._labels[m][start])
         if (m, label) not in self._regions:
-            cells = np.flatnonzero(self._labels[m].ravel() == label).astype(np.int64)
+            cells = np.flatnonzero(self._labels[m].ravel() == label).astype(np.int32)
             self._regions[(m, label)] = (self._cand_size, len(cells))
             self._cand.append(cells)
             self._cand_size += len(cells)
@@ -94,21 +97,16 @@ class MapBank:
         return index
 
     def _pack(self) -> None:
-        self.blocked = np.concatenate(self._blocked)
-        self.gap = np.concatenate(self._gap)
+        self.field = np.concatenate(self._field)
         self.moff = np.asarray(self._moff, dtype=np.int64)
         self.mh = np.asarray([g.height for g in self.grids], dtype=np.int64)
         self.mw = np.asarray([g.width for g in self.grids], dtype=np.int64)
         self.mcell = np.asarray([g.cell_size for g in self.grids], dtype=np.float64)
         self.cand = np.concatenate(self._cand)
-        e = self._entries
-        self.emap = np.asarray([t[0] for t in e], dtype=np.int64)
-        self.estart = np.asarray([t[1:3] for t in e], dtype=np.int64).reshape(-1, 2)
-        self.egoal = np.asarray([t[3:5] for t in e], dtype=np.int64).reshape(-1, 2)
-        self.ecoff = np.asarray([t[5] for t in e], dtype=np.int64)
-        self.ecn = np.asarray([t[6] for t in e], dtype=np.int64)
-        self.emind = np.asarray([t[7] for t in e], dtype=np.float64)
-        self.eres = np.asarray([t[8] for t in e], dtype=np.uint8)
+        rows = [(m, sr, sc, gr, gc, coff, cn, res, math.ceil((mind / self.grids[m].cell_size) ** 2 - 1e-9))
+                for m, sr, sc, gr, gc, coff, cn, mind, res in self._entries]  # fmt: skip
+        self.etab = np.asarray(rows, dtype=np.int32).reshape(-1, 9)
+        self.emap = self.etab[:, 0].astype(np.int64)
 
     # ------------------------------------------------------------------ use
     def add_tasks(self, tasks: list[Task], in_use: np.ndarray) -> tuple[list[int], np.ndarray | None]:
@@ -136,10 +134,10 @@ class MapBank:
         return Task(self.grids[m], (sr, sc), (gr, gc), self.grids[m].name)
 
     def kernel_maps(self) -> tuple:
-        return (self.blocked, self.gap, self.moff, self.mh, self.mw, self.mcell)
+        return (self.field, self.moff, self.mh, self.mw, self.mcell)
 
     def kernel_entries(self) -> tuple:
-        return (self.emap, self.estart, self.egoal, self.ecoff, self.ecn, self.emind, self.eres, self.cand)
+        return (self.etab, self.cand)
 
 
 _POOLS: OrderedDict[tuple, MapBank] = OrderedDict()
@@ -173,7 +171,7 @@ def private_copy(bank: MapBank) -> MapBank:
     packed arrays rebuilt on the next add)."""
     clone = object.__new__(MapBank)
     clone.__dict__.update(bank.__dict__)
-    for name in ("grids", "_blocked", "_gap", "_cand", "_moff", "_entries", "_labels"):
+    for name in ("grids", "_field", "_cand", "_moff", "_entries", "_labels"):
         setattr(clone, name, list(getattr(bank, name)))
     for name in ("_grid_index", "_regions", "_entry_index"):
         setattr(clone, name, dict(getattr(bank, name)))

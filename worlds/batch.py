@@ -36,6 +36,7 @@ class NavBatch:
         f8, i8 = np.float64, np.int64
         self.x, self.y, self.theta, self.gx, self.gy = (np.zeros(n, f8) for _ in range(5))
         self.steps, self.ent, self.outcome = np.zeros(n, i8), np.zeros(n, i8), np.zeros(n, i8)
+        self.map_index = np.zeros(n, i8)
         self.path_length, self.goal_dist = np.zeros(n, f8), np.zeros(n, f8)
         self.start_cell, self.goal_cell = np.zeros((n, 2), i8), np.zeros((n, 2), i8)
         self.rng = np.zeros(n, np.uint64)
@@ -70,8 +71,7 @@ class NavBatch:
     # ----------------------------------------------------------------- kernel views
     def _robots(self) -> tuple:
         motion = (self.x, self.y, self.theta, self.gx, self.gy, self.steps, self.path_length, self.goal_dist)
-        return (
-            *motion,
+        episode = (
             self.ent,
             self.start_cell,
             self.goal_cell,
@@ -80,6 +80,7 @@ class NavBatch:
             self.pool_lo,
             self.pool_n,
         )
+        return (*motion, *episode, self.map_index)
 
     def _finals(self) -> tuple:
         return (self.final_obs, self.final_outcome, self.final_path_length, self.final_steps, self.final_pose,
@@ -103,9 +104,11 @@ class NavBatch:
             if self._bank_is_shared:
                 self.bank, self._bank_is_shared = private_copy(self.bank), False
             chosen = [(k, t) for k, t in enumerate(tasks) if t is not None]
-            entries, remap = self.bank.add_tasks([t for _, t in chosen], self.ent)
+            in_use = np.concatenate([self.ent, self.final_entry])
+            entries, remap = self.bank.add_tasks([t for _, t in chosen], in_use)
             if remap is not None:
                 self.ent[:] = remap[self.ent]
+                self.final_entry[:] = remap[self.final_entry]
             forced[[k for k, _ in chosen]] = entries
         keep = np.zeros(len(indices), dtype=np.bool_)
         if obstacles is not None:

@@ -3,19 +3,25 @@ motion for collisions, moves its discs, casts its beams, scores the step and (fo
 vector env) resets finished robots. The single env calls the same functions with one
 robot, so both envs are the same program.
 
-Arrays are grouped in tuples (see :mod:`worlds.batch` for who builds them):
-``maps``, ``entries`` (from :class:`worlds.bank.MapBank`), ``robots`` (per-robot state, incl.
-its random stream and the range of pool entries it draws episodes from),
-``discs`` (per-robot moving discs), ``finals`` (terminal results of auto-reset robots).
+Arrays are grouped in tuples built by :class:`worlds.batch.NavBatch`: ``maps`` and
+``entries`` (from :class:`worlds.bank.MapBank`), ``robots`` (per-robot state, incl. its
+random stream and the range of pool entries it draws episodes from), ``discs``
+(per-robot moving discs) and ``finals`` (terminal results of auto-reset robots).
+
+numba caches compiled code per source file and does not notice edits to the modules a
+function calls; :func:`_drop_stale_cache` clears the cache when any of them changed.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit
 
+from worlds.bank import E_CN, E_COFF, E_GC, E_GR, E_MAP, E_MIN_D2, E_RESAMPLE, E_SC, E_SR
 from worlds.config import NavConfig
 from worlds.obstacles import move_disc, place_discs, swept_contact
 from worlds.outcomes import Outcome
@@ -23,13 +29,32 @@ from worlds.rng import gauss, randint, uniform
 from worlds.robot import capsule_hits_grid
 from worlds.sensors import cast_ray, ray_disc
 
+
+def _drop_stale_cache() -> None:
+    here = Path(__file__).parent
+    sources = ("kernel.py", "obstacles.py", "rng.py", "robot.py", "sensors.py")
+    digest = hashlib.sha256(b"".join((here / name).read_bytes() for name in sources)).hexdigest()
+    stamp = here / "__pycache__" / "kernel_sources.sha256"
+    try:
+        if stamp.exists() and stamp.read_text() == digest:
+            return
+        for stale in (here / "__pycache__").glob("*.nb[ic]"):
+            stale.unlink(missing_ok=True)
+        stamp.parent.mkdir(exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:  # read-only install: numba then compiles in memory or elsewhere
+        pass
+
+
+_drop_stale_cache()
+
 # indices into the float64 parameter vector built by make_params
 P_STEP, P_RADIUS, P_TNOISE, P_RNOISE, P_HEADINGS, P_MAXR, P_SNOISE = range(7)
 P_DROP, P_RGOAL, P_RCOLL, P_RSTEP, P_RPROG, P_MAXSTEPS, P_GOALTOL = range(7, 14)
 P_OCOUNT, P_ORAD, P_OSPEED, P_OPATROL, P_OLENGTH, P_OSPAWN = range(14, 20)
 # indices into the robots tuple built by worlds.batch.NavBatch
 R_X, R_Y, R_TH, R_GX, R_GY, R_STEPS, R_PLEN, R_PDIST = range(8)
-R_ENT, R_SCELL, R_GCELL, R_OUTCOME, R_RNG, R_PLO, R_PN = range(8, 15)
+R_ENT, R_SCELL, R_GCELL, R_OUTCOME, R_RNG, R_PLO, R_PN, R_MAP = range(8, 16)
 
 RUNNING, GOAL = int(Outcome.RUNNING), int(Outcome.GOAL)
 HIT_STATIC, HIT_DYNAMIC, TIMEOUT = (
@@ -37,6 +62,7 @@ HIT_STATIC, HIT_DYNAMIC, TIMEOUT = (
     int(Outcome.COLLISION_DYNAMIC),
     int(Outcome.TIMEOUT),
 )
+TWO_PI = 2.0 * math.pi
 
 
 def make_params(config: NavConfig) -> np.ndarray:
@@ -55,30 +81,47 @@ def make_params(config: NavConfig) -> np.ndarray:
     return np.asarray(values, dtype=np.float64)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _wrap(angle: float) -> float:
+    while angle >= math.pi:
+        angle -= TWO_PI
+    while angle < -math.pi:
+        angle += TWO_PI
+    return angle
+
+
+@njit(cache=True, inline="always")
 def observe(i, maps, entries, robots, discs, params, beam_c, beam_s, obs):
     """Write robot ``i``'s observation: ranges / max_range, squashed goal distance, sin and cos
     of the goal bearing relative to the heading."""
-    blocked, gap, moff, mh, mw, mcell = maps
-    x, y, th, gx, gy, rng = robots[R_X], robots[R_Y], robots[R_TH], robots[R_GX], robots[R_GY], robots[R_RNG]
-    ox, oy, orad, ocount = discs[0], discs[1], discs[4], discs[10]
-    m = entries[0][robots[R_ENT][i]]
-    max_range = params[P_MAXR]
-    noise, drop = params[P_SNOISE], params[P_DROP]
-    c, s = math.cos(th[i]), math.sin(th[i])
+    field, moff, mh, mw, mcell = maps
+    x, y, th, gx, gy, rng = (
+        robots[R_X][i],
+        robots[R_Y][i],
+        robots[R_TH][i],
+        robots[R_GX][i],
+        robots[R_GY][i],
+        robots[R_RNG],
+    )
+    ox, oy, orad, n_discs = discs[0], discs[1], discs[4], discs[10][i]
+    m = robots[R_MAP][i]
+    off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
+    max_range, noise, drop = params[P_MAXR], params[P_SNOISE], params[P_DROP]
+    inv_range = 1.0 / max_range
+    c, s = math.cos(th), math.sin(th)
     n_beams = beam_c.shape[0]
     for k in range(n_beams):
         dx = c * beam_c[k] - s * beam_s[k]
         dy = s * beam_c[k] + c * beam_s[k]
-        d = cast_ray(blocked, moff[m], mh[m], mw[m], mcell[m], gap, x[i], y[i], dx, dy, max_range)
-        for j in range(ocount[i]):
-            d = min(d, ray_disc(x[i], y[i], dx, dy, ox[i, j], oy[i, j], orad[i, j]))
+        d = cast_ray(field, off, height, width, cell, x, y, dx, dy, max_range)
+        for j in range(n_discs):
+            d = min(d, ray_disc(x, y, dx, dy, ox[i, j], oy[i, j], orad[i, j]))
         if noise > 0.0:
             d = min(max(d + noise * gauss(rng, i), 0.0), max_range)
         if drop > 0.0 and uniform(rng, i) < drop:
             d = max_range
-        obs[i, k] = d / max_range
-    ux, uy = gx[i] - x[i], gy[i] - y[i]
+        obs[i, k] = d * inv_range
+    ux, uy = gx - x, gy - y
     dist = math.hypot(ux, uy)
     obs[i, n_beams] = dist / (dist + max_range)
     if dist > 0.0:
@@ -94,21 +137,23 @@ def reset_robot(i, forced, keep_discs, maps, entries, robots, discs, params, bea
     """Start a new episode for robot ``i``: entry ``forced`` (or a random pool entry when
     negative, with fresh random endpoints if the entry allows), random initial heading,
     new discs unless ``keep_discs``; then observe."""
-    blocked, gap, moff, mh, mw, mcell = maps
-    emap, estart, egoal, ecoff, ecn, emind, eres, cand = entries
+    field, moff, mh, mw, mcell = maps
+    etab, cand = entries
     x, y, th, gx, gy, rng = robots[R_X], robots[R_Y], robots[R_TH], robots[R_GX], robots[R_GY], robots[R_RNG]
-    ent, scell, gcell, plo, pn = robots[R_ENT], robots[R_SCELL], robots[R_GCELL], robots[R_PLO], robots[R_PN]
-    ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby, ocount = discs
-    j = forced if forced >= 0 else plo[i] + randint(rng, i, pn[i])
+    ent, scell, gcell = robots[R_ENT], robots[R_SCELL], robots[R_GCELL]
+    j = forced if forced >= 0 else robots[R_PLO][i] + randint(rng, i, robots[R_PN][i])
     ent[i] = j
-    m = emap[j]
+    m = etab[j, E_MAP]
+    robots[R_MAP][i] = m
     width, cell = mw[m], mcell[m]
-    sr, sc, gr, gc = estart[j, 0], estart[j, 1], egoal[j, 0], egoal[j, 1]
-    if forced < 0 and eres[j]:
-        s_idx = cand[ecoff[j] + randint(rng, i, ecn[j])]
+    sr, sc, gr, gc = etab[j, E_SR], etab[j, E_SC], etab[j, E_GR], etab[j, E_GC]
+    c_off, c_n = etab[j, E_COFF], etab[j, E_CN]
+    if forced < 0 and etab[j, E_RESAMPLE]:
+        s_idx = cand[c_off + randint(rng, i, c_n)]
         for _ in range(32):
-            g_idx = cand[ecoff[j] + randint(rng, i, ecn[j])]
-            if math.hypot(s_idx // width - g_idx // width, s_idx % width - g_idx % width) * cell >= emind[j]:
+            g_idx = cand[c_off + randint(rng, i, c_n)]
+            dr, dc = s_idx // width - g_idx // width, s_idx % width - g_idx % width
+            if dr * dr + dc * dc >= etab[j, E_MIN_D2]:
                 sr, sc, gr, gc = s_idx // width, s_idx % width, g_idx // width, g_idx % width
                 break
     scell[i, 0], scell[i, 1], gcell[i, 0], gcell[i, 1] = sr, sc, gr, gc
@@ -116,33 +161,44 @@ def reset_robot(i, forced, keep_discs, maps, entries, robots, discs, params, bea
     gx[i], gy[i] = (gc + 0.5) * cell, (gr + 0.5) * cell
     choices = int(params[P_HEADINGS])
     if choices > 0:
-        heading = randint(rng, i, choices) * (2.0 * math.pi / choices)
+        th[i] = _wrap(randint(rng, i, choices) * (TWO_PI / choices))
     else:
-        heading = 2.0 * math.pi * uniform(rng, i)
-    th[i] = (heading + math.pi) % (2.0 * math.pi) - math.pi
+        th[i] = _wrap(TWO_PI * uniform(rng, i))
     robots[R_STEPS][i] = 0
     robots[R_PLEN][i] = 0.0
     robots[R_PDIST][i] = math.hypot(gx[i] - x[i], gy[i] - y[i])
     robots[R_OUTCOME][i] = RUNNING
     if not keep_discs:
-        count = min(int(params[P_OCOUNT]), ox.shape[1])
-        patrol = params[P_OPATROL] > 0.0
-        ocount[i] = place_discs(
-            i, rng, blocked, moff[m], mh[m], width, cell, gap, cand, ecoff[j], ecn[j], x[i], y[i],
-            params[P_RADIUS], count, params[P_ORAD], params[P_OSPEED], patrol, params[P_OLENGTH],
-            params[P_OSPAWN], ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby,
-        )  # fmt: skip
+        count = min(int(params[P_OCOUNT]), discs[0].shape[1])
+        spec = (count, params[P_ORAD], params[P_OSPEED], params[P_OPATROL] > 0.0, params[P_OLENGTH])
+        keep_out = params[P_RADIUS] + params[P_ORAD] + params[P_OSPAWN]
+        discs[10][i] = place_discs(
+            i,
+            rng,
+            field,
+            moff[m],
+            mh[m],
+            width,
+            cell,
+            cand,
+            c_off,
+            c_n,
+            x[i],
+            y[i],
+            keep_out,
+            spec,
+            discs,
+        )
     observe(i, maps, entries, robots, discs, params, beam_c, beam_s, obs)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def step_robot(i, action, maps, entries, robots, discs, params, turns) -> float:
     """Move robot ``i`` and its discs one step; set its outcome; return its reward."""
-    blocked, gap, moff, mh, mw, mcell = maps
+    field, moff, mh, mw, mcell = maps
     x, y, th, gx, gy, rng = robots[R_X], robots[R_Y], robots[R_TH], robots[R_GX], robots[R_GY], robots[R_RNG]
-    steps, plen, pdist, outcome = robots[R_STEPS], robots[R_PLEN], robots[R_PDIST], robots[R_OUTCOME]
     ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby, ocount = discs
-    m = entries[0][robots[R_ENT][i]]
+    m = robots[R_MAP][i]
     off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
     radius = params[P_RADIUS]
     heading = th[i] + turns[action]
@@ -151,27 +207,27 @@ def step_robot(i, action, maps, entries, robots, discs, params, turns) -> float:
     distance = params[P_STEP]
     if params[P_TNOISE] > 0.0:
         distance = max(distance + params[P_TNOISE] * gauss(rng, i), 0.0)
-    heading = (heading + math.pi) % (2.0 * math.pi) - math.pi
+    heading = _wrap(heading)
     th[i] = heading
     x0, y0 = x[i], y[i]
     x1, y1 = x0 + distance * math.cos(heading), y0 + distance * math.sin(heading)
     result = RUNNING
-    if capsule_hits_grid(blocked, off, height, width, cell, gap, x0, y0, x1, y1, radius):
+    if capsule_hits_grid(field, off, height, width, cell, x0, y0, x1, y1, radius):
         result = HIT_STATIC
     for k in range(ocount[i]):
         px, py = ox[i, k], oy[i, k]
         ox[i, k], oy[i, k], ovx[i, k], ovy[i, k] = move_disc(
-            blocked, off, height, width, cell, gap, px, py, ovx[i, k], ovy[i, k], orad[i, k], opat[i, k],
+            field, off, height, width, cell, px, py, ovx[i, k], ovy[i, k], orad[i, k], opat[i, k],
             oax[i, k], oay[i, k], obx[i, k], oby[i, k],
         )  # fmt: skip
-        if result == RUNNING and swept_contact(
-            x0, y0, x1, y1, px, py, ox[i, k], oy[i, k], radius + orad[i, k]
-        ):
+        reach = radius + orad[i, k]
+        if result == RUNNING and swept_contact(x0, y0, x1, y1, px, py, ox[i, k], oy[i, k], reach):
             result = HIT_DYNAMIC
     reward = params[P_RSTEP]
+    steps, pdist = robots[R_STEPS], robots[R_PDIST]
     if result == RUNNING:
         x[i], y[i] = x1, y1
-        plen[i] += distance
+        robots[R_PLEN][i] += distance
         dist = math.hypot(gx[i] - x1, gy[i] - y1)
         reward += params[P_RPROG] * (pdist[i] - dist)
         pdist[i] = dist
@@ -183,7 +239,7 @@ def step_robot(i, action, maps, entries, robots, discs, params, turns) -> float:
     steps[i] += 1
     if result == RUNNING and steps[i] >= params[P_MAXSTEPS]:
         result = TIMEOUT
-    outcome[i] = result
+    robots[R_OUTCOME][i] = result
     return reward
 
 

@@ -51,7 +51,7 @@ class DiscObstacles:
 
 
 @njit(cache=True)
-def move_disc(blocked, off, height, width, cell, gap, x, y, vx, vy, radius, patrol, ax, ay, bx, by):
+def move_disc(field, off, height, width, cell, x, y, vx, vy, radius, patrol, ax, ay, bx, by):
     """One step of one disc; returns the new (x, y, vx, vy)."""
     if patrol:
         nx, ny = x + vx, y + vy
@@ -61,10 +61,10 @@ def move_disc(blocked, off, height, width, cell, gap, x, y, vx, vy, radius, patr
             return tx, ty, -vx, -vy
         return nx, ny, vx, vy
     nx = x + vx
-    if capsule_hits_grid(blocked, off, height, width, cell, gap, nx, y, nx, y, radius):
+    if capsule_hits_grid(field, off, height, width, cell, nx, y, nx, y, radius):
         nx, vx = x, -vx
     ny = y + vy
-    if capsule_hits_grid(blocked, off, height, width, cell, gap, nx, ny, nx, ny, radius):
+    if capsule_hits_grid(field, off, height, width, cell, nx, ny, nx, ny, radius):
         ny, vy = y, -vy
     return nx, ny, vx, vy
 
@@ -79,41 +79,15 @@ def swept_contact(rx0, ry0, rx1, ry1, ox0, oy0, ox1, oy1, reach) -> bool:
 
 @njit(cache=True)
 def place_discs(
-    i,
-    rng,
-    blocked,
-    off,
-    height,
-    width,
-    cell,
-    gap,
-    cand,
-    cand_off,
-    cand_n,
-    sx,
-    sy,
-    robot_radius,
-    count,
-    radius,
-    speed,
-    patrol,
-    patrol_length,
-    spawn_clearance,
-    ox,
-    oy,
-    ovx,
-    ovy,
-    orad,
-    opat,
-    oax,
-    oay,
-    obx,
-    oby,
-) -> int:
-    """Place ``count`` discs of robot ``i`` at random candidate cell centres, away from the
-    start (sx, sy), with random directions; returns how many were placed (tries are bounded)."""
+    i, rng, field, off, height, width, cell, cand, cand_off, cand_n, sx, sy, keep_out, spec, discs
+):
+    """Place robot ``i``'s discs at random candidate cell centres (flat indices ``cand[cand_off:
+    cand_off + cand_n]``) at least ``keep_out`` from the start (sx, sy), with random directions.
+    ``spec`` = (count, radius, speed, patrol, patrol_length); ``discs`` the kernel's disc arrays.
+    Returns how many were placed (32 tries each)."""
+    count, radius, speed, patrol, patrol_length = spec
+    ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby = discs[:10]
     placed = 0
-    keep_out = robot_radius + radius + spawn_clearance
     for _ in range(count):
         for _try in range(32):
             cell_index = cand[cand_off + randint(rng, i, cand_n)]
@@ -122,7 +96,7 @@ def place_discs(
             angle = 2.0 * math.pi * uniform(rng, i)
             if math.hypot(x - sx, y - sy) < keep_out:
                 continue
-            if capsule_hits_grid(blocked, off, height, width, cell, gap, x, y, x, y, radius):
+            if capsule_hits_grid(field, off, height, width, cell, x, y, x, y, radius):
                 continue
             dx, dy = math.cos(angle), math.sin(angle)
             k = placed
@@ -130,21 +104,12 @@ def place_discs(
             ovx[i, k], ovy[i, k] = speed * dx, speed * dy
             opat[i, k] = patrol
             oax[i, k], oay[i, k], obx[i, k], oby[i, k] = x, y, x, y
-            if patrol:
-                length = 0.0  # longest free segment along the direction, in quarter-metre steps
-                while length + 0.25 <= patrol_length and not capsule_hits_grid(
-                    blocked,
-                    off,
-                    height,
-                    width,
-                    cell,
-                    gap,
-                    x,
-                    y,
-                    x + (length + 0.25) * dx,
-                    y + (length + 0.25) * dy,
-                    radius,
-                ):
+            if patrol:  # longest free segment along the direction, in quarter-metre steps
+                length = 0.0
+                while length + 0.25 <= patrol_length:
+                    ex, ey = x + (length + 0.25) * dx, y + (length + 0.25) * dy
+                    if capsule_hits_grid(field, off, height, width, cell, x, y, ex, ey, radius):
+                        break
                     length += 0.25
                 obx[i, k], oby[i, k] = x + length * dx, y + length * dy
                 if length < speed:

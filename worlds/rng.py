@@ -45,9 +45,55 @@ def randint(state, i, n) -> int:
     return min(int(uniform(state, i) * n), n - 1)
 
 
+def _ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tables of the 128-layer ziggurat for the standard normal (Marsaglia & Tsang 2000)."""
+    m1, dn, vn = 2147483648.0, 3.442619855899, 9.91256303526217e-3
+    kn, wn, fn = np.zeros(128, np.int64), np.zeros(128), np.zeros(128)
+    tn, q = dn, vn / math.exp(-0.5 * dn * dn)
+    kn[0], kn[1] = int((dn / q) * m1), 0
+    wn[0], wn[127] = q / m1, dn / m1
+    fn[0], fn[127] = 1.0, math.exp(-0.5 * dn * dn)
+    for i in range(126, 0, -1):
+        dn = math.sqrt(-2.0 * math.log(vn / dn + math.exp(-0.5 * dn * dn)))
+        kn[i + 1] = int((dn / tn) * m1)
+        tn = dn
+        fn[i], wn[i] = math.exp(-0.5 * dn * dn), dn / m1
+    return kn, wn, fn
+
+
+_KN, _WN, _FN = _ziggurat_tables()
+_ZIG_R = 3.442619855899
+_S32, _MASK7, _HALF31 = np.uint64(32), np.uint64(127), 2147483648
+
+
+@njit(cache=True)
+def _gauss_tail(state, i, j, iz) -> float:
+    """The ziggurat's slow path (about 2% of draws): layer edges and the tail beyond r."""
+    while True:
+        x = j * _WN[iz]
+        if iz == 0:
+            while True:
+                x = -math.log(1.0 - uniform(state, i)) / _ZIG_R
+                y = -math.log(1.0 - uniform(state, i))
+                if y + y >= x * x:
+                    break
+            return _ZIG_R + x if j > 0 else -_ZIG_R - x
+        if _FN[iz] + uniform(state, i) * (_FN[iz - 1] - _FN[iz]) < math.exp(-0.5 * x * x):
+            return x
+        z = next_u64(state, i)
+        iz = int(z & _MASK7)
+        j = int(z >> _S32) - _HALF31
+        if abs(j) < _KN[iz]:
+            return j * _WN[iz]
+
+
 @njit(cache=True, inline="always")
 def gauss(state, i) -> float:
-    """Standard normal (Box-Muller, one value per two uniforms)."""
-    u1 = 1.0 - uniform(state, i)
-    u2 = uniform(state, i)
-    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+    """Standard normal: ziggurat with the layer from the low 7 bits and the value from the high
+    32 bits of one 64-bit draw (so the two are independent)."""
+    z = next_u64(state, i)
+    iz = int(z & _MASK7)
+    j = int(z >> _S32) - _HALF31
+    if abs(j) < _KN[iz]:
+        return j * _WN[iz]
+    return _gauss_tail(state, i, j, iz)

@@ -13,6 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
+from worlds.fields import BLOCKED, GAP_UNIT, kernel_field
 from worlds.maps import GridMap
 
 
@@ -93,19 +94,20 @@ def segment_box_distance_sq(ax, ay, bx, by, x0, y0, x1, y1) -> float:
     return min(best, _point_segment_sq(x0, y1, ax, ay, bx, by), _point_segment_sq(x1, y1, ax, ay, bx, by))
 
 
-@njit(cache=True)
-def capsule_hits_grid(blocked, off, height, width, cell, gap, x0, y0, x1, y1, radius) -> bool:
+@njit(cache=True, inline="always")
+def capsule_hits_grid(field, off, height, width, cell, x0, y0, x1, y1, radius) -> bool:
     """Does a disc of ``radius`` swept from (x0, y0) to (x1, y1) touch a blocked cell or leave
-    the map? ``blocked``/``gap`` are the flat arrays of a map bank (see worlds.bank)."""
+    the map? ``field``/``off`` locate the map in a bank (see :func:`worlds.fields.kernel_field`)."""
     if min(x0, x1) - radius < 0.0 or min(y0, y1) - radius < 0.0:
         return True
     if max(x0, x1) + radius > width * cell or max(y0, y1) + radius > height * cell:
         return True
-    r0, c0 = int(y0 / cell), int(x0 / cell)
-    if r0 < height and c0 < width:
-        reach = math.hypot(x1 - x0, y1 - y0) + radius
-        if gap[off + r0 * width + c0] > reach:  # nothing blocked within reach of the start cell
-            return False
+    pw = width + 2
+    gap = field[off + (int(y0 / cell) + 1) * pw + int(x0 / cell) + 1]
+    if (
+        gap != BLOCKED and gap * (GAP_UNIT * cell) > math.hypot(x1 - x0, y1 - y0) + radius
+    ):  # nothing within reach
+        return False
     r_lo = max(int((min(y0, y1) - radius) / cell), 0)
     r_hi = min(int((max(y0, y1) + radius) / cell), height - 1)
     c_lo = max(int((min(x0, x1) - radius) / cell), 0)
@@ -113,7 +115,7 @@ def capsule_hits_grid(blocked, off, height, width, cell, gap, x0, y0, x1, y1, ra
     r_sq = radius * radius
     for r in range(r_lo, r_hi + 1):
         for c in range(c_lo, c_hi + 1):
-            if blocked[off + r * width + c]:
+            if field[off + (r + 1) * pw + c + 1] == BLOCKED:
                 d_sq = segment_box_distance_sq(
                     x0, y0, x1, y1, c * cell, r * cell, (c + 1) * cell, (r + 1) * cell
                 )
@@ -122,26 +124,17 @@ def capsule_hits_grid(blocked, off, height, width, cell, gap, x0, y0, x1, y1, ra
     return False
 
 
-def gap_field(grid: GridMap) -> np.ndarray:
-    """For each cell, the distance (m) from any point of the cell to the nearest blocked cell or the
-    outside of the map: a safe lower bound used to skip empty space. It is the centre distance
-    to the blocked set grown by one cell (see the proof in worlds/sensors.py)."""
-    from scipy import ndimage
-
-    padded = np.pad(grid.blocked, 1, constant_values=True)
-    grown = ndimage.binary_dilation(padded, structure=np.ones((3, 3), dtype=bool))
-    dist = ndimage.distance_transform_edt(~grown)[1:-1, 1:-1]
-    return (dist * grid.cell_size).astype(np.float64)
+@njit(cache=True)
+def _collides_batch(field, height, width, cell, x0, y0, x1, y1, radius, out):
+    for i in range(x0.shape[0]):
+        out[i] = capsule_hits_grid(field, 0, height, width, cell, x0[i], y0[i], x1[i], y1[i], radius)
 
 
 def collides(grid: GridMap, x0, y0, x1, y1, radius: float) -> np.ndarray:
     """Per robot: does its disc, swept from (x0, y0) to (x1, y1), touch a blocked cell or the border?"""
-    flat = grid.blocked.ravel().astype(np.uint8)
-    gap = gap_field(grid).ravel()
-    a = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x0, y0, x1, y1)))
-    out = np.empty(a[0].shape, dtype=bool)
-    for i in np.ndindex(out.shape):
-        out[i] = capsule_hits_grid(
-            flat, 0, grid.height, grid.width, grid.cell_size, gap, a[0][i], a[1][i], a[2][i], a[3][i], radius
-        )
-    return out
+    arrays = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x0, y0, x1, y1)))
+    flat = [np.ascontiguousarray(a).ravel() for a in arrays]
+    out = np.empty(flat[0].shape, dtype=bool)
+    field = kernel_field(grid).ravel()
+    _collides_batch(field, grid.height, grid.width, grid.cell_size, *flat, float(radius), out)
+    return out.reshape(arrays[0].shape)
