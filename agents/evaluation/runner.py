@@ -173,7 +173,7 @@ class EvalResult:
         return "\n".join(rows)
 
 
-def _fixed_sampler(tasks: Sequence[Task], key: str) -> TaskSampler:
+def fixed_sampler(tasks: Sequence[Task], key: str) -> TaskSampler:
     """A sampler over exactly ``tasks`` so the env's task pool holds nothing else."""
     pool = list(tasks)
     return TaskSampler(lambda rng: pool[int(rng.integers(len(pool)))], key, tasks=pool)
@@ -183,7 +183,7 @@ def _run_wave(policy: Policy, config: NavConfig, tasks: list[Task], seeds: list[
     from worlds.vector_env import NavigationVectorEnv
 
     n = len(tasks)
-    env = NavigationVectorEnv(n, config, maps=_fixed_sampler(tasks, key))
+    env = NavigationVectorEnv(n, config, maps=fixed_sampler(tasks, key))
     obs, _ = env.reset(seed=list(seeds), options={"tasks": list(tasks)})
     trajectories = [[pose] for pose in env.poses()]
     dynamic = config.obstacles.count > 0
