@@ -54,7 +54,7 @@ class ActorConfig:
     """model whose weights the actor follows (weights/<model>)"""
     batch_steps: int = 16
     """vector-env steps per published TransitionBatch (K); a batch holds K x envs transitions"""
-    ack_window: int = 4
+    ack_window: int = 2
     """batches in flight without the learner's acknowledgement before the actor waits"""
     ack_timeout: float = 10.0
     """seconds without any acknowledgement before in-flight batches are given up on"""

@@ -100,7 +100,8 @@ def add_options(
         if kind is bool:
             group.add_argument(_flag(field.name), action=argparse.BooleanOptionalAction, **kwargs)
         elif _is_tuple(kind):
-            group.add_argument(_flag(field.name), nargs="+", type=_scalar(kind), metavar="N", **kwargs)
+            metavar = "N" if _scalar(kind) in (int, float) else "NAME"
+            group.add_argument(_flag(field.name), nargs="+", type=_scalar(kind), metavar=metavar, **kwargs)
         else:
             group.add_argument(_flag(field.name), type=_scalar(kind), metavar=field.name.upper(), **kwargs)
     parser.set_defaults(**{f"optdefaults_{cls.__name__}": defaults})

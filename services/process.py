@@ -6,6 +6,7 @@ gets an open session and a stop event; these helpers make them.
 
 from __future__ import annotations
 
+import faulthandler
 import logging
 import os
 import signal
@@ -24,6 +25,7 @@ log = logging.getLogger("navlearn.process")
 def setup_logging(verbose: bool = False) -> None:
     """Log lines to stdout (what supervisord and systemd collect); quiet third-party loggers."""
     sys.stdout.reconfigure(line_buffering=True)  # a pipe or file otherwise holds lines back
+    faulthandler.register(signal.SIGUSR1, all_threads=True)  # `kill -USR1 <pid>`: every thread's stack
     logging.basicConfig(
         stream=sys.stdout,
         level=logging.DEBUG if verbose else logging.INFO,

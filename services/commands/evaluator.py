@@ -1,0 +1,56 @@
+"""`navlearn evaluator`: each new policy version measured on held-out maps."""
+
+from __future__ import annotations
+
+import argparse
+
+from services.evaluator import EvaluatorConfig
+from services.options import add_options
+from services.transport import add_zenoh_args
+
+DESCRIPTION = """\
+Run the evaluator: it follows the learner's weights (navlearn/<run>/weights/<model>, asking
+for the newest on start), evaluates each new policy version (or one every --every-versions
+updates; versions that arrive during an evaluation are skipped) greedily on fixed, seeded
+held-out sets (--families: unseen generated maps, the same with moving obstacles, the MovingAI
+arena), publishes an EvalReport on eval/<id> (the learner shows it in its status), appends a
+line to <out>/evaluations.jsonl and redraws <out>/learning_curve.png (success rate and path
+length ratio to A* against policy version and wall time). Logs to stdout; stops cleanly on
+SIGTERM or Ctrl-C.
+"""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "evaluator",
+        help="run the evaluator service (new policy versions on held-out maps)",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_options(parser, EvaluatorConfig, "NAVLEARN_EVALUATOR", "evaluator")
+    parser.add_argument("--verbose", action="store_true", help="debug logging")
+    add_zenoh_args(parser, default_mode="client")
+    parser.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    import sys
+
+    from services.evaluator import run_evaluator
+    from services.options import OptionError, options_from_args
+    from services.process import setup_logging, stop_on_signals
+    from services.transport import TransportError, settings_from_args
+
+    try:
+        config = options_from_args(EvaluatorConfig, args, "NAVLEARN_EVALUATOR")
+        settings = settings_from_args(args)
+    except (OptionError, TransportError) as exc:
+        print(f"navlearn evaluator: {exc}", file=sys.stderr)
+        return 2
+    setup_logging(args.verbose)
+    stop = stop_on_signals()
+    try:
+        return run_evaluator(config, settings, stop)
+    except (TransportError, ValueError) as exc:
+        print(f"navlearn evaluator: {exc}", file=sys.stderr)
+        return 2

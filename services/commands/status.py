@@ -1,0 +1,81 @@
+"""`navlearn status`: the learner's status and the processes alive, as a table or JSON."""
+
+from __future__ import annotations
+
+import argparse
+
+from services.transport import add_zenoh_args
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "status",
+        help="show the learner's status and which processes are alive",
+        description=(
+            "Query navlearn/<run>/status/learner (policy version, replay sizes, updates/s, transitions "
+            "received and rejected by reason, per-actor rate and last seen, losses, last evaluation) and "
+            "the liveliness tokens under navlearn/<run>/alive/ (learner, actors, evaluator, router), then "
+            "print a table, or JSON with --json. Exit code 1 if the learner does not answer."
+        ),
+    )
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    parser.add_argument(
+        "--watch",
+        nargs="?",
+        const=2.0,
+        type=float,
+        metavar="SECONDS",
+        help="refresh every SECONDS (default 2) until Ctrl-C; with --json prints one object per line",
+    )
+    parser.add_argument(
+        "--timeout", type=float, default=3.0, help="seconds to wait for the learner's answer (default 3)"
+    )
+    add_zenoh_args(parser, default_mode="client")
+    parser.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    import json
+    import sys
+    import time
+
+    from services.status import query_alive, query_status, render, status_dict
+    from services.transport import TransportError, open_session, settings_from_args
+
+    try:
+        settings = settings_from_args(args)
+        if settings.connect_timeout == 0:
+            settings.connect_timeout = args.timeout
+        session = open_session(settings)
+    except TransportError as exc:
+        print(f"navlearn status: {exc}", file=sys.stderr)
+        return 2
+
+    def snapshot() -> dict:
+        status = query_status(session, settings.run, timeout=args.timeout)
+        return status_dict(status, query_alive(session, settings.run, timeout=min(args.timeout, 1.0)))
+
+    try:
+        if args.watch is None:
+            view = snapshot()
+            if args.json:
+                print(json.dumps(view))
+            else:
+                from rich.console import Console
+
+                Console().print(render(view))
+            return 0 if view["learner"] is not None else 1
+        if args.json:
+            while True:
+                print(json.dumps(snapshot()), flush=True)
+                time.sleep(args.watch)
+        from rich.live import Live
+
+        with Live(render(snapshot()), auto_refresh=False) as live:
+            while True:
+                time.sleep(args.watch)
+                live.update(render(snapshot()), refresh=True)
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        session.close()

@@ -1,0 +1,120 @@
+"""`navlearn up`: learner + actors + evaluator on this machine for a bounded run."""
+
+from __future__ import annotations
+
+import argparse
+
+from agents.nnql.config import NNQLConfig
+from services.options import add_options
+from services.up import UpConfig
+
+DESCRIPTION = """\
+Train NNQL the distributed way on one machine: start the learner (hosting the Zenoh router on a
+free loopback port), --actors actor processes of --envs robots each and the evaluator, show
+progress (one live line from the learner's status), and after --duration seconds of training
+(or --updates updates, or Ctrl-C) stop them in order: actors, learner (final checkpoint), then
+the evaluator once it has measured the final policy. Everything lands in --out (default
+runs/<run>): checkpoints/, policy/ (final weights: model.safetensors + config.json),
+eval/learning_curve.png and eval/evaluations.jsonl, tb/ (TensorBoard), logs/, summary.json.
+Running it again with the same --run resumes from its checkpoint. The NNQL flags go to the
+learner. Exit code 1 if a process fails (its log tail is printed).
+"""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "up",
+        help="run learner + actors + evaluator on this machine (bounded run)",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_options(parser, UpConfig, "NAVLEARN_UP", "run")
+    add_options(
+        parser, NNQLConfig, "NAVLEARN_NNQL", "NNQL hyper-parameters (passed to the learner)", skip=("seed",)
+    )
+    parser.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    import logging
+    import sys
+    import time
+    from contextlib import nullcontext
+
+    from rich.console import Console
+
+    from services.options import OptionError, options_from_args
+    from services.process import stop_on_signals
+    from services.status import progress_line
+    from services.up import ChildFailed, Up
+
+    try:
+        config = options_from_args(UpConfig, args, "NAVLEARN_UP")
+        nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=config.seed)
+    except OptionError as exc:
+        print(f"navlearn up: {exc}", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=logging.WARNING, format="%(name)s %(levelname)s %(message)s")
+    console = Console()
+    stop = stop_on_signals()
+    up = Up(config, nnql)
+    limits = [
+        f"{config.duration:.0f} s" * bool(config.duration),
+        f"{config.updates} updates" * bool(config.updates),
+    ]
+    budget = " or ".join(b for b in limits if b) or "until Ctrl-C"
+    console.print(
+        f"navlearn up: run [bold]{config.run}[/bold], learner + {config.actors} actors x {config.envs} "
+        f"robots + evaluator on {up.endpoint}; budget {budget}; "
+        f"outputs in {up.out}/"
+    )
+    up.start()
+    start = time.monotonic()
+    view, failed = None, None
+    from rich.live import Live
+
+    # On a terminal one line updates in place (transient); in a log (pipe, file) a line every 10 s.
+    live_or_not = (
+        Live(console=console, auto_refresh=False, transient=True) if console.is_terminal else nullcontext()
+    )
+    with live_or_not as live:
+        last_print = [0.0]
+
+        def show(current, elapsed):
+            clock = f"{elapsed:4.0f}/{config.duration:.0f} s" if config.duration else f"{elapsed:4.0f} s"
+            line = f"[{clock}] {progress_line(current) if current else 'waiting for the learner...'}"
+            if console.is_terminal:
+                live.update(line, refresh=True)
+            elif time.monotonic() - last_print[0] >= 10:
+                console.print(line, highlight=False)
+                last_print[0] = time.monotonic()
+
+        try:
+            view = up.watch(stop, show)
+        except ChildFailed as exc:
+            failed = exc.child
+        console.print("stopping: actors, learner (checkpoint), evaluator (final evaluation)...")
+        codes = up.stop_all()
+    summary = up.write_outputs(view, codes, time.monotonic() - start)
+    if failed is not None:
+        console.print(
+            f"[red]{failed.name} exited with code {failed.process.returncode}[/red]; last lines of "
+            f"{failed.log_path}:\n{failed.tail()}"
+        )
+        return 1
+    bad = {name: code for name, code in codes.items() if code not in (0, -15)}
+    final = summary["last_evaluation"]
+    console.print(f"final policy version {summary['final_version']} in {summary['wall_time_s']:.0f} s")
+    if final:
+        for family, m in final["metrics"].items():
+            console.print(
+                f"  {family}: success {100 * m['success']['value']:.0f}% "
+                f"[{100 * m['success']['low']:.0f}, {100 * m['success']['high']:.0f}], SPL {m['spl']:.2f} "
+                f"(version {final['policy_version']}, {m['episodes']} held-out episodes)"
+            )
+    for name, path in summary["outputs"].items():
+        console.print(f"  {name}: {path}")
+    if bad:
+        console.print(f"[red]processes exited with errors: {bad}[/red] (see {up.out}/logs/)")
+        return 1
+    return 0

@@ -1,0 +1,160 @@
+"""Reading the learner's status over Zenoh and showing it (``navlearn status``, ``navlearn up``)."""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+from protocols import keys
+from protocols.codec import decode
+from protocols.errors import ProtocolError
+from protocols.messages import LearnerStatus
+
+
+def query_status(session, run: str, timeout: float = 3.0) -> LearnerStatus | None:
+    """The learner's answer on ``status/learner``, or None if no learner answered in time."""
+    for reply in session.get(keys.status(run), timeout=timeout):
+        if reply.ok is None:
+            continue
+        try:
+            message = decode(reply.ok.payload.to_bytes())
+        except ProtocolError:
+            continue
+        if isinstance(message, LearnerStatus):
+            return message
+    return None
+
+
+def query_alive(session, run: str, timeout: float = 2.0) -> list[tuple[str, str]]:
+    """(role, id) of every process holding a liveliness token in ``run``, sorted."""
+    found = set()
+    for reply in session.liveliness().get(keys.everything(run, "alive"), timeout=timeout):
+        if reply.ok is None:
+            continue
+        try:
+            found.add(tuple(keys.parse(reply.ok.key_expr).names))
+        except ProtocolError:
+            continue
+    return sorted(found)
+
+
+def status_dict(status: LearnerStatus | None, alive: list[tuple[str, str]], now: float | None = None) -> dict:
+    """One JSON-able view of the run: the learner's status (None if it did not answer) and who is alive."""
+    now = time.time() if now is None else now
+    processes: dict[str, list[str]] = {}
+    for role, ident in alive:
+        processes.setdefault(role, []).append(ident)
+    out: dict[str, Any] = {"time": now, "alive": processes, "learner": None}
+    if status is None:
+        return out
+    alive_actors = set(processes.get("actor", []))
+    actors = {}
+    for actor in sorted(set(status.actors_last_seen) | alive_actors):
+        last_seen = status.actors_last_seen.get(actor)
+        actors[actor] = {
+            "alive": actor in alive_actors,
+            "transitions": status.counters.get(f"transitions/{actor}", 0),
+            "transitions_per_s": status.rates.get(f"transitions_per_s/{actor}", 0.0),
+            "last_seen_s_ago": None if last_seen is None else round(now - last_seen, 1),
+        }
+    out["learner"] = {
+        "sender": status.sender,
+        "versions": status.versions,
+        "replay_sizes": status.replay_sizes,
+        "counters": {k: v for k, v in status.counters.items() if not k.startswith("transitions/")},
+        "rates": {k: v for k, v in status.rates.items() if not k.startswith("transitions_per_s/")},
+        "losses": {k: (v if math.isfinite(v) else str(v)) for k, v in status.losses.items()},
+        "actors": actors,
+        "last_eval": status.last_eval,
+    }
+    return out
+
+
+def _fmt(value: Any, spec: str = ".3g") -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return format(value, spec)
+    return str(value)
+
+
+def progress_line(view: dict) -> str:
+    """One line for a live display: version, throughput, replay, lag, actors, last evaluation."""
+    learner = view.get("learner")
+    if learner is None:
+        return "waiting for the learner's status..."
+    rates, counters = learner["rates"], learner["counters"]
+    version = next(iter(learner["versions"].values()), 0)
+    replay = learner["replay_sizes"].get("transitions", 0)
+    line = (
+        f"version {version} | {rates.get('updates_per_s', 0):.0f} upd/s | "
+        f"{rates.get('transitions_per_s', 0):.0f} transitions/s | replay {replay}"
+        f" | lag {rates.get('policy_lag', 0):.1f} | actors {len(view['alive'].get('actor', []))}"
+        f" | rejected {counters.get('transitions_rejected', 0)}"
+    )
+    evaluation = learner.get("last_eval")
+    if evaluation:
+        parts = [
+            f"{family} {100 * fam['success']:.0f}%"
+            for family, fam in evaluation.get("families", {}).items()
+            if fam.get("success") is not None
+        ]
+        line += f" | eval v{evaluation['policy_version']}: " + ", ".join(parts)
+    return line
+
+
+def render(view: dict):
+    """A rich renderable: summary, actors, rejections and the last evaluation."""
+    from rich.console import Group
+    from rich.table import Table
+
+    learner = view.get("learner")
+    alive = ", ".join(f"{role}: {' '.join(ids)}" for role, ids in sorted(view["alive"].items())) or "none"
+    if learner is None:
+        summary = Table(title="navlearn status", show_header=False)
+        summary.add_row("learner", "no answer on status/learner")
+        summary.add_row("alive", alive)
+        return summary
+    summary = Table(title=f"learner {learner['sender']}", show_header=False)
+    for model, version in learner["versions"].items():
+        summary.add_row(f"policy version ({model})", str(version))
+    for name, size in learner["replay_sizes"].items():
+        summary.add_row(f"replay: {name}", str(size))
+    for name, value in sorted(learner["rates"].items()):
+        summary.add_row(name.replace("_", " "), _fmt(value))
+    for name, value in sorted(learner["counters"].items()):
+        summary.add_row(name.replace("_", " "), str(value))
+    for name, value in sorted(learner["losses"].items()):
+        summary.add_row(f"loss: {name}", _fmt(value, ".4g"))
+    summary.add_row("alive", alive)
+    actors = Table(title="actors")
+    for column in ("actor", "alive", "transitions", "transitions/s", "last seen (s ago)"):
+        actors.add_column(column, justify="left" if column == "actor" else "right")
+    for name, actor in learner["actors"].items():
+        actors.add_row(
+            name,
+            "yes" if actor["alive"] else "[red]gone[/red]",
+            str(actor["transitions"]),
+            _fmt(actor["transitions_per_s"], ".0f"),
+            _fmt(actor["last_seen_s_ago"]),
+        )
+    parts = [summary, actors]
+    evaluation = learner.get("last_eval")
+    if evaluation:
+        table = Table(
+            title=f"last evaluation: version {evaluation['policy_version']} by {evaluation['evaluator']}"
+        )
+        for column in ("family", "episodes", "success", "SPL", "path / A*"):
+            table.add_column(column, justify="left" if column == "family" else "right")
+        for family, fam in evaluation.get("families", {}).items():
+            success = fam.get("success")
+            table.add_row(
+                family,
+                _fmt(fam.get("episodes")),
+                "-" if success is None else f"{100 * success:.0f}%",
+                _fmt(fam.get("spl"), ".2f"),
+                _fmt(fam.get("path_ratio"), ".2f"),
+            )
+        parts.append(table)
+    return Group(*parts)

@@ -1,0 +1,306 @@
+"""`navlearn up`: the whole system on one machine, as child processes, for a bounded run.
+
+It starts the learner (hosting the Zenoh router on a free loopback port), N
+actors and the evaluator as separate processes (``python -m services.cli ...``,
+each logging into ``<out>/logs/``), shows one live progress line read from the
+learner's status, and stops everything in order when the budget is spent, on
+Ctrl-C or SIGTERM, or when a child dies: actors first, then the learner (which
+broadcasts its final weights and writes its checkpoint), then the evaluator
+once it has measured the final version (bounded wait). Outputs in ``<out>``:
+``checkpoints/``, ``policy/`` (the final weights), ``eval/learning_curve.png``
+and ``eval/evaluations.jsonl``, ``tb/`` (TensorBoard) and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import json
+import logging
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger("navlearn.up")
+PR_SET_PDEATHSIG = 1
+MODEL = "nnql"
+
+
+@dataclass
+class UpConfig:
+    """A one-machine run: how many processes, how long, where the outputs go."""
+
+    run: str = "local"
+    """run name (Zenoh keys navlearn/<run>/...); a second `up` with the same run resumes its checkpoint"""
+    out: str = ""
+    """output directory; empty: runs/<run>"""
+    actors: int = 2
+    """actor processes"""
+    envs: int = 8
+    """robots per actor"""
+    maps: str = "mixed:16"
+    """training map spec for the actors (worlds.tasks)"""
+    seed: int = 0
+    """seed of the learner (network, replay sampling); actor i uses seed + i"""
+    duration: float = 90.0
+    """seconds of training, counted from the learner's first status answer (0: no time limit)"""
+    updates: int = 0
+    """stop once the learner has run this many updates in total (0: no limit)"""
+    eval_episodes: int = 20
+    """evaluator episodes per family (unseen and dynamic held-out maps)"""
+    eval_every: int = 0
+    """updates between evaluated versions (0: every new version the evaluator can keep up with)"""
+    checkpoint_every: float = 60.0
+    """seconds between learner checkpoints (one is always written at the end)"""
+    port: int = 0
+    """loopback port of the learner's router; 0: a free one"""
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def _die_with_parent() -> None:
+    """In the child, before exec: get SIGTERM if `up` dies (Linux), so nothing is left behind."""
+    with contextlib.suppress(OSError):
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+class Child:
+    """One service process with its log file."""
+
+    def __init__(self, name: str, argv: list[str], log_dir: Path, env: dict[str, str]) -> None:
+        self.name = name
+        self.log_path = log_dir / f"{name}.log"
+        self._log = open(self.log_path, "ab")  # noqa: SIM115 - closed in wait()
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "services.cli", *argv],
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,  # Ctrl-C reaches `up` only; it stops the children in order
+            preexec_fn=_die_with_parent,
+        )
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def terminate(self) -> None:
+        if self.alive():
+            self.process.send_signal(signal.SIGTERM)
+
+    def wait(self, timeout: float) -> int:
+        try:
+            code = self.process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            log.warning("%s did not stop within %.0f s; killing it", self.name, timeout)
+            self.process.kill()
+            code = self.process.wait()
+        self._log.close()
+        return code
+
+    def tail(self, lines: int = 15) -> str:
+        text = self.log_path.read_text(errors="replace").splitlines()
+        return "\n".join(text[-lines:])
+
+
+def nnql_environment(nnql) -> dict[str, str]:
+    """NNQLConfig as NAVLEARN_NNQL_* variables for the learner process."""
+    env = {}
+    for name, value in nnql.to_dict().items():
+        if isinstance(value, list | tuple):
+            value = " ".join(map(str, value))
+        elif isinstance(value, bool):
+            value = "1" if value else "0"
+        env[f"NAVLEARN_NNQL_{name.upper()}"] = str(value)
+    return env
+
+
+class Up:
+    """Starts, watches and stops the processes of one run."""
+
+    def __init__(self, config: UpConfig, nnql) -> None:
+        self.config = config
+        self.out = Path(config.out or f"runs/{config.run}")
+        self.endpoint = f"tcp/127.0.0.1:{config.port or free_port()}"
+        self.nnql = nnql
+        self.children: dict[str, Child] = {}
+
+    def start(self) -> None:
+        cfg, out = self.config, self.out
+        (out / "logs").mkdir(parents=True, exist_ok=True)
+        base = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
+        base.update({"NAVLEARN_RUN": cfg.run, "PYTHONUNBUFFERED": "1"})
+        learner_env = {**base, **nnql_environment(self.nnql)}
+        self._spawn(
+            "learner",
+            [
+                "learner",
+                "--listen",
+                self.endpoint,
+                "--checkpoint-dir",
+                str(out / "checkpoints"),
+                "--checkpoint-every",
+                str(cfg.checkpoint_every),
+                "--tensorboard",
+                str(out / "tb"),
+            ],
+            learner_env,
+        )
+        for i in range(cfg.actors):
+            self._spawn(
+                f"actor-{i + 1}",
+                [
+                    "actor",
+                    "--connect",
+                    self.endpoint,
+                    "--id",
+                    f"actor-{i + 1}",
+                    "--envs",
+                    str(cfg.envs),
+                    "--maps",
+                    cfg.maps,
+                    "--seed",
+                    str(cfg.seed + i),
+                ],
+                base,
+            )
+        self._spawn(
+            "evaluator",
+            [
+                "evaluator",
+                "--connect",
+                self.endpoint,
+                "--episodes",
+                str(cfg.eval_episodes),
+                "--every-versions",
+                str(cfg.eval_every),
+                "--out",
+                str(out / "eval"),
+                "--tensorboard",
+                str(out / "tb"),
+            ],
+            base,
+        )
+
+    def _spawn(self, name: str, argv: list[str], env: dict[str, str]) -> None:
+        self.children[name] = Child(name, argv, self.out / "logs", env)
+
+    def dead_child(self) -> Child | None:
+        return next((c for c in self.children.values() if not c.alive()), None)
+
+    def watch(self, stop: threading.Event, show) -> dict[str, Any] | None:
+        """Follow the learner's status until the budget is spent, ``stop`` is set or a child dies."""
+        from services.process import connect
+        from services.status import query_alive, query_status, status_dict
+        from services.transport import ZenohSettings
+
+        cfg = self.config
+        settings = ZenohSettings(mode="client", connect=[self.endpoint], run=cfg.run)
+        session = connect(settings, stop)
+        view, started = None, None
+        try:
+            while session is not None and not stop.is_set():
+                if (dead := self.dead_child()) is not None:
+                    raise ChildFailed(dead)
+                status = query_status(session, cfg.run, timeout=2.0)
+                if status is not None:
+                    view = status_dict(status, query_alive(session, cfg.run, timeout=0.5))
+                    started = started or time.monotonic()
+                elapsed = time.monotonic() - started if started else 0.0
+                show(view, elapsed)
+                version = view["learner"]["versions"].get(MODEL, 0) if view else 0
+                if started and cfg.duration and elapsed >= cfg.duration:
+                    break
+                if cfg.updates and version >= cfg.updates:
+                    break
+                stop.wait(1.0)
+        finally:
+            if session is not None:
+                session.close()
+        return view
+
+    def stop_all(self, eval_wait: float = 60.0) -> dict[str, int]:
+        """Actors, then the learner (final checkpoint), then the evaluator after its last report."""
+        codes = {}
+        actors = [c for n, c in self.children.items() if n.startswith("actor-")]
+        for child in actors:
+            child.terminate()
+        for child in actors:
+            codes[child.name] = child.wait(30)
+        learner = self.children["learner"]
+        learner.terminate()
+        codes["learner"] = learner.wait(120)
+        final = self.final_version()
+        evaluator = self.children["evaluator"]
+        deadline = time.monotonic() + eval_wait
+        while final is not None and evaluator.alive() and time.monotonic() < deadline:
+            if final in self.evaluated_versions():
+                break
+            time.sleep(1.0)
+        evaluator.terminate()
+        codes["evaluator"] = evaluator.wait(60)
+        return codes
+
+    def final_version(self) -> int | None:
+        policy = self.latest_policy()
+        return json.loads((policy / "config.json").read_text())["version"] if policy else None
+
+    def latest_policy(self) -> Path | None:
+        from services.checkpoint import CheckpointDir
+
+        latest = CheckpointDir(self.out / "checkpoints").latest()
+        policy = latest / "nnql" / "policy" if latest else None
+        return policy if policy and (policy / "config.json").exists() else None
+
+    def evaluated_versions(self) -> set[int]:
+        path = self.out / "eval" / "evaluations.jsonl"
+        if not path.exists():
+            return set()
+        return {json.loads(line)["policy_version"] for line in path.read_text().splitlines() if line.strip()}
+
+    def write_outputs(
+        self, view: dict[str, Any] | None, codes: dict[str, int], wall: float
+    ) -> dict[str, Any]:
+        policy = self.latest_policy()
+        if policy is not None:
+            shutil.copytree(policy, self.out / "policy", dirs_exist_ok=True)
+        lines = self.out / "eval" / "evaluations.jsonl"
+        evaluations = (
+            [json.loads(x) for x in lines.read_text().splitlines() if x.strip()] if lines.exists() else []
+        )
+        summary = {
+            "run": self.config.run,
+            "wall_time_s": round(wall, 1),
+            "final_version": self.final_version(),
+            "exit_codes": codes,
+            "last_status": view,
+            "last_evaluation": evaluations[-1] if evaluations else None,
+            "outputs": {
+                "policy": str(self.out / "policy") if policy else None,
+                "checkpoints": str(self.out / "checkpoints"),
+                "learning_curve": str(self.out / "eval" / "learning_curve.png"),
+                "evaluations": str(lines),
+                "tensorboard": str(self.out / "tb"),
+                "logs": str(self.out / "logs"),
+            },
+        }
+        (self.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        return summary
+
+
+class ChildFailed(RuntimeError):
+    def __init__(self, child: Child) -> None:
+        self.child = child
+        super().__init__(f"{child.name} exited with code {child.process.returncode}")
