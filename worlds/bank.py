@@ -42,6 +42,7 @@ class MapBank:
         self.pool_tasks: list[Task] = []
         self.pool_resample = False
         self.pool_min_distance = 0.0
+        self.source: TaskSampler | None = None
         self._field: list[np.ndarray] = []
         self._cand: list[np.ndarray] = []
         self._cand_size = 0
@@ -146,12 +147,13 @@ _POOL_CACHE_SIZE = 8
 
 def pool_bank(sampler: TaskSampler, size: int, seed: int) -> MapBank:
     """The bank of ``sampler``'s task pool: its tasks when finite, else ``size`` draws, draw ``k``
-    with ``np.random.default_rng([seed, k])``. Cached per (spec, size, seed): share it read-only,
-    :meth:`MapBank.add_tasks` on a copy (see :func:`private_copy`)."""
-    key = (sampler.key if not sampler.key.startswith("callable@") else id(sampler), size, seed)
-    if key in _POOLS:
+    with ``np.random.default_rng([seed, k])``. Cached per (spec, size, seed) for samplers built
+    from a spec, per sampler object otherwise. Share it read-only (see :func:`private_copy`)."""
+    key = (sampler.cache_key if sampler.cache_key is not None else id(sampler), size, seed)
+    cached = _POOLS.get(key)
+    if cached is not None and (sampler.cache_key is not None or cached.source is sampler):
         _POOLS.move_to_end(key)
-        return _POOLS[key]
+        return cached
     tasks = list(sampler.tasks or [sampler(np.random.default_rng([seed, k])) for k in range(size)])
     bank = MapBank()
     bank.add_pool(tasks, sampler.resample, sampler.min_distance)
@@ -160,6 +162,7 @@ def pool_bank(sampler: TaskSampler, size: int, seed: int) -> MapBank:
         sampler.resample,
         sampler.min_distance,
     )
+    bank.source = sampler
     _POOLS[key] = bank
     while len(_POOLS) > _POOL_CACHE_SIZE:
         _POOLS.popitem(last=False)

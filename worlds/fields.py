@@ -11,6 +11,8 @@ every grown cell is within one cell per axis of a blocked one.
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 from scipy import ndimage
 
@@ -45,3 +47,20 @@ def kernel_field(grid: GridMap) -> np.ndarray:
     padded, gap = _padded_gap(grid)
     units = np.minimum(np.floor(gap / GAP_UNIT), BLOCKED - 1)
     return np.where(padded, BLOCKED, units).astype(np.uint8)
+
+
+_RECENT: OrderedDict[int, tuple[GridMap, np.ndarray]] = OrderedDict()
+
+
+def cached_kernel_field(grid: GridMap) -> np.ndarray:
+    """:func:`kernel_field` of ``grid``, flattened, remembered for the last 16 maps (callers such
+    as planners cast rays on the same map many times)."""
+    hit = _RECENT.get(id(grid))
+    if hit is not None and hit[0] is grid:
+        _RECENT.move_to_end(id(grid))
+        return hit[1]
+    field = kernel_field(grid).ravel()
+    _RECENT[id(grid)] = (grid, field)
+    while len(_RECENT) > 16:
+        _RECENT.popitem(last=False)
+    return field

@@ -67,6 +67,12 @@ def draw(
         ax.add_patch(Circle((x, y), robot_radius, color="tab:purple", zorder=5))
         ax.plot([x, x + 1.6 * robot_radius * np.cos(theta)], [y, y + 1.6 * robot_radius * np.sin(theta)],
                 "-", color="white", lw=1.5, zorder=6)  # fmt: skip
+    handles = [h for h in ax.patches if h.get_label() in ("start", "goal")]
+    handles += [line for line in ax.lines if line.get_label() == "trajectory"]
+    if obstacles is not None and len(np.asarray(obstacles).reshape(-1, 3)):
+        handles.append(Circle((0, 0), 1, color="tab:orange", label="moving disc"))
+    if handles:
+        ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
     ax.set_xlim(0, grid.width * cs)
     ax.set_ylim(grid.height * cs, 0)
     ax.set_aspect("equal")

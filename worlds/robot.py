@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
-from worlds.fields import BLOCKED, GAP_UNIT, kernel_field
+from worlds.fields import BLOCKED, GAP_UNIT, cached_kernel_field
 from worlds.maps import GridMap
 
 
@@ -135,6 +135,6 @@ def collides(grid: GridMap, x0, y0, x1, y1, radius: float) -> np.ndarray:
     arrays = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x0, y0, x1, y1)))
     flat = [np.ascontiguousarray(a).ravel() for a in arrays]
     out = np.empty(flat[0].shape, dtype=bool)
-    field = kernel_field(grid).ravel()
+    field = cached_kernel_field(grid)
     _collides_batch(field, grid.height, grid.width, grid.cell_size, *flat, float(radius), out)
     return out.reshape(arrays[0].shape)

@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
-from worlds.fields import BLOCKED, GAP_UNIT, kernel_field
+from worlds.fields import BLOCKED, GAP_UNIT, cached_kernel_field, kernel_field
 from worlds.maps import GridMap
 
 JUMP_MIN = 6
@@ -126,7 +126,7 @@ def cast_rays(
     angles = np.atleast_1d(np.asarray(angles, dtype=np.float64))
     discs = np.zeros((0, 3)) if discs is None else np.asarray(discs, dtype=np.float64).reshape(-1, 3)
     out = np.empty((x.shape[0], angles.shape[0]), dtype=np.float64)
-    field = kernel_field(grid).ravel()
+    field = cached_kernel_field(grid)
     _cast_batch(field, *grid.shape, grid.cell_size, x, y, theta, angles, max_range, discs, out)
     return out
 

@@ -40,7 +40,8 @@ class TaskSampler:
     """A callable ``(rng) -> Task``. ``tasks`` is the full list when the source is finite;
     ``resample`` says whether an environment may draw new random start/goal pairs on the
     maps of its tasks (true for sources whose start and goal are random anyway), at least
-    ``min_distance`` metres apart."""
+    ``min_distance`` metres apart. ``cache_key``, set for samplers built from a spec, lets
+    environments share the task pool of equal specs (see :func:`worlds.bank.pool_bank`)."""
 
     def __init__(
         self,
@@ -49,9 +50,11 @@ class TaskSampler:
         tasks: list[Task] | None = None,
         resample: bool = False,
         min_distance: float = 0.0,
+        cache_key: str | None = None,
     ) -> None:
         self._draw = draw
         self.key = key
+        self.cache_key = cache_key
         self.tasks = tasks
         self.resample = resample
         self.min_distance = min_distance
@@ -114,6 +117,8 @@ def parse_map_spec(spec: str) -> TaskSampler:
             f"map spec {spec!r} is neither FAMILY:N[xM] (families: {', '.join((*FAMILIES, 'mixed'))}) "
             "nor an existing map file"
         )
+    stat = path.stat()
+    file_key = f"{path.resolve()}@{stat.st_mtime_ns}:{stat.st_size}"
     if path.suffix == ".scen":
         scenarios = load_scenarios(path)
         if not scenarios:
@@ -125,15 +130,18 @@ def parse_map_spec(spec: str) -> TaskSampler:
                 grids[scen.map_name] = load_movingai(path.parent / Path(scen.map_name).name)
             tasks.append(Task(grids[scen.map_name], scen.start, scen.goal, scen.map_name))
         turn = iter(range(2**62))
-        return TaskSampler(lambda rng: tasks[next(turn) % len(tasks)], str(path), tasks=tasks)
+        return TaskSampler(
+            lambda rng: tasks[next(turn) % len(tasks)], str(path), tasks=tasks, cache_key=file_key
+        )
     grid = load_map(path)
     if not path.read_text(encoding="ascii").startswith("type "):
         grid, markers = parse_ascii(path.read_text(encoding="ascii"), path)
         if "S" in markers and "G" in markers:
             task = Task(grid, markers["S"], markers["G"], grid.name)
-            return TaskSampler(lambda rng: task, str(path), tasks=[task])
+            return TaskSampler(lambda rng: task, str(path), tasks=[task], cache_key=file_key)
     distance = 0.25 * min(grid.shape) * grid.cell_size
-    return TaskSampler(_random_endpoints(grid, distance), str(path), resample=True, min_distance=distance)
+    draw = _random_endpoints(grid, distance)
+    return TaskSampler(draw, str(path), resample=True, min_distance=distance, cache_key=file_key)
 
 
 def as_sampler(maps: str | Callable[[np.random.Generator], Task]) -> TaskSampler:
@@ -143,5 +151,5 @@ def as_sampler(maps: str | Callable[[np.random.Generator], Task]) -> TaskSampler
     if isinstance(maps, str):
         return parse_map_spec(maps)
     if callable(maps):
-        return TaskSampler(maps, f"callable@{id(maps):x}")
+        return TaskSampler(maps, getattr(maps, "__name__", "callable"))
     raise TypeError(f"maps must be a spec string or a callable (rng) -> Task, got {type(maps).__name__}")

@@ -1,0 +1,42 @@
+"""A simple goal-seeking reactive policy: a baseline and the robot of `navlearn world show`.
+
+It reads only the observation (like a learned policy): among the actions whose new heading
+has enough free range in front and to both sides (judged from the nearest beam and its two
+neighbours), it takes the one closest to the goal bearing. It is not a planner: it gets
+stuck behind walls that face the goal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from worlds.config import NavConfig
+
+
+def goal_seeking_policy(config: NavConfig | None = None, margin: float = 0.3):
+    """A policy ``obs (N, n_beams + 3) -> actions (N,)`` for ``config``'s robot and sensors;
+    an action is blocked when the beam nearest its heading reads less than
+    ``step + radius + margin`` metres, or a neighbouring beam less than twice ``radius + margin``
+    (which keeps the robot's sides off corners)."""
+    config = config or NavConfig()
+    sensors, robot = config.sensors, config.robot
+    turns = robot.turns
+    beam_angles = sensors.beam_angles
+    gap = np.angle(np.exp(1j * (turns[:, None] - beam_angles[None, :])))  # action x beam
+    nearest_beam = np.abs(gap).argmin(axis=1)
+    n = sensors.n_beams
+    sides = np.stack([(nearest_beam - 1) % n, (nearest_beam + 1) % n], axis=1)
+    needed = (robot.step + robot.radius + margin) / sensors.max_range
+    needed_side = 2 * (robot.radius + margin) / sensors.max_range
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
+        bearing = np.arctan2(obs[:, n + 1], obs[:, n + 2])  # goal direction relative to the heading
+        misalignment = np.abs(np.angle(np.exp(1j * (bearing[:, None] - turns[None, :]))))
+        free = (obs[:, nearest_beam] >= needed) & (obs[:, sides].min(axis=2) >= needed_side)
+        score = np.where(free, -misalignment, -np.inf)
+        stuck = ~free.any(axis=1)
+        score[stuck] = obs[stuck][:, nearest_beam]  # nothing free: head for the most open side
+        return score.argmax(axis=1).astype(np.int64)
+
+    return policy
