@@ -11,6 +11,7 @@ replay from its checkpoint; after a router restart the processes reconnect by th
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -69,9 +70,11 @@ class Cluster:
             stdout=subprocess.DEVNULL,
             stderr=subprocess.STDOUT,
         )
-        self.session = open_session(
-            ZenohSettings(mode="client", connect=[self.endpoint], run=self.run, connect_timeout=60)
-        )
+        self.session = None
+
+    def connect(self) -> None:
+        settings = ZenohSettings(mode="client", connect=[self.endpoint], run=self.run, connect_timeout=60)
+        self.session = open_session(settings)
 
     def ctl(self, *args: str, check: bool = True) -> str:
         result = subprocess.run(
@@ -104,7 +107,8 @@ class Cluster:
 
     def close(self) -> None:
         pids = [int(p) for p in self.ctl("pid", "all", check=False).split() if p.isdigit()]
-        self.session.close()
+        if self.session is not None:
+            self.session.close()
         self.supervisord.terminate()  # supervisord stops every program (SIGTERM, then SIGKILL)
         try:
             self.supervisord.wait(200)
@@ -112,15 +116,16 @@ class Cluster:
             self.supervisord.kill()
             self.supervisord.wait()
         for pid in pids:  # only if supervisord itself could not stop them
-            cmdline = Path(f"/proc/{pid}/cmdline")
-            if cmdline.exists() and b"navlearn" in cmdline.read_bytes():
-                os.kill(pid, 9)
+            with contextlib.suppress(OSError):  # gone already, as it should be
+                if b"navlearn" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                    os.kill(pid, 9)
 
 
 @pytest.fixture
 def cluster(tmp_path):
     cluster = Cluster(tmp_path / "home")
     try:
+        cluster.connect()
         yield cluster
     finally:
         cluster.close()
