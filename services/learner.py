@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import queue
 import threading
 import time
 from dataclasses import dataclass
@@ -29,6 +30,7 @@ from services.inbox import Inbox, Received
 from services.process import Scalars, connect
 from services.ratelimit import RateLimiter
 from services.stats import ActorStats, LagWindow, RateWindow
+from services.status import eval_summary
 from services.transport import ZenohSettings, declare_alive
 
 log = logging.getLogger("navlearn.learner")
@@ -199,7 +201,7 @@ class LearnerService:
             return
         try:
             item = self.inbox.transitions.get(timeout=timeout)
-        except Exception:  # queue.Empty
+        except queue.Empty:
             return
         self._insert(item)
 
@@ -208,7 +210,7 @@ class LearnerService:
         while done < max_batches and self.limiter.can_insert():
             try:
                 item = self.inbox.transitions.get_nowait()
-            except Exception:  # queue.Empty
+            except queue.Empty:
                 break
             self._insert(item)
             done += 1
@@ -256,7 +258,7 @@ class LearnerService:
         while True:
             try:
                 item = self.inbox.other.get_nowait()
-            except Exception:  # queue.Empty
+            except queue.Empty:
                 return busy
             busy = True
             if isinstance(item.message, DemoBatch):
@@ -269,29 +271,14 @@ class LearnerService:
                 self._on_eval(item)
 
     def _on_eval(self, item: Received) -> None:
-        report: EvalReport = item.message
         self._count("eval_reports")
-        summary = {}
-        for family, metrics in report.metrics.items():
-            success = metrics.get("success")
-            summary[family] = {
-                "success": success.get("value") if isinstance(success, dict) else success,
-                "spl": metrics.get("spl"),
-                "path_ratio": metrics.get("path_ratio"),
-                "episodes": metrics.get("episodes"),
-            }
-        self.last_eval = {
-            "evaluator": item.name,
-            "model": report.model,
-            "policy_version": report.policy_version,
-            "received": item.arrived,
-            "families": summary,
-        }
+        self.last_eval = eval_summary(item.name, item.message, item.arrived)
+        families = self.last_eval["families"]
         log.info(
             "eval report from %s for version %d: %s",
             item.name,
-            report.policy_version,
-            ", ".join(f"{f} success {s['success']}" for f, s in summary.items()),
+            item.message.policy_version,
+            ", ".join(f"{f} success {s['success']}" for f, s in families.items()),
         )
 
     def broadcast(self) -> None:

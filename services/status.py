@@ -9,7 +9,27 @@ from typing import Any
 from protocols import keys
 from protocols.codec import decode
 from protocols.errors import ProtocolError
-from protocols.messages import LearnerStatus
+from protocols.messages import EvalReport, LearnerStatus
+
+
+def eval_summary(evaluator: str, report: EvalReport, arrived: float) -> dict[str, Any]:
+    """The part of an EvalReport the learner keeps for its status: per family success, SPL, path ratio."""
+    families = {}
+    for family, metrics in report.metrics.items():
+        success = metrics.get("success")
+        families[family] = {
+            "success": success.get("value") if isinstance(success, dict) else success,
+            "spl": metrics.get("spl"),
+            "path_ratio": metrics.get("path_ratio"),
+            "episodes": metrics.get("episodes"),
+        }
+    return {
+        "evaluator": evaluator,
+        "model": report.model,
+        "policy_version": report.policy_version,
+        "received": arrived,
+        "families": families,
+    }
 
 
 def query_status(session, run: str, timeout: float = 3.0) -> LearnerStatus | None:
