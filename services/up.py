@@ -60,7 +60,10 @@ class UpConfig:
     checkpoint_every: float = 60.0
     """seconds between learner checkpoints (one is always written at the end)"""
     port: int = 0
-    """loopback port of the learner's router; 0: a free one"""
+    """port of the learner's router; 0: a free one"""
+    listen_all: bool = False
+    """the learner's router listens on 0.0.0.0 (all interfaces), so actors on other hosts can join
+    with --connect tcp/<this host>:<port> (give --port); default: 127.0.0.1 only"""
 
 
 def free_port() -> int:
@@ -133,7 +136,9 @@ class Up:
     def __init__(self, config: UpConfig, nnql) -> None:
         self.config = config
         self.out = Path(config.out or f"runs/{config.run}")
-        self.endpoint = f"tcp/127.0.0.1:{config.port or free_port()}"
+        port = config.port or free_port()
+        self.endpoint = f"tcp/127.0.0.1:{port}"
+        self.listen = f"tcp/0.0.0.0:{port}" if config.listen_all else self.endpoint
         self.nnql = nnql
         self.children: dict[str, Child] = {}
 
@@ -148,7 +153,7 @@ class Up:
             [
                 "learner",
                 "--listen",
-                self.endpoint,
+                self.listen,
                 "--checkpoint-dir",
                 str(out / "checkpoints"),
                 "--checkpoint-every",
