@@ -118,6 +118,7 @@ class Actor:
         self.weights_applied = 0
         self.episodes: deque[int] = deque(maxlen=100)
         self.episodes_done = 0
+        self.reachable = True
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         if self.policy is None:
@@ -180,27 +181,31 @@ class Actor:
             **flat,
         )
 
+    def tick(self, stop: threading.Event) -> None:
+        """One round: newest weights in, ``batch_steps`` vector steps, the batch out (waiting for the
+        learner's acknowledgements while the window is full)."""
+        reachable = self.publisher.matching_status.matching
+        if reachable and not self.reachable:
+            log.info("learner reachable again; asking for its newest weights")
+            self.receiver.request_latest()
+        self.reachable = reachable
+        self.apply_weights()
+        batch = self.step_batch()
+        self.outbox.put(batch.seq, encode(batch))
+        self.outbox.flush(stop)
+
     def run(self, stop: threading.Event) -> int:
         cfg = self.config
         self.receiver.request_latest()
         self.rollout.reset(seed=self.seed)
         start = last_log = time.monotonic()
         steps_at_log = 0
-        was_reachable = True
         while not stop.is_set() and not (cfg.max_steps and self.rollout.steps >= cfg.max_steps):
-            reachable = self.publisher.matching_status.matching
-            if reachable and not was_reachable:
-                log.info("learner reachable again; asking for its newest weights")
-                self.receiver.request_latest()
-            was_reachable = reachable
-            self.apply_weights()
-            batch = self.step_batch()
-            self.outbox.put(batch.seq, encode(batch))
-            self.outbox.flush(stop)
+            self.tick(stop)
             now = time.monotonic()
             if now - last_log >= cfg.log_every:
                 rate = (self.rollout.steps - steps_at_log) / (now - last_log)
-                self._log_progress(rate, reachable)
+                self._log_progress(rate, self.reachable)
                 last_log, steps_at_log = now, self.rollout.steps
         log.info(
             "actor %s done: %d robot-steps in %.0f s, %d batches sent, %d unsent",
