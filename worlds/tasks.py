@@ -90,9 +90,8 @@ def _generated(family: str, height: int, width: int) -> TaskSampler:
         return _random_endpoints(grid, min_task_distance(grid))(rng)
 
     probe = GridMap(np.zeros((height, width), dtype=bool))
-    return TaskSampler(
-        draw, f"{family}:{height}x{width}", resample=True, min_distance=min_task_distance(probe)
-    )
+    key = f"{family}:{height}x{width}"
+    return TaskSampler(draw, key, resample=True, min_distance=min_task_distance(probe), cache_key=key)
 
 
 def parse_map_spec(spec: str) -> TaskSampler:
