@@ -21,7 +21,7 @@ from conftest import free_port
 from protocols import keys
 from protocols.codec import decode, encode
 from protocols.flow import Ack
-from protocols.messages import EvalReport, TransitionBatch, WeightsUpdate
+from protocols.messages import DemoBatch, EpisodeMeta, EvalReport, TransitionBatch, WeightsUpdate
 from services.status import query_status
 from services.transport import ZenohSettings, open_session
 
@@ -138,6 +138,22 @@ def test_learner_serves_weights_rejects_bad_input_trains_acks_and_checkpoints(le
     assert status.counters["transitions_rejected"] == 5
     ack_sub.undeclare()
     weights_sub.undeclare()
+
+    # demonstrations go to their own buffer, never into the actors' replay
+    lengths = np.array([3, 5], np.int32)
+    demo = DemoBatch(
+        source="astar",
+        episode_lengths=lengths,
+        obs=np.random.default_rng(1).random((int(lengths.sum()) + 2, OBS_DIM), dtype=np.float32),
+        actions=np.zeros(8, np.int64),
+        rewards=np.zeros(8, np.float32),
+        terminations=np.array([0, 0, 1, 0, 0, 0, 0, 1], bool),
+        truncations=np.zeros(8, bool),
+        episodes=[EpisodeMeta(map_id="m", start=(1, 1), goal=(3, 3)) for _ in range(2)],
+    )
+    session.put(keys.demos(run, "astar"), encode(demo))
+    status = wait_status(session, run, lambda s: s.replay_sizes["demos"] == 8)
+    assert status.replay_sizes["transitions"] == 256 and status.counters["demo_steps"] == 8
 
     # SIGTERM: clean exit with a checkpoint holding the counters
     process.send_signal(signal.SIGTERM)
