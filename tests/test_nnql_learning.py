@@ -75,3 +75,38 @@ def test_nnql_learns_a_corridor(tmp_path, variant):
     assert loaded.version == result.updates
     assert (tmp_path / "out" / "curve.png").stat().st_size > 0
     assert len(result.curve) >= 2
+
+
+def test_keep_best_saves_the_weights_that_validated_best(tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    import agents.nnql.train_local as train_local_module
+    from agents.nnql.policy import NNQLPolicy
+
+    corridor = tmp_path / "corridor.txt"
+    corridor.write_text(CORRIDOR)
+    scores = iter([0.2, 0.9, 0.5, 0.1])  # three periodic validations, then the final weights
+    seen_versions = []
+
+    def fake_evaluate(policy, episodes, seed, nav=None):
+        seen_versions.append(policy.version)
+        success = next(scores)
+        rate = SimpleNamespace(value=success)
+        return SimpleNamespace(metrics={"unseen": SimpleNamespace(success=rate, spl=success)})
+
+    monkeypatch.setattr(train_local_module, "evaluate_policy", fake_evaluate)
+    nnql = NNQLConfig(hidden_sizes=(8,), batch_size=32, learning_starts=200, utd_ratio=0.25)
+    run = LocalTrainConfig(
+        steps=1600,
+        envs=8,
+        maps=str(corridor),
+        out=str(tmp_path / "out"),
+        eval_every=400,
+        final_eval_episodes=0,
+        progress=False,
+    )
+    result = train_local(run, nnql)
+    assert len(seen_versions) == 4 and len(set(seen_versions)) == 4
+    assert result.selected_version == seen_versions[1]
+    assert NNQLPolicy.load(tmp_path / "out").version == seen_versions[1]
+    assert result.learner.version == seen_versions[3] != seen_versions[1]

@@ -29,14 +29,14 @@ class NNQLConfig:
     """Adam learning rate"""
     gamma: float = 0.98
     """discount factor"""
-    batch_size: int = 128
+    batch_size: int = 256
     """transitions per gradient update"""
     replay_capacity: int = 100_000
     """replay buffer size in transitions (oldest overwritten first)"""
     learning_starts: int = 2_000
     """transitions in replay before the first update"""
-    utd_ratio: float = 0.125
-    """gradient updates per inserted transition (update-to-data ratio; 0.125 = one per 8)"""
+    utd_ratio: float = 0.0625
+    """gradient updates per inserted transition (update-to-data ratio; 0.0625 = one per 16)"""
     prioritized: bool = False
     """prioritized replay (TorchRL PrioritizedSampler) instead of uniform sampling"""
     priority_alpha: float = 0.3
@@ -61,11 +61,11 @@ class NNQLConfig:
     """max global gradient norm (0 disables clipping)"""
     exploration: str = "boltzmann"
     """behaviour policy: boltzmann (softmax over Q / temperature, the thesis' policy) or epsilon (greedy)"""
-    temperature_start: float = 0.5
+    temperature_start: float = 0.2
     """Boltzmann temperature at version 0"""
-    temperature_end: float = 0.02
+    temperature_end: float = 0.01
     """Boltzmann temperature after temperature_decay_updates (geometric decay)"""
-    temperature_decay_updates: int = 20_000
+    temperature_decay_updates: int = 12_000
     """updates over which the temperature decays"""
     epsilon_start: float = 1.0
     """epsilon at version 0 (exploration='epsilon')"""

@@ -164,14 +164,17 @@ class NNQLPolicy:
 
     # ------------------------------------------------------------ files
 
+    def get_weights(self) -> dict[str, np.ndarray]:
+        """A copy of the weights, named as ``set_weights`` takes them."""
+        weights = {}
+        for index, (weight, bias) in zip(range(0, 2 * len(self.layers), 2), self.layers, strict=True):
+            weights[f"{index}.weight"] = np.ascontiguousarray(weight.T)
+            weights[f"{index}.bias"] = bias.copy()
+        return weights
+
     def save(self, path: str | Path, **metadata: Any) -> Path:
         """Write ``model.safetensors`` + ``config.json`` into directory ``path``."""
-        weights = {}
-        indices = range(0, 2 * len(self.layers), 2)
-        for index, (weight, bias) in zip(indices, self.layers, strict=True):
-            weights[f"{index}.weight"] = np.ascontiguousarray(weight.T)
-            weights[f"{index}.bias"] = bias
-        return save_policy_dir(path, weights, self.architecture, self.version, **metadata)
+        return save_policy_dir(path, self.get_weights(), self.architecture, self.version, **metadata)
 
     @classmethod
     def load(cls, path: str | Path, **kwargs: Any) -> NNQLPolicy:

@@ -20,6 +20,7 @@ import numpy as np
 
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
+from agents.nnql.policy import NNQLPolicy
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
@@ -43,10 +44,12 @@ class LocalTrainConfig:
     """output directory: policy (model.safetensors + config.json), curve.png, curve.jsonl, summary.json"""
     eval_every: int = 50_000
     """robot-steps between greedy evaluations on held-out maps (0: only the final one)"""
-    eval_episodes: int = 50
-    """episodes of each periodic evaluation"""
+    eval_episodes: int = 100
+    """episodes of each periodic evaluation (validation set, seed 1)"""
+    keep_best: bool = True
+    """save the weights that scored best on the validation evaluations (seed 1) rather than the last"""
     final_eval_episodes: int = 100
-    """episodes of the final evaluation ("unseen" family: generated maps never trained on)"""
+    """episodes of the final evaluation (test set, seed 0: generated maps never trained on)"""
     progress: bool = True
     """show a progress bar"""
 
@@ -63,8 +66,10 @@ class TrainResult:
     update_time: float
     """seconds spent inside learner updates (sample + loss + step)"""
     curve: list[dict[str, float]] = field(default_factory=list)
+    selected_version: int | None = None
+    """policy version (updates) of the saved weights when keep_best chose them"""
     final_eval: dict[str, Any] | None = None
-    """FamilyMetrics.to_dict() of the final greedy evaluation on the "unseen" set (seed 0)"""
+    """FamilyMetrics.to_dict() of the final greedy evaluation of the saved weights (test set, seed 0)"""
     final_table: str = ""
     out: str | None = None
     learner: NNQLLearner | None = field(default=None, repr=False)
@@ -75,7 +80,9 @@ class TrainResult:
 
 
 VALIDATION_SEED = 1
-"""periodic evaluations use the held-out set of this seed; the final one uses seed 0, the reported set"""
+"""periodic evaluations (and keep_best's choice) use the held-out "unseen" set of this seed"""
+TEST_SEED = 0
+"""the final, reported evaluation uses the set of this seed (the one `navlearn evaluate` uses)"""
 
 
 def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None) -> Any:
@@ -108,6 +115,7 @@ def train_local(
     metrics: dict[str, float] = {}
     update_time = 0.0
     next_point, next_eval = 0, run.eval_every if run.eval_every > 0 else run.steps + 1
+    best: Candidate | None = None
     bar = _progress_bar(run)
     start = last_postfix = time.perf_counter()
     while rollout.steps < run.steps:
@@ -127,8 +135,7 @@ def train_local(
             curve.append(_curve_point(rollout.steps, now - start, learner, recent, policy, metrics))
             next_point += CURVE_EVERY
         if next_eval <= rollout.steps < run.steps:
-            report = evaluate_policy(policy, run.eval_episodes, VALIDATION_SEED, nav)
-            curve[-1]["eval_success"] = report.metrics["unseen"].success.value
+            best = _validate(policy, run, nav, curve[-1], best)
             next_eval += run.eval_every
         if bar is not None:
             bar.update(rollout.num_envs)
@@ -150,14 +157,38 @@ def train_local(
         curve=curve,
         learner=learner,
     )
+    if best is not None:  # keep_best: the final weights compete with the periodic ones
+        best = _validate(policy, run, nav, curve[-1], best)
+        policy.set_weights(best.weights, best.version)
+        result.selected_version = best.version
     if run.final_eval_episodes > 0:
-        report = evaluate_policy(policy, run.final_eval_episodes, 0, nav)
+        report = evaluate_policy(policy, run.final_eval_episodes, TEST_SEED, nav)
         result.final_eval = report.to_dict(with_episodes=False)["metrics"]["unseen"]
         result.final_table = report.table()
-        curve[-1]["eval_success"] = report.metrics["unseen"].success.value
     if run.out:
-        result.out = str(write_outputs(Path(run.out), learner, result, run, nnql))
+        result.out = str(write_outputs(Path(run.out), policy, result, run, nnql))
     return result
+
+
+@dataclass
+class Candidate:
+    """Weights scored on the validation set; the best one is what keep_best saves."""
+
+    score: tuple[float, float]
+    version: int
+    weights: dict[str, np.ndarray]
+
+
+def _validate(policy: Any, run: LocalTrainConfig, nav: Any, point: dict[str, float], best: Candidate | None):
+    """Evaluate on the validation set, note it on the curve point, return the better candidate."""
+    metrics = evaluate_policy(policy, run.eval_episodes, VALIDATION_SEED, nav).metrics["unseen"]
+    point["eval_success"] = metrics.success.value
+    score = (metrics.success.value, metrics.spl)
+    if not run.keep_best:
+        return None
+    if best is None or score >= best.score:
+        return Candidate(score, policy.version, policy.get_weights())
+    return best
 
 
 def _curve_point(steps, wall, learner, recent, policy, metrics) -> dict[str, float]:
@@ -192,32 +223,37 @@ def _postfix(point: dict[str, float], updates: int, update_time: float) -> str:
     return text
 
 
-def write_outputs(out: Path, learner: NNQLLearner, result: TrainResult, run, nnql: NNQLConfig) -> Path:
+def write_outputs(out: Path, policy: NNQLPolicy, result: TrainResult, run, nnql: NNQLConfig) -> Path:
     """Policy files, the learning curve (JSON lines + PNG) and a summary in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    learner.save_policy(out, env_steps=result.env_steps, maps=run.maps)
+    policy.save(out, nnql_config=nnql.to_dict(), env_steps=result.env_steps, maps=run.maps)
     with open(out / "curve.jsonl", "w") as fh:
         for point in result.curve:
             fh.write(json.dumps(point) + "\n")
     summary = {"run": asdict(run), "nnql": nnql.to_dict(), **result.to_dict()}
     summary.pop("curve")
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    plot_curve(result.curve, out / "curve.png")
+    plot_curve(result, out / "curve.png")
     return out
 
 
-def plot_curve(curve: list[dict[str, float]], path: Path) -> None:
+def plot_curve(result: TrainResult, path: Path) -> None:
+    """Success (training episodes, validation evaluations, final test) and TD loss vs robot-steps."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    curve = result.curve
     steps = [p["env_steps"] for p in curve]
     fig, (ax_s, ax_l) = plt.subplots(1, 2, figsize=(10, 3.6))
     ax_s.plot(steps, [p["train_success"] for p in curve], label="training episodes (last 200)")
     evals = [(p["env_steps"], p["eval_success"]) for p in curve if "eval_success" in p]
     if evals:
-        ax_s.plot(*zip(*evals, strict=True), "o-", label="greedy, unseen maps")
+        ax_s.plot(*zip(*evals, strict=True), "o-", label=f"greedy, validation maps (seed {VALIDATION_SEED})")
+    if result.final_eval:
+        test = result.final_eval["success"]["value"]
+        ax_s.plot([steps[-1]], [test], "*", ms=12, label=f"saved policy, test maps (seed {TEST_SEED})")
     ax_s.set(xlabel="robot-steps", ylabel="success rate", ylim=(0, 1.02), title="NNQL success")
     ax_s.legend(loc="lower right")
     ax_s.grid(alpha=0.3)

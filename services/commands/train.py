@@ -30,11 +30,24 @@ def register(subparsers) -> None:
     parser.add_argument("--out", default="runs/nnql-local", help="output directory")
     parser.add_argument("--seed", type=int, default=0, help="seed of env, network and exploration")
     parser.add_argument(
-        "--eval-every", type=int, default=100_000, help="robot-steps between evaluations (0: at the end only)"
+        "--eval-every", type=int, default=50_000, help="robot-steps between validation evaluations (0: none)"
     )
-    parser.add_argument("--eval-episodes", type=int, default=50, help="episodes per periodic evaluation")
     parser.add_argument(
-        "--final-eval-episodes", type=int, default=100, help="episodes of the final evaluation (0: skip)"
+        "--eval-episodes",
+        type=int,
+        default=100,
+        help="episodes per validation evaluation (seed 1)",
+    )
+    parser.add_argument(
+        "--keep-last",
+        action="store_true",
+        help="save the last weights instead of those that scored best on the validation evaluations",
+    )
+    parser.add_argument(
+        "--final-eval-episodes",
+        type=int,
+        default=100,
+        help="episodes of the final test (seed 0; 0: skip)",
     )
     parser.add_argument(
         "--hidden",
@@ -91,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
         out=args.out,
         eval_every=args.eval_every,
         eval_episodes=args.eval_episodes,
+        keep_best=not args.keep_last,
         final_eval_episodes=args.final_eval_episodes,
         progress=not args.no_progress,
     )
@@ -99,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
         f"{result.env_steps} robot-steps, {result.updates} updates in {result.wall_time:.0f} s "
         f"({result.env_steps_per_s:.0f} steps/s, learner {result.updates_per_s:.0f} updates/s)"
     )
+    if result.selected_version is not None:
+        print(f"saved the weights of version {result.selected_version} (best on the validation set)")
     if result.final_table:
         print(result.final_table)
     print(f"wrote {result.out}")
