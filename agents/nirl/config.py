@@ -1,0 +1,175 @@
+"""NIRL hyper-parameters: one flat dataclass (thesis ch. 5, cleanrl-style)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from agents.nnql.config import ACTIVATION_NAMES, NNQLConfig
+
+
+@dataclass
+class NIRLConfig:
+    """Neural inverse RL: reward network, Q-network policy, MAP refinement, max-margin fit, policy iteration.
+
+    The Q-learning part (replay, DQNLoss, target network) is NNQL's; ``nnql_config()``
+    hands the matching NNQLConfig to ``agents.nnql.learner.NNQLLearner``.
+    """
+
+    hidden_sizes: tuple[int, ...] = (128, 128)
+    """widths of the Q-network's hidden layers (the policy is softmax(Q / temperature))"""
+    activation: str = "relu"
+    """hidden activation of both networks: relu, tanh or elu"""
+    reward_hidden_sizes: tuple[int, ...] = (64, 64)
+    """widths of the reward network's hidden layers (input: state-action features)"""
+    reward_scale: float = 2.0
+    """the learned reward is a cost in (-reward_scale, 0): -reward_scale * sigmoid(network output)"""
+    gamma: float = 0.95
+    """discount factor of policy evaluation"""
+    lr: float = 1e-3
+    """Adam learning rate of the Q-network"""
+    reward_lr: float = 1e-3
+    """Adam learning rate of the reward network"""
+    reward_weight_decay: float = 1e-4
+    """L2 penalty on the reward network (the regulariser of maximum margin planning)"""
+    margin: float = 0.5
+    """structured margin scale: a demonstrated action must beat action a by margin * (0.5 + 0.5 * turn gap)"""
+    rank_coef: float = 1.0
+    """weight of the ranking margin: demonstrated steps must out-score the learner's own experience"""
+    q_margin_coef: float = 0.5
+    """weight of the large-margin term on the Q-network's own values at demo states (0: pure Q-learning)"""
+    refine: bool = True
+    """MAP refinement of demonstrations (False: every demonstrated action kept with weight 1)"""
+    demo_noise: float = 0.2
+    """prior probability that a demonstrated action is a random one (MAP refinement's observation noise)"""
+    prior_temperature: float = 0.1
+    """temperature of the policy prior softmax(Q / T) used by MAP refinement"""
+    relabel_threshold: float = 0.6
+    """relabel a demonstrated step to the MAP action when that action's posterior reaches this"""
+    batch_size: int = 128
+    """transitions per Q-learning update"""
+    demo_fraction: float = 0.25
+    """share of each Q-learning batch drawn from the demonstrations (relabelled like the rest)"""
+    demo_batch_size: int = 128
+    """demonstration steps per reward update and per margin term"""
+    replay_capacity: int = 100_000
+    """experience replay size in transitions"""
+    demo_capacity: int = 200_000
+    """demonstration steps kept (own buffer: experience never evicts demonstrations)"""
+    warmstart_updates: int = 500
+    """updates warm-starting both networks from the demonstrations before the first iteration"""
+    iterations: int = 40
+    """policy-iteration rounds of the local trainer"""
+    steps_per_iteration: int = 2_048
+    """environment steps collected with the current stochastic policy per iteration (local trainer)"""
+    reward_updates: int = 50
+    """reward-network updates per iteration (maximum margin step)"""
+    q_updates: int = 256
+    """Q-learning updates per iteration (policy evaluation under the learned reward)"""
+    temperature_start: float = 0.3
+    """Boltzmann temperature of the behaviour policy at iteration 0"""
+    temperature_end: float = 0.02
+    """... after temperature_decay_iterations (geometric decay)"""
+    temperature_decay_iterations: int = 30
+    """iterations over which the temperature decays"""
+    target_tau: float = 0.005
+    """Polyak factor of the Q target network"""
+    double_q: bool = True
+    """double Q-learning in policy evaluation"""
+    grad_clip: float = 10.0
+    """max global gradient norm of each network's update (0 disables clipping)"""
+    seed: int = 0
+    """seeds both networks, replay sampling and the local trainer's environments"""
+    torch_threads: int = 1
+    """torch intra-op threads"""
+
+    def __post_init__(self) -> None:
+        self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)
+        self.reward_hidden_sizes = tuple(int(h) for h in self.reward_hidden_sizes)
+        if self.activation not in ACTIVATION_NAMES:
+            raise ValueError(f"NIRLConfig.activation={self.activation!r}: expected one of {ACTIVATION_NAMES}")
+        if not self.hidden_sizes or not self.reward_hidden_sizes:
+            raise ValueError("NIRLConfig: both networks need at least one hidden layer")
+        if min(*self.hidden_sizes, *self.reward_hidden_sizes) < 1:
+            raise ValueError("NIRLConfig: hidden layer widths must be positive")
+        if not 0.0 < self.gamma < 1.0:
+            raise ValueError(f"NIRLConfig.gamma={self.gamma}: expected 0 < gamma < 1")
+        if self.reward_scale <= 0 or self.margin < 0 or min(self.q_margin_coef, self.rank_coef) < 0:
+            raise ValueError(
+                "NIRLConfig: need reward_scale > 0 and non-negative margin, rank_coef, q_margin_coef"
+            )
+        if not 0.0 <= self.demo_noise < 1.0:
+            raise ValueError(f"NIRLConfig.demo_noise={self.demo_noise}: expected 0 <= noise < 1")
+        if not 0.0 < self.relabel_threshold <= 1.0 or self.prior_temperature <= 0:
+            raise ValueError("NIRLConfig: need 0 < relabel_threshold <= 1 and prior_temperature > 0")
+        if not 0.0 <= self.demo_fraction < 1.0:
+            raise ValueError(f"NIRLConfig.demo_fraction={self.demo_fraction}: expected 0 <= f < 1")
+        if min(self.batch_size, self.demo_batch_size) < 1 or self.replay_capacity < self.batch_size:
+            raise ValueError("NIRLConfig: need positive batch sizes and replay_capacity >= batch_size")
+        if min(self.temperature_start, self.temperature_end) <= 0:
+            raise ValueError("NIRLConfig: Boltzmann temperatures must be > 0")
+        if min(self.iterations, self.steps_per_iteration, self.reward_updates, self.q_updates) < 0:
+            raise ValueError("NIRLConfig: iteration counts must be >= 0")
+
+    def nnql_config(self) -> NNQLConfig:
+        """The NNQL configuration of the Q-learning machinery NIRL's policy evaluation reuses."""
+        return NNQLConfig(
+            hidden_sizes=self.hidden_sizes,
+            activation=self.activation,
+            lr=self.lr,
+            gamma=self.gamma,
+            batch_size=self.batch_size,
+            replay_capacity=self.replay_capacity,
+            learning_starts=self.batch_size,
+            target_update="soft",
+            target_tau=self.target_tau,
+            double_q=self.double_q,
+            grad_clip=self.grad_clip,
+            exploration="boltzmann",
+            temperature_start=self.temperature_start,
+            temperature_end=self.temperature_end,
+            seed=self.seed,
+            torch_threads=self.torch_threads,
+        )
+
+    def temperature_at(self, iteration: int) -> float:
+        """Behaviour-policy temperature at ``iteration`` (geometric decay from start to end)."""
+        frac = min(max(iteration, 0) / max(self.temperature_decay_iterations, 1), 1.0)
+        return float(self.temperature_start * (self.temperature_end / self.temperature_start) ** frac)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able copy (tuples become lists)."""
+        data = dataclasses.asdict(self)
+        data["hidden_sizes"] = list(self.hidden_sizes)
+        data["reward_hidden_sizes"] = list(self.reward_hidden_sizes)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> NIRLConfig:
+        """Inverse of to_dict; unknown keys are an error so typos do not pass silently."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ValueError(f"NIRLConfig: unknown field(s) {unknown}")
+        return cls(**data)
+
+
+@dataclass
+class NIRLRun:
+    """Environment, evaluation and outputs of one local NIRL run (the algorithm is NIRLConfig's)."""
+
+    envs: int = 16
+    """robots stepped together when collecting experience"""
+    maps: str = "mixed:16"
+    """map spec of the experience-collection maps (worlds.tasks.parse_map_spec)"""
+    out: str = "runs/nirl"
+    """output directory: policy files, weights_history.safetensors, curve.jsonl, summary.json"""
+    eval_every: int = 5
+    """iterations between greedy evaluations on held-out maps (0: only the final one)"""
+    eval_episodes: int = 50
+    """episodes of each periodic evaluation ("unseen" family, validation seed)"""
+    final_eval_episodes: int = 100
+    """episodes of the final evaluation ("unseen" family, seed 0: the reported set)"""
+    progress: bool = True
+    """show a progress bar"""

@@ -1,0 +1,143 @@
+"""The maths of NIRL as pure functions: structured margins, the max-margin loss, MAP refinement.
+
+All take and return torch tensors, hold no state and are unit-tested alone
+(tests/test_nirl_losses.py).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+
+KEEP, REWEIGHT, RELABEL = 0, 1, 2
+"""What MAP refinement did with a demonstrated step."""
+
+
+def crash_value(scale: float, gamma: float) -> float:
+    """Value of the absorbing state a collision leads to: stuck forever at the largest cost,
+    ``-scale / (1 - gamma)``. Collisions are infeasible moves, as obstacles are in a planner's
+    model; the learned reward only prices feasible ones."""
+    return -scale / (1.0 - gamma)
+
+
+def absorbing_rewards(
+    reward: torch.Tensor, terminated: torch.Tensor, reached_goal: torch.Tensor, scale: float, gamma: float
+) -> torch.Tensor:
+    """One-step rewards with the collision absorbing state folded in: ``R + gamma * crash_value``
+    on terminations that are not the goal (the TD target bootstraps nothing after a termination)."""
+    crashed = terminated.bool() & ~reached_goal.bool()
+    return reward + crashed.to(reward.dtype) * gamma * crash_value(scale, gamma)
+
+
+def structured_margins(turns: torch.Tensor, scale: float) -> torch.Tensor:
+    """Margin matrix ``L[e, a]`` (A, A): how much the demonstrated action ``e`` must beat action ``a``.
+
+    ``L[e, e] = 0``; otherwise ``scale * (0.5 + 0.5 * |turn_a - turn_e| / max gap)``: a
+    neighbouring turn must lose by half the scale, the opposite turn by the full scale
+    (the loss function of the structured prediction is the turn error, not just 0/1).
+    """
+    turns = torch.as_tensor(turns, dtype=torch.float32).reshape(-1)
+    gap = (turns[None, :] - turns[:, None]).abs()
+    widest = gap.max()
+    relative = gap / widest if widest > 0 else torch.zeros_like(gap)
+    margins = scale * (0.5 + 0.5 * relative)
+    margins.fill_diagonal_(0.0)
+    return margins
+
+
+def max_margin_loss(
+    q_values: torch.Tensor,
+    actions: torch.Tensor,
+    margins: torch.Tensor,
+    weights: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """Structured hinge of maximum margin planning over one decision (Ratliff et al. 2006).
+
+    ``mean_i w_i * (max_a [Q(s_i, a) + L[a_i, a]] - Q(s_i, a_i))``: zero exactly when every
+    demonstrated action ``a_i`` beats each other action ``a`` by at least ``L[a_i, a]``,
+    positive otherwise. The max includes ``a_i`` itself (margin 0), so no term is negative.
+    ``q_values`` (N, A), ``actions`` (N,) int, ``margins`` (A, A), ``weights`` (N,) or None.
+    """
+    actions = actions.long().reshape(-1)
+    augmented = q_values + margins[actions]
+    demonstrated = q_values.gather(1, actions[:, None]).squeeze(1)
+    hinge = augmented.max(dim=1).values - demonstrated
+    if weights is not None:
+        hinge = hinge * weights.reshape(-1).to(hinge.dtype)
+    return hinge.mean()
+
+
+def ranking_margin_loss(
+    demo_rewards: torch.Tensor,
+    policy_rewards: torch.Tensor,
+    margin: float,
+    demo_weights: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """Trajectory-level margin between demonstrated and self-generated steps, from samples.
+
+    ``mean_{i,j} max(0, R_policy_j + margin - R_demo_i)`` over every pair of a demonstrated
+    step's reward (N,) and a step of the learner's own experience (M,): the sampled form of
+    maximum margin planning's "the demonstration must out-score the planner's own path", with
+    the planner's path replaced by the policy's sampled experience (no model needed). Zero once
+    every demonstrated step out-scores every sampled one by ``margin``; ``demo_weights`` (N,)
+    scale each demonstrated step's pairs.
+    """
+    gaps = torch.relu(policy_rewards.reshape(1, -1) + margin - demo_rewards.reshape(-1, 1))
+    if demo_weights is not None:
+        gaps = gaps * demo_weights.reshape(-1, 1).to(gaps.dtype)
+    return gaps.mean()
+
+
+def margin_violations(q_values: torch.Tensor, actions: torch.Tensor, margins: torch.Tensor) -> torch.Tensor:
+    """Fraction of steps whose demonstrated action does not beat every other by its margin."""
+    actions = actions.long().reshape(-1)
+    augmented = q_values + margins[actions]
+    demonstrated = q_values.gather(1, actions[:, None]).squeeze(1)
+    return (augmented.max(dim=1).values > demonstrated + 1e-6).float().mean()
+
+
+def map_posterior(prior: torch.Tensor, observed: torch.Tensor, noise: float) -> torch.Tensor:
+    """Posterior over the intended action given the demonstrated one (Bayes' rule), (N, A).
+
+    The demonstrator meant action ``a*`` (prior ``prior[i, a*]``, the current policy's
+    probabilities) and recorded it, except with probability ``noise`` a uniformly random
+    action: ``P(observed | a*) = (1 - noise) [observed = a*] + noise / A``.
+    """
+    n_actions = prior.shape[1]
+    observed = observed.long().reshape(-1)
+    likelihood = torch.full_like(prior, noise / n_actions)
+    likelihood.scatter_add_(1, observed[:, None], torch.full_like(prior[:, :1], 1.0 - noise))
+    joint = prior * likelihood
+    return joint / joint.sum(dim=1, keepdim=True).clamp_min(1e-12)
+
+
+class Refinement(NamedTuple):
+    """MAP refinement of demonstrated steps: the label to learn from, its weight and the decision."""
+
+    labels: torch.Tensor
+    """(N,) int64: the recorded action, or the MAP action where it was relabelled"""
+    weights: torch.Tensor
+    """(N,) float: posterior probability of the label"""
+    decisions: torch.Tensor
+    """(N,) int64: KEEP, REWEIGHT or RELABEL"""
+
+
+def refine_steps(posterior: torch.Tensor, observed: torch.Tensor, relabel_threshold: float) -> Refinement:
+    """Keep, re-weight or relabel each demonstrated step from its posterior.
+
+    The MAP action replaces the recorded one when it differs and its posterior reaches
+    ``relabel_threshold`` (RELABEL); otherwise the recorded action stays, weighted by its
+    own posterior - KEEP when it is the MAP action, REWEIGHT when the posterior doubts it
+    but names no confident alternative.
+    """
+    observed = observed.long().reshape(-1)
+    best_p, best = posterior.max(dim=1)
+    kept_p = posterior.gather(1, observed[:, None]).squeeze(1)
+    relabel = (best != observed) & (best_p >= relabel_threshold)
+    labels = torch.where(relabel, best, observed)
+    weights = torch.where(relabel, best_p, kept_p)
+    decisions = torch.full_like(observed, REWEIGHT)
+    decisions[best == observed] = KEEP
+    decisions[relabel] = RELABEL
+    return Refinement(labels, weights, decisions)

@@ -1,0 +1,174 @@
+"""`navlearn nirl train`: NIRL in one process - demonstrations, a vector env, the learner.
+
+Neural policy iteration, each round:
+1. collect ``steps_per_iteration`` robot-steps with the current stochastic policy
+   (softmax over Q, temperature decaying by iteration) into the experience replay;
+2. ``NIRLLearner.iterate()``: MAP-refined max-margin reward updates, then Q-learning
+   on replayed experience relabelled with the learned reward (policy evaluation);
+3. the policy takes the new Q-network (policy improvement), and the weights of both
+   networks are recorded.
+The environment's own reward is never used for learning; the greedy policy is evaluated
+on held-out maps to draw the learning curve.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.nirl.config import NIRLConfig, NIRLRun
+from agents.nirl.learner import NIRLLearner
+from agents.nirl.weights import HISTORY_FILE, WeightHistory, plot_weight_changes
+from agents.nnql.rollout import EpisodeEnd, VectorRollout
+
+SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
+VALIDATION_SEED = 1
+"""periodic evaluations use the held-out set of this seed; the final one uses seed 0, the reported set"""
+
+
+@dataclass
+class NIRLResult:
+    """What a run produced: the learner, its learning curve and final evaluation."""
+
+    learner: NIRLLearner
+    history: WeightHistory
+    env_steps: int = 0
+    wall_time: float = 0.0
+    curve: list[dict[str, float]] = field(default_factory=list)
+    final_eval: dict[str, Any] | None = None
+    final_table: str = ""
+
+
+def evaluate_greedy(learner: NIRLLearner, episodes: int, seed: int, nav: Any = None) -> Any:
+    """Greedy policy on the shared held-out "unseen" set -> agents.evaluation EvalResult."""
+    from agents.evaluation.runner import evaluate, make_eval_set
+
+    return evaluate(learner.policy(), make_eval_set("unseen", episodes, seed=seed), config=nav)
+
+
+def train_nirl(
+    demos: Sequence[Any],
+    config: NIRLConfig | None = None,
+    run: NIRLRun | None = None,
+    nav: Any = None,
+    on_iteration: Callable[[dict[str, float]], None] | None = None,
+) -> NIRLResult:
+    """Warm-start on ``demos`` (``agents.demos.Demo`` list), then ``config.iterations`` rounds of
+    neural policy iteration. ``on_iteration(point)`` sees each curve point."""
+    from worlds.vector_env import NavigationVectorEnv
+
+    config = config or NIRLConfig()
+    run = run or NIRLRun()
+    start = time.perf_counter()
+    learner = NIRLLearner(config, nav)
+    learner.add_demos(demos)
+    learner.warm_start()
+    history = WeightHistory()
+    history.record(0, reward=learner.reward_weights(), policy=learner.get_weights())
+    result = NIRLResult(learner, history)
+    env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=config.seed)
+    policy = learner.policy(mode="boltzmann", temperature=config.temperature_at(0), seed=config.seed)
+    rollout = VectorRollout(env, policy)
+    rollout.reset(seed=config.seed)
+    recent: deque[EpisodeEnd] = deque(maxlen=200)
+    bar = _progress_bar(run, config)
+    for it in range(config.iterations):
+        policy.set_weights(learner.get_weights(), learner.version)
+        policy.temperature = config.temperature_at(it)
+        collected = 0
+        while collected < config.steps_per_iteration:
+            batch, ended = rollout.step()
+            learner.add_experience(batch)
+            recent.extend(ended)
+            collected += rollout.num_envs
+        metrics = learner.iterate()
+        history.record(learner.iteration, reward=learner.reward_weights(), policy=learner.get_weights())
+        point = _curve_point(learner, rollout.steps, time.perf_counter() - start, recent, metrics)
+        point["temperature"] = policy.temperature
+        if run.eval_every and (it + 1) % run.eval_every == 0 and it + 1 < config.iterations:
+            report = evaluate_greedy(learner, run.eval_episodes, VALIDATION_SEED, nav)
+            point["eval_success"] = report.metrics["unseen"].success.value
+        result.curve.append(point)
+        if on_iteration is not None:
+            on_iteration(point)
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix_str(_postfix(point))
+    if bar is not None:
+        bar.close()
+    env.close()
+    result.env_steps = rollout.steps
+    if run.final_eval_episodes > 0:
+        report = evaluate_greedy(learner, run.final_eval_episodes, 0, nav)
+        result.final_eval = report.to_dict(with_episodes=False)["metrics"]["unseen"]
+        result.final_table = report.table()
+        if result.curve:
+            result.curve[-1]["eval_success"] = report.metrics["unseen"].success.value
+    result.wall_time = time.perf_counter() - start
+    if run.out:
+        write_outputs(Path(run.out), result, config, run)
+    return result
+
+
+def _curve_point(learner, env_steps, wall, recent, metrics) -> dict[str, float]:
+    outcomes = [e.outcome for e in recent]
+    point = {
+        "iteration": float(learner.iteration),
+        "env_steps": float(env_steps),
+        "updates": float(learner.version),
+        "wall_time": float(wall),
+        "train_success": float(np.mean([o == SUCCESS_OUTCOME for o in outcomes])) if outcomes else 0.0,
+    }
+    point.update({k: float(v) for k, v in metrics.items() if k.startswith(("losses/", "charts/"))})
+    return point
+
+
+def _progress_bar(run: NIRLRun, config: NIRLConfig):
+    if not run.progress:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=config.iterations, unit="iter", desc="nirl", dynamic_ncols=True)
+
+
+def _postfix(point: dict[str, float]) -> str:
+    text = (
+        f"steps {point['env_steps']:.0f} train success {point['train_success']:.0%} "
+        f"margin {point.get('losses/reward_margin', float('nan')):.3f} "
+        f"relabel {point.get('charts/refine_relabel', 0.0):.0%}"
+    )
+    if "eval_success" in point:
+        text += f" eval {point['eval_success']:.0%}"
+    return text
+
+
+def write_outputs(out: Path, result: NIRLResult, config: NIRLConfig, run: NIRLRun) -> Path:
+    """Policy files, weight history, learning curve and summary in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    result.learner.save_policy(out, env_steps=result.env_steps, maps=run.maps)
+    result.history.save(out / HISTORY_FILE)
+    with open(out / "curve.jsonl", "w") as fh:
+        for point in result.curve:
+            fh.write(json.dumps(point) + "\n")
+    summary = {
+        "run": asdict(run),
+        "nirl": config.to_dict(),
+        "env_steps": result.env_steps,
+        "updates": result.learner.version,
+        "iterations": result.learner.iteration,
+        "demo_episodes": result.learner.demo_episodes,
+        "demo_steps": len(result.learner.demos),
+        "wall_time": result.wall_time,
+        "final_eval": result.final_eval,
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    if len(result.history) >= 2:
+        plot_weight_changes(result.history, out / "weights.png")
+    return out

@@ -1,0 +1,106 @@
+"""`navlearn nirl`: train NIRL in one process from a demonstration dataset; plot its weight changes."""
+
+from __future__ import annotations
+
+import argparse
+
+TRAIN_DESCRIPTION = """\
+Neural inverse reinforcement learning (thesis ch. 5) in one process. Loads the demonstrations
+(a Minari dataset from `navlearn demos generate` or the file demonstrator), warm-starts the
+reward network and the Q-network policy from them, then runs --iterations rounds of neural
+policy iteration: collect experience with the stochastic policy on --maps, MAP-refine the
+demonstrations, fit the reward by model-free maximum margin planning, Q-learn under the learned
+reward. The environment's reward is never used. Writes to --out: the policy (model.safetensors +
+config.json, loadable by `navlearn evaluate --policy DIR`), reward.safetensors, the weights of
+both networks at every iteration (weights_history.safetensors, plotted in weights.png),
+curve.jsonl and summary.json; prints the greedy evaluation on 100 held-out generated maps.
+"""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from agents.nirl.config import NIRLConfig, NIRLRun
+    from services.options import add_options
+
+    parser = subparsers.add_parser(
+        "nirl",
+        help="train NIRL from demonstrations in one process, or plot its weight changes",
+        description="Neural inverse reinforcement learning (thesis ch. 5): `nirl train`, `nirl weights`.",
+    )
+    sub = parser.add_subparsers(dest="nirl_command", metavar="SUBCOMMAND", required=True)
+    train = sub.add_parser(
+        "train",
+        help="train NIRL from a demonstration dataset",
+        description=TRAIN_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    train.add_argument("--demos", required=True, help="demonstration dataset directory (Minari)")
+    add_options(
+        train, NIRLRun, "NAVLEARN_NIRL_RUN", "run: environment, evaluation, outputs", skip=("progress",)
+    )
+    add_options(train, NIRLConfig, "NAVLEARN_NIRL", "NIRL hyper-parameters")
+    train.add_argument("--no-progress", action="store_true", help="no progress bar")
+    train.set_defaults(func=run_train)
+
+    weights = sub.add_parser(
+        "weights",
+        help="plot how the reward and policy networks' weights changed over a run",
+        description="Read RUN/weights_history.safetensors (written by `navlearn nirl train` and by the "
+        "learner service's NIRL checkpoints) and plot, per network and layer, the relative change of the "
+        "weights from one iteration to the next and from the first iteration.",
+    )
+    weights.add_argument("--run", required=True, help="run directory holding weights_history.safetensors")
+    weights.add_argument("--out", default="weights.png", help="PNG to write")
+    weights.set_defaults(func=run_weights)
+
+
+def run_train(args: argparse.Namespace) -> int:
+    import sys
+
+    from agents.demos import DemoFormatError, load_demos
+    from agents.nirl.config import NIRLConfig, NIRLRun
+    from agents.nirl.train_local import train_nirl
+    from services.options import OptionError, options_from_args
+    from worlds.tasks import parse_map_spec
+
+    try:
+        config = options_from_args(NIRLConfig, args, "NAVLEARN_NIRL")
+        run = options_from_args(NIRLRun, args, "NAVLEARN_NIRL_RUN", progress=not args.no_progress)
+        if run.envs < 1:
+            raise OptionError("--envs must be positive")
+        parse_map_spec(run.maps)
+        demos = load_demos(args.demos)
+    except (OptionError, DemoFormatError, ValueError) as exc:
+        print(f"navlearn nirl train: {exc}", file=sys.stderr)
+        return 2
+    steps = sum(len(d) for d in demos)
+    print(f"{len(demos)} demonstrations ({steps} steps) from {args.demos}")
+    result = train_nirl(demos, config, run)
+    print(
+        f"{result.learner.iteration} iterations, {result.env_steps} robot-steps, "
+        f"{result.learner.version} Q updates in {result.wall_time:.0f} s"
+    )
+    if result.final_table:
+        print(result.final_table)
+    if run.out:
+        print(f"wrote {run.out}")
+    return 0
+
+
+def run_weights(args: argparse.Namespace) -> int:
+    import sys
+    from pathlib import Path
+
+    from agents.nirl.weights import HISTORY_FILE, WeightHistory, plot_weight_changes
+
+    path = Path(args.run) / HISTORY_FILE
+    if not path.is_file():
+        print(f"navlearn nirl weights: {path} not found (is --run a NIRL run directory?)", file=sys.stderr)
+        return 2
+    try:
+        history = WeightHistory.load(path)
+        out = plot_weight_changes(history, args.out, title=f"NIRL weight changes ({args.run})")
+    except ValueError as exc:
+        print(f"navlearn nirl weights: {exc}", file=sys.stderr)
+        return 2
+    print(f"{len(history)} iterations -> {out}")
+    return 0

@@ -1,0 +1,254 @@
+"""The demonstrator service: demonstrations published as DemoBatches on ``demos/<source>``.
+
+Three sources, one publishing path:
+
+* ``astar``: the modified-A* expert (agents.planning) drives the robot on generated
+  maps at ``rate`` episodes per second, optionally replacing actions by random wall-free
+  ones with probability ``noise`` (injected sub-optimality; the action taken is recorded);
+* ``human``: a person drives the robot from the terminal (``services.teleop``), and each
+  finished episode is published;
+* ``file``: a demonstration dataset (Minari, ``navlearn demos generate``) is imported
+  and published once.
+
+Demonstrations are only worth sending to a learner that hears them, so before each
+batch the demonstrator waits (as long as it takes, or until stopped) for a learner's
+liveliness token; while no learner is present nothing is lost, only delayed. Batches go
+out with congestion control BLOCK. The process declares ``alive/demonstrator/<id>``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from agents.demos import Demo
+from protocols import keys
+from protocols.codec import encode
+from protocols.messages import DemoBatch, EpisodeMeta
+from services.process import connect
+from services.transport import Presence, ZenohSettings, declare_alive
+
+log = logging.getLogger("navlearn.demonstrator")
+SOURCES = ("astar", "human", "file")
+
+
+@dataclass
+class DemonstratorConfig:
+    """One demonstrator process: where its demonstrations come from and how fast they go out."""
+
+    source: str = "astar"
+    """astar (the modified-A* expert), human (terminal teleoperation) or file (a Minari dataset)"""
+    id: str = ""
+    """demonstrator id (token alive/demonstrator/<id>); empty: <source>-<pid>"""
+    maps: str = "mixed:16"
+    """map spec of the astar and human episodes (worlds.tasks): mixed:16, rooms:20, x.map, x.txt ..."""
+    rate: float = 1.0
+    """astar: expert episodes per second (0: as fast as the expert runs)"""
+    episodes: int = 0
+    """stop after publishing this many episodes (0: astar and human run until stopped, file sends all)"""
+    noise: float = 0.0
+    """astar: probability that a step takes a random wall-free action instead of the expert's"""
+    obstacles: int = 0
+    """moving discs per astar/human episode"""
+    seed: int = 0
+    """episode i resets the environment with seed SEED + i"""
+    file: str = ""
+    """file: the demonstration dataset directory to publish"""
+    batch_episodes: int = 1
+    """episodes per DemoBatch"""
+    keep_failures: bool = False
+    """also publish episodes that did not reach the goal"""
+    wait_learner: bool = True
+    """hold each batch until a learner's liveliness token is present"""
+    log_every: float = 10.0
+    """seconds between progress lines (astar, file)"""
+
+    def __post_init__(self) -> None:
+        if self.source not in SOURCES:
+            raise ValueError(f"source must be one of {', '.join(SOURCES)}, got {self.source!r}")
+        if self.source == "file" and not self.file:
+            raise ValueError("--source file needs --file DATASET")
+        if not 0.0 <= self.noise <= 1.0:
+            raise ValueError(f"noise must be in [0, 1], got {self.noise}")
+        if self.rate < 0 or self.episodes < 0 or self.batch_episodes < 1 or self.obstacles < 0:
+            raise ValueError("need rate >= 0, episodes >= 0, obstacles >= 0 and batch_episodes >= 1")
+
+
+def demo_batch(demos: list[Demo], source: str, sender: str, seq: int) -> DemoBatch:
+    """Whole episodes as one DemoBatch (observations stacked, T_i + 1 rows per episode)."""
+    quality = "optimal" if all(d.metadata.get("noise", 0.0) == 0.0 for d in demos) else "suboptimal"
+    if source == "human":
+        quality = "human"
+    return DemoBatch(
+        sender=sender,
+        seq=seq,
+        source=source,
+        quality=quality,
+        episode_lengths=np.array([len(d) for d in demos], dtype=np.int32),
+        obs=np.concatenate([d.observations for d in demos]),
+        actions=np.concatenate([d.actions for d in demos]),
+        rewards=np.concatenate([d.rewards for d in demos]).astype(np.float32),
+        terminations=np.concatenate([d.terminations for d in demos]),
+        truncations=np.concatenate([d.truncations for d in demos]),
+        episodes=[
+            EpisodeMeta(
+                map_id=str(d.metadata.get("map_id", "")),
+                start=tuple(int(v) for v in d.metadata["start"]),
+                goal=tuple(int(v) for v in d.metadata["goal"]),
+                seed=d.metadata.get("seed"),
+            )
+            for d in demos
+        ],
+    )
+
+
+def nav_config(config: DemonstratorConfig):
+    from dataclasses import replace
+
+    from worlds.config import NavConfig, ObstacleConfig
+
+    return replace(NavConfig(), obstacles=ObstacleConfig(count=config.obstacles))
+
+
+def expert_episodes(config: DemonstratorConfig, stop: threading.Event) -> Iterator[Demo]:
+    """Expert demonstrations, one per ``1 / rate`` seconds, until ``stop`` (failures skipped unless kept)."""
+    from agents.planning.demonstrate import record_episode
+    from agents.planning.expert import Expert
+    from worlds.env import NavigationEnv
+    from worlds.outcomes import Outcome
+
+    nav = nav_config(config)
+    env = NavigationEnv(nav, maps=config.maps)
+    expert = Expert(nav)
+    rng = np.random.default_rng([config.seed, 1013])
+    index = 0
+    next_time = time.monotonic()
+    while not stop.is_set():
+        demo, _ = record_episode(env, expert, config.seed + index, config.noise, rng)
+        index += 1
+        if config.keep_failures or demo.metadata["outcome"] == Outcome.GOAL:
+            yield demo
+        if config.rate > 0:
+            next_time += 1.0 / config.rate
+            stop.wait(max(0.0, next_time - time.monotonic()))
+
+
+def file_episodes(config: DemonstratorConfig) -> Iterator[Demo]:
+    from agents.demos import load_demos
+    from worlds.outcomes import Outcome
+
+    for demo in load_demos(config.file):
+        if config.keep_failures or demo.metadata["outcome"] == Outcome.GOAL:
+            yield demo
+
+
+class DemoPublisher:
+    """Publishes batches of episodes on ``demos/<source>``, waiting for a learner if told to."""
+
+    def __init__(self, session, run: str, config: DemonstratorConfig, stop: threading.Event):
+        import zenoh
+
+        self.config = config
+        self.stop = stop
+        self.sender = f"{config.id}#{int(time.time())}"
+        self.publisher = session.declare_publisher(
+            keys.demos(run, config.source),
+            congestion_control=zenoh.CongestionControl.BLOCK,
+            reliability=zenoh.Reliability.RELIABLE,
+        )
+        self.learners = Presence(session, run, role="learner") if config.wait_learner else None
+        self.seq = 0
+        self.episodes = 0
+        self.steps = 0
+
+    def wait_for_learner(self) -> bool:
+        """Block until a learner is alive (or stop); True when one is."""
+        if self.learners is None:
+            return True
+        warned = False
+        while not self.stop.is_set():
+            if self.learners.wait_for(bool, timeout=0.5):
+                return True
+            if not warned:
+                log.info("waiting for a learner to publish demonstrations to")
+                warned = True
+        return False
+
+    def publish(self, demos: list[Demo]) -> bool:
+        if not demos or not self.wait_for_learner():
+            return False
+        self.seq += 1
+        batch = demo_batch(demos, self.config.source, self.sender, self.seq)
+        self.publisher.put(encode(batch))
+        self.episodes += len(demos)
+        self.steps += int(batch.episode_lengths.sum())
+        log.debug("published %d episodes (%d steps) as batch %d", len(demos), len(batch.actions), self.seq)
+        return True
+
+    def publish_all(self, episodes: Iterable[Demo]) -> int:
+        """Publish ``episodes`` in batches until they run out, ``episodes`` is reached, or stop."""
+        cfg = self.config
+        pending: list[Demo] = []
+        last_log = time.monotonic()
+        for demo in episodes:
+            pending.append(demo)
+            limit_reached = cfg.episodes and self.episodes + len(pending) >= cfg.episodes
+            if len(pending) >= cfg.batch_episodes or limit_reached:
+                self.publish(pending)
+                pending = []
+            if time.monotonic() - last_log >= cfg.log_every:
+                log.info("%s: %d episodes, %d steps published", cfg.source, self.episodes, self.steps)
+                last_log = time.monotonic()
+            if limit_reached or self.stop.is_set():
+                break
+        if pending and not self.stop.is_set():
+            self.publish(pending)
+        return self.episodes
+
+    def close(self) -> None:
+        if self.learners is not None:
+            self.learners.close()
+        self.publisher.undeclare()
+
+
+def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
+    """Process set-up: Zenoh session, liveliness, the source, the publisher."""
+    if config.source == "file":
+        from agents.demos import load_demos
+
+        load_demos(config.file)  # a bad dataset fails here, before joining the network
+    if not config.id:
+        config.id = f"{config.source}-{os.getpid()}"
+    keys.check_name(config.id, "demonstrator id")
+    session = connect(settings, stop)
+    if session is None:
+        return 0
+    publisher = DemoPublisher(session, settings.run, config, stop)
+    token = declare_alive(session, settings.run, "demonstrator", config.id)
+    log.info("demonstrator %s (%s) up, run %s", config.id, config.source, settings.run)
+    try:
+        if config.source == "astar":
+            publisher.publish_all(expert_episodes(config, stop))
+        elif config.source == "file":
+            publisher.publish_all(file_episodes(config))
+        else:
+            from services.teleop import drive
+
+            drive(config, publisher, stop)
+        log.info(
+            "%s: %d episodes, %d steps published; stopping",
+            config.source,
+            publisher.episodes,
+            publisher.steps,
+        )
+        return 0
+    finally:
+        token.undeclare()
+        publisher.close()
+        session.close()

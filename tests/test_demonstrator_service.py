@@ -1,0 +1,219 @@
+"""`navlearn demonstrator`: DemoBatch building, the terminal frame, and the three sources as real
+processes publishing to a Zenoh subscriber (the human one driven through a pseudo-terminal)."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import queue
+import select
+import signal
+import struct
+import subprocess
+import sys
+import termios
+import time
+
+import numpy as np
+import pytest
+from conftest import free_port
+
+from protocols import keys
+from protocols.codec import decode, encode
+from protocols.messages import DemoBatch
+from services.demonstrator import demo_batch
+from services.teleop import heading_glyph, render_frame
+
+CORRIDOR = """\
+##########
+#S......G#
+#........#
+##########
+"""
+ARROWS = {0: b"q", 1: b"\x1bOD", 2: b"\x1bOA", 3: b"\x1bOC", 4: b"e"}
+"""key bytes per action: xterm's arrow keys in the application mode curses switches on (smkx)"""
+
+
+def expert_demos(maps: str, n: int, seed: int = 0, noise: float = 0.0):
+    from agents.planning.demonstrate import generate_demos
+    from worlds.config import NavConfig
+
+    demos, _ = generate_demos(maps, n, seed=seed, noise=noise, config=NavConfig())
+    return demos
+
+
+def test_demo_batch_round_trips_through_the_codec():
+    demos = expert_demos("rooms:10", 2)
+    batch = demo_batch(demos, "astar", sender="test", seq=3)
+    assert batch.quality == "optimal"
+    decoded = decode(encode(batch))
+    assert isinstance(decoded, DemoBatch) and decoded.source == "astar" and decoded.seq == 3
+    for (meta, arrays), demo in zip(decoded.split(), demos, strict=True):
+        assert np.array_equal(arrays["actions"], demo.actions)
+        assert np.allclose(arrays["observations"], demo.observations)
+        assert meta.start == tuple(demo.metadata["start"]) and meta.goal == tuple(demo.metadata["goal"])
+    noisy = demo_batch(expert_demos("rooms:10", 1, noise=0.5), "astar", "test", 1)
+    assert noisy.quality == "suboptimal"
+
+
+def test_render_frame_draws_map_goal_beams_and_robot():
+    blocked = np.zeros((3, 4), bool)
+    blocked[0, :] = True
+    rows = render_frame(blocked, 1.0, (1.5, 1.5, 0.0), (2, 3), np.array([[3.5, 1.5]]), [(0.5, 2.5)])
+    assert rows[0] == "########"
+    assert rows[1] == ". > . * "
+    assert rows[2] == "o . . G "
+    assert [heading_glyph(t) for t in (0.0, np.pi / 2, np.pi, -np.pi / 2)] == [">", "v", "<", "^"]
+
+
+@pytest.fixture
+def network():
+    """This process is the router, a learner stand-in (liveliness token) and a demos subscriber."""
+    from services.transport import ZenohSettings, declare_alive, open_session
+
+    port = free_port()
+    endpoint, run = f"tcp/127.0.0.1:{port}", f"dm{port}"
+    session = open_session(ZenohSettings(mode="router", listen=[endpoint], run=run))
+    token = declare_alive(session, run, "learner", "stand-in")
+    received: queue.Queue = queue.Queue()
+    subscriber = session.declare_subscriber(
+        keys.everything(run, "demos"), lambda s: received.put((str(s.key_expr), decode(s.payload.to_bytes())))
+    )
+    try:
+        yield endpoint, run, received
+    finally:
+        subscriber.undeclare()
+        token.undeclare()
+        session.close()
+
+
+def command(endpoint: str, run: str, *extra: str) -> list[str]:
+    return [sys.executable, "-m", "services.cli", "demonstrator", "--connect", endpoint, "--run", run, *extra]
+
+
+def clean_env() -> dict[str, str]:
+    return {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
+
+
+def collect(received: queue.Queue, episodes: int, timeout: float) -> list[tuple[str, DemoBatch]]:
+    out, total, deadline = [], 0, time.monotonic() + timeout
+    while total < episodes and time.monotonic() < deadline:
+        try:
+            key, batch = received.get(timeout=0.5)
+        except queue.Empty:
+            continue
+        out.append((key, batch))
+        total += len(batch.episode_lengths)
+    return out
+
+
+def finish(process: subprocess.Popen, timeout: float = 60) -> int:
+    try:
+        return process.wait(timeout)
+    except subprocess.TimeoutExpired:
+        process.send_signal(signal.SIGTERM)
+        try:
+            return process.wait(30)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            return process.wait()
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_astar_and_file_sources_publish_episodes(network, tmp_path):
+    from gymnasium import spaces
+
+    from agents.demos import write_demos
+    from worlds.config import NavConfig
+    from worlds.env import observation_space
+
+    endpoint, run, received = network
+    dataset = tmp_path / "demos" / "expert-v0"
+    write_demos(
+        dataset, expert_demos("rooms:10", 3, seed=5), observation_space(NavConfig()), spaces.Discrete(5)
+    )
+    astar = subprocess.Popen(
+        command(endpoint, run, "--source", "astar", "--maps", "rooms:10", "--episodes", "2", "--rate", "0",
+                "--noise", "0.3"),
+        env=clean_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    from_file = subprocess.Popen(
+        command(endpoint, run, "--source", "file", "--file", str(dataset), "--batch-episodes", "2"),
+        env=clean_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    got = collect(received, 5, timeout=180)
+    assert finish(astar) == 0, astar.stderr.read().decode()
+    assert finish(from_file) == 0, from_file.stderr.read().decode()
+    by_source: dict[str, int] = {}
+    for key, batch in got:
+        assert keys.parse(key).name == batch.source
+        by_source[batch.source] = by_source.get(batch.source, 0) + len(batch.episode_lengths)
+        if batch.source == "astar":
+            assert batch.quality == "suboptimal"
+    assert by_source == {"astar": 2, "file": 3}
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_human_teleop_through_a_pseudo_terminal(network, tmp_path):
+    """Keys go in through a pty, exactly as a person's would; the episode arrives at the subscriber."""
+    from agents.planning.expert import Expert
+    from services.demonstrator import DemonstratorConfig, nav_config
+    from worlds.env import NavigationEnv
+
+    endpoint, run, received = network
+    corridor = tmp_path / "corridor.txt"
+    corridor.write_text(CORRIDOR)
+    config = DemonstratorConfig(source="human", maps=str(corridor), seed=7)
+    # The keys a person would press: the expert's actions in the very episode the UI will show.
+    env = NavigationEnv(nav_config(config), maps=str(corridor))
+    obs, info = env.reset(seed=config.seed)
+    expert = Expert(env.config)
+    expert.reset(info["task"], info["pose"])
+    actions, done = [], False
+    while not done:
+        actions.append(expert.act(info["pose"], obs))
+        obs, _, terminated, truncated, info = env.step(actions[-1])
+        done = terminated or truncated
+    assert info["outcome"] == 1 and len(actions) < 40
+
+    master, slave = os.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 100, 0, 0))
+    argv = command(
+        endpoint, run, "--source", "human", "--maps", str(corridor), "--seed", "7", "--episodes", "1"
+    )
+    process = subprocess.Popen(
+        argv,
+        stdin=slave, stdout=slave, stderr=slave, env={**clean_env(), "TERM": "xterm"}, start_new_session=True,
+    )  # fmt: skip
+    os.close(slave)
+    screen = b""
+    try:
+        deadline = time.monotonic() + 120
+        while b"keys:" not in screen and time.monotonic() < deadline and process.poll() is None:
+            if select.select([master], [], [], 0.5)[0]:
+                screen += os.read(master, 65536)
+        assert b"keys:" in screen, screen[-2000:]
+        for action in actions:
+            os.write(master, ARROWS[action])
+            time.sleep(0.05)
+        got = collect(received, 1, timeout=60)
+        while select.select([master], [], [], 0.2)[0]:  # drain the pty so the UI never blocks on output
+            try:
+                screen += os.read(master, 65536)
+            except OSError:
+                break
+        assert finish(process) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+        os.close(master)
+    assert len(got) == 1, screen[-3000:].decode(errors="replace")
+    key, batch = got[0]
+    assert batch.source == "human" and keys.parse(key).name == "human"
+    assert batch.actions.tolist() == actions
+    assert bool(batch.terminations[-1])
