@@ -11,6 +11,7 @@ Until the first weights arrive the robots act uniformly at random (version 0).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import re
@@ -150,7 +151,8 @@ class Actor:
                 self.policy = NNQLPolicy(message.tensors, network, version=message.version, seed=self.seed)
             else:
                 self.policy.set_weights(message.tensors, message.version)
-            self.exploration = NNQLConfig(**exploration) if exploration else NNQLConfig()
+            known = {f.name for f in dataclasses.fields(NNQLConfig)}  # a newer learner may send more
+            self.exploration = NNQLConfig(**{k: v for k, v in exploration.items() if k in known})
         except (ValueError, TypeError, KeyError) as exc:
             log.warning("ignoring weights version %d: %s", message.version, exc)
             return False

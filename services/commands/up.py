@@ -86,7 +86,7 @@ def main(args: argparse.Namespace) -> int:
             if console.is_terminal:
                 live.update(line, refresh=True)
             elif time.monotonic() - last_print[0] >= 10:
-                console.print(line, highlight=False)
+                console.print(line, highlight=False, soft_wrap=True)
                 last_print[0] = time.monotonic()
 
         try:
