@@ -49,6 +49,7 @@ class MapBank:
         self._map_size = 0
         self._moff: list[int] = []
         self._entries: list[tuple[int, int, int, int, int, int, int, float, int]] = []
+        self.tasks: list[Task] = []  # the task of each entry, as given
 
     def add_pool(self, tasks: list[Task], resample: bool, min_distance: float) -> tuple[int, int]:
         """Append a task pool (before any explicit task); returns its (first entry, size)."""
@@ -92,6 +93,7 @@ class MapBank:
             return self._entry_index[key]
         c_off, c_n = self._region(m, task.start)
         self._entries.append((m, *task.start, *task.goal, c_off, c_n, min_distance, int(resample)))
+        self.tasks.append(task)
         index = len(self._entries) - 1
         if not resample:
             self._entry_index[key] = index
@@ -127,12 +129,16 @@ class MapBank:
         keep[np.asarray(in_use, dtype=np.int64)] = True
         remap = np.cumsum(keep) - 1
         self._entries = [e for e, k in zip(self._entries, keep, strict=True) if k]
+        self.tasks = [t for t, k in zip(self.tasks, keep, strict=True) if k]
         self._entry_index = {key: int(remap[i]) for key, i in self._entry_index.items() if keep[i]}
         return remap
 
-    def entry_task(self, index: int) -> Task:
-        m, sr, sc, gr, gc = self._entries[index][:5]
-        return Task(self.grids[m], (sr, sc), (gr, gc), self.grids[m].name)
+    def entry_task(self, index: int, start: tuple[int, int], goal: tuple[int, int]) -> Task:
+        """Entry ``index``'s task, or the same map with another ``start``/``goal`` (resampled)."""
+        task = self.tasks[index]
+        if (task.start, task.goal) == (start, goal):
+            return task
+        return Task(task.grid, start, goal, task.map_id)
 
     def kernel_maps(self) -> tuple:
         return (self.field, self.moff, self.mh, self.mw, self.mcell)
@@ -174,7 +180,7 @@ def private_copy(bank: MapBank) -> MapBank:
     packed arrays rebuilt on the next add)."""
     clone = object.__new__(MapBank)
     clone.__dict__.update(bank.__dict__)
-    for name in ("grids", "_field", "_cand", "_moff", "_entries", "_labels"):
+    for name in ("grids", "_field", "_cand", "_moff", "_entries", "_labels", "tasks"):
         setattr(clone, name, list(getattr(bank, name)))
     for name in ("_grid_index", "_regions", "_entry_index"):
         setattr(clone, name, dict(getattr(bank, name)))

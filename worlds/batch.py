@@ -158,8 +158,7 @@ class NavBatch:
         return self._task(int(self.final_entry[i]), self.final_start[i], self.final_goal[i])
 
     def _task(self, entry: int, start: np.ndarray, goal: np.ndarray) -> Task:
-        grid = self.bank.grids[int(self.bank.emap[entry])]
-        return Task(grid, (int(start[0]), int(start[1])), (int(goal[0]), int(goal[1])), grid.name)
+        return self.bank.entry_task(entry, (int(start[0]), int(start[1])), (int(goal[0]), int(goal[1])))
 
     def discs(self, i: int) -> np.ndarray:
         """Robot ``i``'s moving discs now, ``(k, 3)``: x, y, radius."""
