@@ -223,7 +223,7 @@ class Actor:
         success = np.mean(self.episodes) if self.episodes else float("nan")
         log.info(
             "%.0f robot-steps/s | version %d (learner %d, lag %d) | episodes %d, success %.0f%% (last %d) | "
-            "sent %d, outbox %d%s",
+            "sent %d, outbox %d, unacknowledged %d%s",
             rate,
             self.version,
             self.learner_version,
@@ -233,6 +233,7 @@ class Actor:
             len(self.episodes),
             self.outbox.sent,
             len(self.outbox),
+            self.outbox.acks_given_up,
             "" if reachable else " | learner unreachable",
         )
 
