@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import warnings
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -64,6 +65,14 @@ def demo_steps(observations: np.ndarray, actions: np.ndarray, terminations, trun
         "terminated": np.asarray(terminations, dtype=bool),
         "truncated": np.asarray(truncations, dtype=bool),
     }
+
+
+def sample(buffer: TensorDictReplayBuffer, n: int) -> TensorDict:
+    """``n`` transitions from ``buffer``, whatever batch size the buffer was built with (TorchRL
+    warns when the two differ; NIRL draws several batch sizes from the same buffers on purpose)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Got conflicting batch_sizes", category=UserWarning)
+        return buffer.sample(n)
 
 
 class NIRLLearner:
@@ -192,7 +201,7 @@ class NIRLLearner:
         sampled experience and is held fixed; the gradient reaches the reward through the
         immediate term. ``myopic`` (the warm start, before any Q exists) uses ``C = 0``.
         """
-        batch = self.demos.sample(self.config.demo_batch_size)
+        batch = sample(self.demos, self.config.demo_batch_size)
         obs = batch["observation"]
         refined = self.refine(obs, batch["action"])
         reward = self.reward(obs)
@@ -205,7 +214,7 @@ class NIRLLearner:
         loss = margin = max_margin_loss(q_hat, refined.labels, self.margins, refined.weights)
         rank = torch.zeros(())
         if not myopic and self.config.rank_coef > 0 and len(self.experience):
-            own = self.experience.sample(self.config.demo_batch_size)
+            own = sample(self.experience, self.config.demo_batch_size)
             own_reward = self.reward(own["observation"]).gather(1, own["action"].long()[:, None])
             demo_reward = reward.gather(1, refined.labels[:, None])
             rank = ranking_margin_loss(demo_reward, own_reward, self.config.margin, refined.weights)
@@ -235,9 +244,9 @@ class NIRLLearner:
             n_demo = cfg.batch_size
         parts = []
         if cfg.batch_size - n_demo > 0:
-            parts.append(self.experience.sample(cfg.batch_size - n_demo).select(*Q_KEYS))
+            parts.append(sample(self.experience, cfg.batch_size - n_demo).select(*Q_KEYS))
         if n_demo > 0:
-            parts.append(self.demos.sample(n_demo).select(*Q_KEYS))
+            parts.append(sample(self.demos, n_demo).select(*Q_KEYS))
         batch = torch.cat(parts) if len(parts) > 1 else parts[0]
         with torch.no_grad():
             learned = self.reward(batch["observation"]).gather(1, batch["action"].long()[:, None]).squeeze(1)
@@ -259,7 +268,7 @@ class NIRLLearner:
         loss = td_loss = q.loss(batch)["loss"]
         margin = torch.zeros(())
         if coef > 0 and len(self.demos):
-            demo = self.demos.sample(self.config.demo_batch_size)
+            demo = sample(self.demos, self.config.demo_batch_size)
             refined = self.refine(demo["observation"], demo["action"])
             margin = max_margin_loss(
                 q.network(demo["observation"]), refined.labels, self.margins, refined.weights
