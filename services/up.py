@@ -207,13 +207,19 @@ class Up:
 
     def watch(self, stop: threading.Event, show) -> dict[str, Any] | None:
         """Follow the learner's status until the budget is spent, ``stop`` is set or a child dies."""
-        from services.process import connect
         from services.status import query_alive, query_status, status_dict
-        from services.transport import ZenohSettings
+        from services.transport import TransportError, ZenohSettings, open_session
 
         cfg = self.config
         settings = ZenohSettings(mode="client", connect=[self.endpoint], run=cfg.run)
-        session = connect(settings, stop)
+        session = None
+        while session is None and not stop.is_set():  # the learner's router may take a while to come up
+            if (dead := self.dead_child()) is not None:
+                raise ChildFailed(dead)
+            try:
+                session = open_session(settings, connect_timeout=1.0)
+            except TransportError:
+                show(None, 0.0)
         view, started = None, None
         try:
             while session is not None and not stop.is_set():

@@ -66,7 +66,8 @@ def main(args: argparse.Namespace) -> int:
     console.print(
         f"navlearn up: run [bold]{config.run}[/bold], learner + {config.actors} actors x {config.envs} "
         f"robots + evaluator on {up.endpoint}; budget {budget}; "
-        f"outputs in {up.out}/"
+        f"outputs in {up.out}/",
+        soft_wrap=True,
     )
     up.start()
     start = time.monotonic()
