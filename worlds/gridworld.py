@@ -129,11 +129,8 @@ class GridDynamics:
         collision = ~legal
         collision[goal_state] = False
 
-        if n_moves > 1:
-            outcome_prob = np.full((n_moves, n_moves), config.slip / (n_moves - 1))
-            np.fill_diagonal(outcome_prob, 1.0 - config.slip)
-        else:
-            outcome_prob = np.ones((1, 1))
+        outcome_prob = np.full((n_moves, n_moves), config.slip / (n_moves - 1))
+        np.fill_diagonal(outcome_prob, 1.0 - config.slip)
         return cls(
             grid,
             goal,

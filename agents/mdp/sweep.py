@@ -75,25 +75,21 @@ def _sweeps(successor, reward, alpha, beta, gamma, values, threshold, max_sweeps
 
 
 @njit(cache=True)
-def _greedy(successor, reward, prob, gamma, values):
-    """Jacobi backup ``max_a Q(s, a)`` and its argmax for every state."""
+def _greedy_policy(successor, reward, prob, gamma, values):
+    """``argmax_a Q(s, a)`` of ``values`` for every state (a Jacobi backup)."""
     n_states, n_outcomes = successor.shape
     n_actions = prob.shape[0]
-    out = np.empty(n_states)
     policy = np.empty(n_states, dtype=np.int64)
     for s in range(n_states):
         best = -np.inf
-        arg = 0
         for a in range(n_actions):
             q = 0.0
             for b in range(n_outcomes):
                 q += prob[a, b] * (reward[s, b] + gamma * values[successor[s, b]])
             if q > best:
                 best = q
-                arg = a
-        out[s] = best
-        policy[s] = arg
-    return out, policy
+                policy[s] = a
+    return policy
 
 
 def goal_outward_order(dynamics: GridDynamics) -> np.ndarray:
@@ -158,7 +154,7 @@ def grid_value_iteration(
     )
     sweeps += int(more)
     values = values[rank]  # back to state numbering
-    _, policy = _greedy(dynamics.successor, dynamics.reward, dynamics.outcome_prob, gamma, values)
+    policy = _greedy_policy(dynamics.successor, dynamics.reward, dynamics.outcome_prob, gamma, values)
     residual = float(residual)
     bound = contraction_bound(residual, gamma) if math.isfinite(residual) else math.inf
     return SolveResult(values, policy, sweeps, residual, bound, residual < threshold, f"grid-gs/{order}")
