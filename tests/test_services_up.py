@@ -17,14 +17,14 @@ def test_up_trains_evaluates_the_final_policy_and_writes_its_outputs(tmp_path):
     env = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
     argv = [
         sys.executable, "-m", "services.cli", "up", "--run", f"up{os.getpid()}", "--out", str(out),
-        "--duration", "8", "--actors", "1", "--envs", "4", "--eval-episodes", "2",
+        "--updates", "40", "--duration", "150", "--actors", "1", "--envs", "4", "--eval-episodes", "2",
         "--hidden-sizes", "16", "--batch-size", "16", "--learning-starts", "64",
     ]  # fmt: skip
     result = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=360)
     assert result.returncode == 0, result.stdout + result.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["exit_codes"] == {"actor-1": 0, "learner": 0, "evaluator": 0}
-    assert summary["final_version"] > 0
+    assert summary["final_version"] >= 40
     assert summary["last_evaluation"]["policy_version"] == summary["final_version"]
     assert set(summary["last_evaluation"]["metrics"]) == {"unseen", "dynamic"}
     policy = json.loads((out / "policy" / "config.json").read_text())
