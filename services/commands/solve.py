@@ -138,6 +138,11 @@ def run(args: argparse.Namespace) -> int:
         f"V(start) = {result.values[dynamics.state(start)]:.3f}; greedy path (intended moves) "
         f"{'reaches the goal in' if reached else 'does NOT reach the goal after'} {len(path) - 1} moves"
     )
+    if not reached:
+        print(
+            "  (far from the goal gamma**distance is below what eps resolves, so values are flat there: "
+            "a larger --gamma or a smaller --eps makes the goal visible)"
+        )
     title = f"{grid.name or 'map'}: {result.method}, slip {args.slip}, gamma {args.gamma}"
     fig = plot_values(dynamics, result.values, result.policy, path, start, title)
     fig.savefig(args.out, dpi=110)
