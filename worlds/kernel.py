@@ -27,7 +27,7 @@ from worlds.obstacles import move_disc, place_discs, swept_contact
 from worlds.outcomes import Outcome
 from worlds.rng import gauss, randint, uniform
 from worlds.robot import capsule_hits_grid
-from worlds.sensors import cast_ray, ray_disc
+from worlds.sensors import cast_from, ray_disc, ray_origin
 
 
 def _drop_stale_cache() -> None:
@@ -110,10 +110,14 @@ def observe(i, maps, entries, robots, discs, params, beam_c, beam_s, obs):
     inv_range = 1.0 / max_range
     c, s = math.cos(th), math.sin(th)
     n_beams = beam_c.shape[0]
+    idx, col, row, px, py = ray_origin(field, off, height, width, cell, x, y)
+    limit = max_range / cell
     for k in range(n_beams):
         dx = c * beam_c[k] - s * beam_s[k]
         dy = s * beam_c[k] + c * beam_s[k]
-        d = cast_ray(field, off, height, width, cell, x, y, dx, dy, max_range)
+        d = 0.0
+        if idx >= 0:
+            d = min(cast_from(field, off, width, idx, col, row, px, py, dx, dy, limit) * cell, max_range)
         for j in range(n_discs):
             d = min(d, ray_disc(x, y, dx, dy, ox[i, j], oy[i, j], orad[i, j]))
         if noise > 0.0:
@@ -168,7 +172,9 @@ def reset_robot(i, forced, keep_discs, maps, entries, robots, discs, params, bea
     robots[R_PLEN][i] = 0.0
     robots[R_PDIST][i] = math.hypot(gx[i] - x[i], gy[i] - y[i])
     robots[R_OUTCOME][i] = RUNNING
-    if not keep_discs:
+    if not keep_discs and params[P_OCOUNT] == 0.0:
+        discs[10][i] = 0
+    elif not keep_discs:
         count = min(int(params[P_OCOUNT]), discs[0].shape[1])
         spec = (count, params[P_ORAD], params[P_OSPEED], params[P_OPATROL] > 0.0, params[P_OLENGTH])
         keep_out = params[P_RADIUS] + params[P_ORAD] + params[P_OSPAWN]
