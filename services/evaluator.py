@@ -30,6 +30,8 @@ from services.weights import WeightsReceiver, split_architecture
 log = logging.getLogger("navlearn.evaluator")
 CURVE_FILE = "learning_curve.png"
 LINES_FILE = "evaluations.jsonl"
+REFERENCE = "reference"
+"""model field of points that evaluate a fixed saved policy (the imitation policy) once"""
 
 
 @dataclass
@@ -56,6 +58,10 @@ class EvaluatorConfig:
     """directory for TensorBoard scalars (eval/<family>/success, spl, path_ratio); empty: none"""
     max_evals: int = 0
     """stop after this many evaluations (0: run until stopped)"""
+    compare: tuple[str, ...] = ()
+    """more models evaluated beside --model on the same sets (e.g. nirl): each follows weights/<name>"""
+    imitation: str = ""
+    """a saved imitation policy directory (navlearn imitate train), evaluated once as a reference"""
 
 
 def summary_scalars(metrics: dict[str, Any]) -> dict[str, float]:
@@ -80,6 +86,9 @@ def plot_curve(points: list[dict[str, Any]], path: Path) -> Path:
 
     start = min(p["time"] for p in points)
     families = sorted({f for p in points for f in p["metrics"]})
+    models = sorted({p.get("model", "") for p in points if p.get("model") != REFERENCE})
+    series = [(m, f) for m in models for f in families]
+    references = [p for p in points if p.get("model") == REFERENCE]
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), sharey="row")
     for col, (xlabel, xof) in enumerate(
         (
@@ -87,11 +96,18 @@ def plot_curve(points: list[dict[str, Any]], path: Path) -> Path:
             ("wall time (min)", lambda p: (p["time"] - start) / 60),
         )
     ):
-        for family in families:
-            rows = sorted((xof(p), p["metrics"][family]) for p in points if family in p["metrics"])
+        for model, family in series:
+            rows = sorted(
+                (xof(p), p["metrics"][family])
+                for p in points
+                if family in p["metrics"] and p.get("model", "") == model
+            )
+            if not rows:
+                continue
+            label = f"{model} {family}".strip() if len(models) > 1 else family
             xs = [x for x, _ in rows]
             success = [m["success"] for _, m in rows]
-            (line,) = axes[0, col].plot(xs, [s["value"] for s in success], "o-", ms=3, label=family)
+            (line,) = axes[0, col].plot(xs, [s["value"] for s in success], "o-", ms=3, label=label)
             axes[0, col].fill_between(
                 xs,
                 [s["low"] for s in success],
@@ -101,13 +117,19 @@ def plot_curve(points: list[dict[str, Any]], path: Path) -> Path:
             )
             ratio = [(x, m["path_ratio"]) for x, m in rows if m.get("path_ratio") is not None]
             if ratio:
-                axes[1, col].plot(*zip(*ratio, strict=True), "o-", ms=3, color=line.get_color(), label=family)
+                axes[1, col].plot(*zip(*ratio, strict=True), "o-", ms=3, color=line.get_color(), label=label)
+        for reference in references:  # a fixed policy (imitation): one horizontal line per family
+            for family, metrics in reference["metrics"].items():
+                label = f"{reference.get('name', REFERENCE)} {family}"
+                axes[0, col].axhline(metrics["success"]["value"], ls="--", lw=1, color="gray", label=label)
+                if metrics.get("path_ratio") is not None:
+                    axes[1, col].axhline(metrics["path_ratio"], ls="--", lw=1, color="gray")
         axes[0, col].set(ylim=(0, 1.02), ylabel="success rate" if col == 0 else None)
         axes[1, col].set(xlabel=xlabel, ylabel="path length / A*" if col == 0 else None)
         for ax in axes[:, col]:
             ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=8, loc="upper left")
-    fig.suptitle("NNQL on held-out maps (greedy policy)")
+    fig.suptitle(f"{', '.join(models).upper() or 'policies'} on held-out maps (greedy policy)")
     fig.tight_layout()
     tmp = path.with_suffix(".tmp.png")
     fig.savefig(tmp, dpi=100)
@@ -125,6 +147,11 @@ class Evaluator:
         self.run_name = run
         self.eval_sets = eval_sets
         self.receiver = WeightsReceiver(session, run, config.model, limits)
+        self.receivers = {config.model: self.receiver}
+        for model in config.compare:
+            if model not in self.receivers:
+                self.receivers[model] = WeightsReceiver(session, run, model, limits)
+        self.lasts: dict[str, tuple[str, int]] = {}  # model -> (learner sender, version) last evaluated
         self.key = keys.evaluation(run, config.id)
         self.out = Path(config.out)
         self.out.mkdir(parents=True, exist_ok=True)
@@ -139,10 +166,11 @@ class Evaluator:
             return []
         return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
-    def due(self, sender: str, version: int) -> bool:
-        if self.last is None or self.last[0] != sender:
+    def due(self, sender: str, version: int, model: str | None = None) -> bool:
+        last = self.last if model is None else self.lasts.get(model)
+        if last is None or last[0] != sender:
             return True
-        return version > self.last[1] and version - self.last[1] >= self.config.every_versions
+        return version > last[1] and version - last[1] >= self.config.every_versions
 
     def evaluate(self, weights: dict, architecture: dict, version: int) -> dict[str, Any]:
         from agents.evaluation import evaluate
@@ -156,42 +184,75 @@ class Evaluator:
         log.info("version %d evaluated in %.1f s\n%s", version, time.perf_counter() - start, result.table())
         return metrics
 
-    def report(self, sender: str, version: int, metrics: dict[str, Any]) -> None:
+    def report(self, sender: str, version: int, metrics: dict[str, Any], model: str | None = None) -> None:
+        model = model or self.config.model
         self.seq += 1
         message = EvalReport(
             sender=self.config.id,
             seq=self.seq,
-            model=self.config.model,
+            model=model,
             policy_version=version,
             metrics=metrics,
         )
         self.session.put(self.key, encode(message))
-        point = {"policy_version": version, "time": time.time(), "learner": sender, "metrics": metrics}
+        point = {
+            "policy_version": version,
+            "time": time.time(),
+            "learner": sender,
+            "model": model,
+            "metrics": metrics,
+        }
         self.points.append(point)
         with open(self.out / LINES_FILE, "a") as fh:
             fh.write(json.dumps(point) + "\n")
         plot_curve(self.points, self.out / CURVE_FILE)
-        self.scalars.add(summary_scalars(metrics), version)
+        prefix = "" if model == self.config.model else f"{model}/"
+        self.scalars.add({prefix + k: v for k, v in summary_scalars(metrics).items()}, version)
+
+    def evaluate_reference(self, path: str) -> None:
+        """Evaluate a saved policy (the imitation one) once; it is drawn as a horizontal line."""
+        from agents.evaluation import evaluate
+        from agents.evaluation.policies import load_policy
+
+        policy = load_policy(path)
+        result = evaluate(policy, self.eval_sets)
+        log.info("reference policy %s evaluated\n%s", path, result.table())
+        metrics = result.to_dict(with_episodes=False)["metrics"]
+        point = {"policy_version": policy.version, "time": time.time(), "learner": "", "model": REFERENCE,
+                 "name": policy.model or Path(path).name, "metrics": metrics}  # fmt: skip
+        self.points = [p for p in self.points if p.get("model") != REFERENCE] + [point]
+        with open(self.out / LINES_FILE, "a") as fh:
+            fh.write(json.dumps(point) + "\n")
 
     def run(self, stop: threading.Event) -> int:
-        self.receiver.request_latest()
+        if self.config.imitation:
+            self.evaluate_reference(self.config.imitation)
+        for receiver in self.receivers.values():
+            receiver.request_latest()
         done = 0
         while not stop.is_set() and not (self.config.max_evals and done >= self.config.max_evals):
-            received = self.receiver.take()
-            if received is None:
+            idle = True
+            for model, receiver in self.receivers.items():
+                received = receiver.take()
+                if received is None:
+                    continue
+                idle = False
+                message = received.message
+                if not self.due(message.sender, message.version, model):
+                    continue
+                metrics = self.evaluate(message.tensors, message.architecture, message.version)
+                self.lasts[model] = (message.sender, message.version)
+                if model == self.config.model:
+                    self.last = self.lasts[model]
+                self.report(message.sender, message.version, metrics, model)
+                done += 1
+            if idle:
                 stop.wait(0.2)
-                continue
-            message = received.message
-            if not self.due(message.sender, message.version):
-                continue
-            metrics = self.evaluate(message.tensors, message.architecture, message.version)
-            self.last = (message.sender, message.version)
-            self.report(message.sender, message.version, metrics)
-            done += 1
         return 0
 
     def close(self) -> None:
-        self.receiver.close()
+        for receiver in self.receivers.values():
+            receiver.close()
         self.scalars.close()
 
 

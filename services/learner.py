@@ -75,12 +75,18 @@ class LearnerConfig:
     """seconds between progress lines on stdout"""
     max_updates: int = 0
     """stop (with a checkpoint) after this many updates; 0: run until stopped"""
+    nirl: bool = False
+    """also train NIRL (thesis ch. 5) on the demonstrations and the actors' experience; weights/nirl"""
+    nirl_updates: int = 1
+    """NIRL updates per NNQL update once NIRL's warm start on the demonstrations is done"""
 
 
 class LearnerService:
     """One NNQL learner behind Zenoh. Built by ``run_learner``; ``run(stop)`` is the main loop."""
 
-    def __init__(self, config: LearnerConfig, learner, session, run: str, inbox: Inbox, demos, sender: str):
+    def __init__(
+        self, config: LearnerConfig, learner, session, run: str, inbox: Inbox, demos, sender: str, nirl=None
+    ):
         from services.weights import WeightsBroadcaster
 
         self.config = config
@@ -90,6 +96,8 @@ class LearnerService:
         self.inbox = inbox
         self.demos = demos
         self.sender = sender
+        self.nirl = nirl  # services.nirl_trainer.NIRLTrainer, or None
+        self.nnql_ran = 0  # NNQL updates in the last loop (NIRL's pace once warm)
         nnql = learner.config
         self.limiter = RateLimiter(
             nnql.utd_ratio, max(nnql.learning_starts, nnql.batch_size), config.rate_tolerance
@@ -121,6 +129,8 @@ class LearnerService:
         def write(tmp: Path) -> None:
             self.learner.save_checkpoint(tmp / "nnql")
             self.demos.save(tmp / "demos")
+            if self.nirl is not None:
+                self.nirl.save(tmp / "nirl")
             state = {
                 "limiter": self.limiter.state(),
                 "counters": self.counters,
@@ -153,6 +163,8 @@ class LearnerService:
         for actor, saved in state["actors"].items():
             self.actors[actor] = ActorStats(transitions=saved["transitions"], batches=saved["batches"])
         self.demos.load(path / "demos", state["demo_episodes"])
+        if self.nirl is not None:
+            self.nirl.load(path / "nirl")
         self.last_eval = state["last_eval"]
         log.info(
             "resumed from %s: version %d, replay %d, demos %d",
@@ -178,6 +190,7 @@ class LearnerService:
             busy = self._drain_other()
             busy |= self._ingest(max_batches=16)
             busy |= self._train(max_updates=32)
+            busy |= self._train_nirl()
             if not busy:
                 self._wait_for_data(0.05)
             now = time.monotonic()
@@ -251,7 +264,18 @@ class LearnerService:
             ran += 1
             if self.learner.version % self.config.broadcast_every == 0:
                 self.broadcast()
+        self.nnql_ran = ran
         return ran > 0
+
+    def _train_nirl(self) -> bool:
+        """NIRL's updates: its warm start on the demonstrations (8 per loop, also while no actor
+        sends), then ``nirl_updates`` per NNQL update, so it never spins on data that does not grow."""
+        if self.nirl is None:
+            return False
+        learner = self.nirl.learner
+        warming = learner.warm_updates < learner.config.warmstart_updates
+        due = 8 if warming else self.config.nirl_updates * self.nnql_ran
+        return self.nirl.train(due) > 0
 
     def _drain_other(self) -> bool:
         busy = False
@@ -265,8 +289,11 @@ class LearnerService:
                 if item.message.obs.shape[1] != self.learner.architecture["obs_dim"]:
                     self.inbox.reject("shape", f"demos from {item.name} have the wrong obs_dim")
                     continue
-                self._count("demo_steps", self.demos.add(item.message))
+                steps = self.demos.add(item.message)
+                self._count("demo_steps", steps)
                 self._count("demo_batches")
+                self._count(f"demo_steps/{item.message.source}", steps)
+                self._count(f"demo_episodes/{item.message.source}", len(item.message.episode_lengths))
             elif isinstance(item.message, EvalReport):
                 self._on_eval(item)
 
@@ -287,6 +314,8 @@ class LearnerService:
         architecture["exploration"] = {name: getattr(nnql, name) for name in EXPLORATION_FIELDS}
         self.weights.publish(self.learner.get_weights(), self.learner.version, architecture)
         self._count("weights_broadcast")
+        if self.nirl is not None:
+            self.nirl.broadcast()
 
     def _count(self, name: str, n: int = 1) -> None:
         self.counters[name] = self.counters.get(name, 0) + int(n)
@@ -305,16 +334,23 @@ class LearnerService:
         for actor, stats in self.actors.items():
             rates[f"transitions_per_s/{actor}"] = stats.rate.rate()
             counters[f"transitions/{actor}"] = stats.transitions
+        versions = {self.config.model: self.learner.version}
+        losses = {k.removeprefix("losses/"): v for k, v in self.metrics.items() if k.startswith("losses/")}
+        if self.nirl is not None:
+            nirl_counters, nirl_losses = self.nirl.status_fields()
+            counters.update(nirl_counters)
+            losses.update(nirl_losses)
+            versions["nirl"] = self.nirl.version
         self.status_seq += 1
         return LearnerStatus(
             sender=self.sender,
             seq=self.status_seq,
             counters=counters,
             rates=rates,
-            versions={self.config.model: self.learner.version},
+            versions=versions,
             replay_sizes={"transitions": len(self.learner.replay), "demos": len(self.demos)},
             actors_last_seen={a: s.last_seen for a, s in self.actors.items() if s.last_seen},
-            losses={k.removeprefix("losses/"): v for k, v in self.metrics.items() if k.startswith("losses/")},
+            losses=losses,
             last_eval=self.last_eval,
         )
 
@@ -352,13 +388,16 @@ class LearnerService:
     def close(self) -> None:
         self._status_queryable.undeclare()
         self.weights.close()
+        if self.nirl is not None:
+            self.nirl.close()
         self.scalars.close()
 
 
 def run_learner(
-    config: LearnerConfig, nnql: NNQLConfig, settings: ZenohSettings, stop: threading.Event
+    config: LearnerConfig, nnql: NNQLConfig, settings: ZenohSettings, stop: threading.Event, nirl=None
 ) -> int:
-    """Process set-up: learner, Zenoh session (hosting the router unless told to connect), the loop."""
+    """Process set-up: learner, Zenoh session (hosting the router unless told to connect), the loop.
+    ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
     from agents.nnql.learner import NNQLLearner
     from services.demo_buffer import DemoBuffer
     from worlds.config import NavConfig
@@ -374,7 +413,16 @@ def run_learner(
     if session is None:
         return 0
     sender = f"{config.id}#{int(time.time())}"
-    service = LearnerService(config, learner, session, settings.run, inbox, demos, sender)
+    trainer = None
+    if config.nirl:
+        from agents.nirl.config import NIRLConfig
+        from services.nirl_trainer import NIRLTrainer
+
+        nirl = nirl or NIRLConfig(seed=nnql.seed)
+        trainer = NIRLTrainer(
+            nirl, learner.replay, demos.replay, session, settings.run, sender, config.broadcast_every
+        )
+    service = LearnerService(config, learner, session, settings.run, inbox, demos, sender, nirl=trainer)
     try:
         if config.resume and service.checkpoints is not None and (latest := service.checkpoints.latest()):
             service.resume(latest)

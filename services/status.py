@@ -163,7 +163,8 @@ def render(view: dict):
     evaluation = learner.get("last_eval")
     if evaluation:
         table = Table(
-            title=f"last evaluation: version {evaluation['policy_version']} by {evaluation['evaluator']}"
+            title=f"last evaluation: {evaluation.get('model', '')} version {evaluation['policy_version']} "
+            f"by {evaluation['evaluator']}"
         )
         for column in ("family", "episodes", "success", "SPL", "path / A*"):
             table.add_column(column, justify="left" if column == "family" else "right")

@@ -113,6 +113,7 @@ class NIRLLearner:
         self.demo_episodes = 0
         self.iteration = 0
         self.reward_steps = 0
+        self.warm_updates = 0
         self.reward_credit = 0.0
         self.metrics: dict[str, float] = {}
 
@@ -287,12 +288,20 @@ class NIRLLearner:
 
     def warm_start(self, updates: int | None = None) -> dict[str, float]:
         """Fit both networks to the demonstrations alone: the reward by the myopic margin (no
-        continuation yet), the Q-network by the large margin plus TD on relabelled demo steps."""
+        continuation yet), the Q-network by the large margin plus TD on relabelled demo steps.
+        Runs ``updates`` steps, by default those of ``warmstart_updates`` not run yet."""
         if not len(self.demos):
             raise RuntimeError("warm_start needs demonstrations; call add_demos first")
+        if updates is None:
+            updates = max(self.config.warmstart_updates - self.warm_updates, 0)
         metrics: dict[str, float] = {}
-        for _ in range(self.config.warmstart_updates if updates is None else updates):
-            metrics = {**self.reward_step(myopic=True), **self.q_step(margin_coef=1.0)}
+        for _ in range(updates):
+            metrics = self._warm_step()
+        return metrics
+
+    def _warm_step(self) -> dict[str, float]:
+        metrics = {**self.reward_step(myopic=True), **self.q_step(margin_coef=1.0)}
+        self.warm_updates += 1
         self.metrics.update(metrics)
         return metrics
 
@@ -311,9 +320,12 @@ class NIRLLearner:
         return metrics
 
     def update(self) -> dict[str, float]:
-        """One Q update, preceded by the reward updates due at reward_updates per q_updates; an
-        iteration ends every q_updates Q updates (the learner service's step)."""
+        """The learner service's step: a warm-start update while fewer than ``warmstart_updates``
+        ran, else one Q update preceded by the reward updates due at reward_updates per q_updates
+        (an iteration ends every q_updates Q updates)."""
         cfg = self.config
+        if self.warm_updates < cfg.warmstart_updates:
+            return self._warm_step()
         metrics: dict[str, float] = {}
         self.reward_credit += cfg.reward_updates / max(cfg.q_updates, 1)
         while self.reward_credit >= 1.0:
@@ -327,7 +339,20 @@ class NIRLLearner:
         return metrics
 
     def ready(self) -> bool:
+        """Updates need demonstrations (experience is optional: demos alone train it)."""
         return len(self.demos) >= 1
+
+    def exploration_schedule(self) -> dict[str, Any]:
+        """The behaviour policy's schedule in NNQLConfig's terms (what actors read from a
+        WeightsUpdate's architecture): Boltzmann, temperature decaying over Q updates."""
+        cfg = self.config
+        return {
+            "exploration": "boltzmann",
+            "temperature_start": cfg.temperature_start,
+            "temperature_end": cfg.temperature_end,
+            "temperature_decay_updates": cfg.warmstart_updates
+            + cfg.temperature_decay_iterations * cfg.q_updates,
+        }
 
     # ------------------------------------------------------------ weights and files
 
@@ -375,6 +400,7 @@ class NIRLLearner:
             "counters": {
                 "iteration": self.iteration,
                 "reward_steps": self.reward_steps,
+                "warm_updates": self.warm_updates,
                 "reward_credit": self.reward_credit,
                 "demo_episodes": self.demo_episodes,
             },
@@ -388,6 +414,7 @@ class NIRLLearner:
         counters = state["counters"]
         self.iteration = int(counters["iteration"])
         self.reward_steps = int(counters["reward_steps"])
+        self.warm_updates = int(counters["warm_updates"])
         self.reward_credit = float(counters["reward_credit"])
         self.demo_episodes = int(counters["demo_episodes"])
 

@@ -34,6 +34,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_options(parser, LearnerConfig, "NAVLEARN_LEARNER", "learner service")
     add_options(parser, NNQLConfig, "NAVLEARN_NNQL", "NNQL hyper-parameters")
+    parser.add_argument(
+        "--nirl-config",
+        metavar="FILE",
+        help="with --nirl: JSON object of NIRL hyper-parameters (agents.nirl.config.NIRLConfig fields); "
+        "NAVLEARN_NIRL_<FIELD> environment variables set single fields (the file wins)",
+    )
     parser.add_argument("--verbose", action="store_true", help="debug logging")
     add_zenoh_args(parser, default_mode="router")
     parser.set_defaults(func=main)
@@ -50,18 +56,41 @@ def main(args: argparse.Namespace) -> int:
     try:
         config = options_from_args(LearnerConfig, args, "NAVLEARN_LEARNER")
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL")
+        nirl = nirl_config(args, nnql.seed) if config.nirl else None
         settings = settings_from_args(args)
         if args.zenoh_mode is None and settings.connect:
             settings.mode = (
                 "client"  # --connect (or NAVLEARN_CONNECT): join that router instead of hosting one
             )
-    except (OptionError, TransportError) as exc:
+    except (OptionError, TransportError, OSError, ValueError) as exc:
         print(f"navlearn learner: {exc}", file=sys.stderr)
         return 2
     setup_logging(args.verbose)
     stop = stop_on_signals()
     try:
-        return run_learner(config, nnql, settings, stop)
+        return run_learner(config, nnql, settings, stop, nirl=nirl)
     except (TransportError, ValueError) as exc:
         print(f"navlearn learner: {exc}", file=sys.stderr)
         return 2
+
+
+def nirl_config(args: argparse.Namespace, seed: int):
+    """NIRLConfig from NAVLEARN_NIRL_* variables and --nirl-config (JSON, which wins, as flags do);
+    seeded like NNQL unless told otherwise."""
+    import json
+    import os
+    from pathlib import Path
+
+    from agents.nirl.config import NIRLConfig
+    from services.options import options_from_args
+
+    values = {} if os.environ.get("NAVLEARN_NIRL_SEED") else {"seed": seed}
+    if args.nirl_config:
+        loaded = json.loads(Path(args.nirl_config).read_text())
+        if not isinstance(loaded, dict):
+            raise ValueError(f"{args.nirl_config}: expected a JSON object of NIRLConfig fields")
+        unknown = sorted(set(loaded) - set(NIRLConfig().to_dict()))
+        if unknown:
+            raise ValueError(f"{args.nirl_config}: unknown NIRLConfig field(s) {unknown}")
+        values.update(loaded)
+    return options_from_args(NIRLConfig, None, "NAVLEARN_NIRL", **values)
