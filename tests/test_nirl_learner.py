@@ -132,3 +132,39 @@ def test_nirl_on_a_tiny_map_reaches_the_goal(tmp_path):
         "reward.safetensors",
     ):
         assert (out / name).is_file()
+
+
+def test_checkpoint_and_weight_history_round_trip(tmp_path):
+    from agents.nirl.weights import WeightHistory, plot_weight_changes
+
+    obs, expert = goal_seeking_steps(84, seed=3)
+    config = NIRLConfig(**SMALL, warmstart_updates=10, q_updates=4, reward_updates=2)
+    learner = NIRLLearner(config)
+    learner.add_demos([Episode(obs[:42], expert[:41]), Episode(obs[42:], expert[42:83])])
+    learner.add_experience(
+        {"obs": obs[:80], "action": expert[:80], "reward": np.zeros(80), "next_obs": obs[1:81],
+         "terminated": np.zeros(80, bool), "truncated": np.zeros(80, bool)}
+    )  # fmt: skip
+    history = WeightHistory()
+    for _ in range(14):  # 10 warm-start updates, then one iteration of 4 Q updates
+        learner.update()
+    history.record(0, reward=learner.reward_weights(), policy=learner.get_weights())
+    assert learner.warm_updates == 10 and learner.iteration == 1 and learner.reward_steps == 10 + 2
+    learner.save_checkpoint(tmp_path / "ckpt")
+    restored = NIRLLearner(config)
+    restored.load_checkpoint(tmp_path / "ckpt")
+    assert len(restored.demos) == len(learner.demos) == 82
+    assert (restored.version, restored.iteration, restored.warm_updates) == (14, 1, 10)
+    for name, value in learner.get_weights().items():
+        assert np.array_equal(restored.get_weights()[name], value)
+    for name, value in learner.reward_weights().items():
+        assert np.array_equal(restored.reward_weights()[name], value)
+    learner.update()
+    history.record(1, reward=learner.reward_weights(), policy=learner.get_weights())
+    history.save(tmp_path / "history.safetensors")
+    loaded = WeightHistory.load(tmp_path / "history.safetensors")
+    assert loaded.iterations == [0, 1] and set(loaded.snapshots) == set(history.snapshots)
+    changes = loaded.layer_changes("policy")
+    assert set(changes) == {"0.weight", "2.weight", "4.weight"}
+    assert all(c["step"][1] > 0 and c["drift"][0] == 0 for c in changes.values())
+    assert plot_weight_changes(loaded, tmp_path / "w.png").stat().st_size > 10_000

@@ -10,9 +10,6 @@ service can share its NNQL replay (actor experience) and its demonstration buffe
 
 from __future__ import annotations
 
-import os
-import shutil
-import warnings
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -20,8 +17,9 @@ from typing import Any
 import numpy as np
 import torch
 from tensordict import TensorDict
-from torchrl.data import LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
+from torchrl.data import TensorDictReplayBuffer
 
+from agents.nirl.buffers import demo_buffer, demo_steps, sample
 from agents.nirl.config import NIRLConfig
 from agents.nirl.losses import (
     KEEP,
@@ -40,8 +38,6 @@ from agents.nirl.networks import RewardNetwork, goal_reached
 from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
 from agents.nnql.policy import NNQLPolicy
 
-MODEL_NAME = "nirl"
-REWARD_FILE = "reward.safetensors"
 Q_KEYS = (
     "observation",
     "action",
@@ -51,28 +47,6 @@ Q_KEYS = (
     ("next", "truncated"),
     ("next", "done"),
 )
-
-
-def demo_steps(observations: np.ndarray, actions: np.ndarray, terminations, truncations) -> dict:
-    """One demonstrated episode (T + 1 observations, T actions) as flat transitions."""
-    obs = np.asarray(observations, dtype=np.float32)
-    n = len(actions)
-    return {
-        "obs": obs[:-1],
-        "action": np.asarray(actions, dtype=np.int64),
-        "reward": np.zeros(n, dtype=np.float32),  # the demonstrator's reward is unknown: NIRL learns it
-        "next_obs": obs[1:],
-        "terminated": np.asarray(terminations, dtype=bool),
-        "truncated": np.asarray(truncations, dtype=bool),
-    }
-
-
-def sample(buffer: TensorDictReplayBuffer, n: int) -> TensorDict:
-    """``n`` transitions from ``buffer``, whatever batch size the buffer was built with (TorchRL
-    warns when the two differ; NIRL draws several batch sizes from the same buffers on purpose)."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Got conflicting batch_sizes", category=UserWarning)
-        return buffer.sample(n)
 
 
 class NIRLLearner:
@@ -109,21 +83,13 @@ class NIRLLearner:
         self.margins = structured_margins(torch.as_tensor(nav.robot.turns), config.margin)
         self.experience = experience if experience is not None else self.q.replay
         self.owns_demos = demos is None
-        self.demos = demos if demos is not None else self._demo_buffer(config)
+        self.demos = demos if demos is not None else demo_buffer(config.demo_capacity, config.seed + 1)
         self.demo_episodes = 0
         self.iteration = 0
         self.reward_steps = 0
         self.warm_updates = 0
         self.reward_credit = 0.0
         self.metrics: dict[str, float] = {}
-
-    @staticmethod
-    def _demo_buffer(config: NIRLConfig) -> TensorDictReplayBuffer:
-        return TensorDictReplayBuffer(
-            storage=LazyTensorStorage(config.demo_capacity),
-            sampler=RandomSampler(),
-            generator=torch.Generator().manual_seed(config.seed + 1),
-        )
 
     # ------------------------------------------------------------ data in
 
@@ -369,26 +335,9 @@ class NIRLLearner:
 
     def save_policy(self, path: str | Path, **metadata: Any) -> Path:
         """model.safetensors + config.json (model "nirl", kind "q_network") and reward.safetensors."""
-        from safetensors.numpy import save_file
+        from agents.nirl.persistence import save_policy_files
 
-        from agents.evaluation.policies import save_policy
-
-        path = Path(path)
-        path.mkdir(parents=True, exist_ok=True)
-        save_file(self.reward_weights(), str(path / (REWARD_FILE + ".tmp")))
-        os.replace(path / (REWARD_FILE + ".tmp"), path / REWARD_FILE)
-        metadata.setdefault("nirl_config", self.config.to_dict())
-        return save_policy(
-            path,
-            self.get_weights(),
-            self.q.architecture,
-            model=MODEL_NAME,
-            kind="q_network",
-            version=self.version,
-            reward_architecture=self.reward.architecture,
-            iteration=self.iteration,
-            **metadata,
-        )
+        return save_policy_files(self, path, **metadata)
 
     def state_dict(self) -> dict[str, Any]:
         """Reward network, its optimiser and NIRL's counters (the Q side is NNQLLearner's)."""
@@ -420,22 +369,11 @@ class NIRLLearner:
 
     def save_checkpoint(self, path: str | Path) -> Path:
         """Directory with q/ (NNQLLearner checkpoint), nirl.pt and demos/ (if this learner owns them)."""
-        path = Path(path)
-        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-        shutil.rmtree(tmp, ignore_errors=True)
-        tmp.mkdir(parents=True)
-        self.q.save_checkpoint(tmp / "q")
-        torch.save(self.state_dict(), tmp / "nirl.pt")
-        if self.owns_demos and len(self.demos):
-            self.demos.dumps(tmp / "demos")
-        if path.exists():
-            shutil.rmtree(path)
-        os.replace(tmp, path)
-        return path
+        from agents.nirl.persistence import save_checkpoint
+
+        return save_checkpoint(self, path)
 
     def load_checkpoint(self, path: str | Path) -> None:
-        path = Path(path)
-        self.q.load_checkpoint(path / "q")
-        self.load_state_dict(torch.load(path / "nirl.pt", weights_only=True))
-        if self.owns_demos and (path / "demos").exists():
-            self.demos.loads(path / "demos")
+        from agents.nirl.persistence import load_checkpoint
+
+        load_checkpoint(self, path)
