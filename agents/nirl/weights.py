@@ -96,7 +96,11 @@ def plot_weight_changes(history: WeightHistory, out: str | Path, title: str = "N
             label = f"layer {param.removesuffix('.weight')}"
             axes[row, 0].plot(iterations[1:], values["step"][1:], label=label)
             axes[row, 1].plot(iterations, values["drift"], label=label)
-        axes[row, 0].set(ylabel=f"{network}\n|W_k - W_k-1| / |W_k-1|", yscale="log")
+        steps = np.concatenate([values["step"][1:] for values in changes.values()])
+        log_scale = bool(len(steps)) and bool((steps > 0).all())  # a layer that did not move has no log
+        axes[row, 0].set(
+            ylabel=f"{network}\n|W_k - W_k-1| / |W_k-1|", yscale="log" if log_scale else "linear"
+        )
         axes[row, 1].set(ylabel="|W_k - W_0| / |W_0|")
         for ax in axes[row]:
             ax.grid(alpha=0.3)
