@@ -1,5 +1,6 @@
-"""`navlearn demonstrator`: DemoBatch building, the terminal frame, and the three sources as real
-processes publishing to a Zenoh subscriber (the human one driven through a pseudo-terminal)."""
+"""`navlearn demonstrator`: DemoBatch building, the terminal frame, and human teleoperation as a
+real process driven through a pseudo-terminal, publishing to a Zenoh subscriber. The astar and
+file sources run against a real learner in tests/test_nirl_services.py."""
 
 from __future__ import annotations
 
@@ -117,42 +118,6 @@ def finish(process: subprocess.Popen, timeout: float = 60) -> int:
         except subprocess.TimeoutExpired:
             process.kill()
             return process.wait()
-
-
-@pytest.mark.integration
-@pytest.mark.slow
-@pytest.mark.timeout(300)
-def test_astar_and_file_sources_publish_episodes(network, tmp_path):
-    from gymnasium import spaces
-
-    from agents.demos import write_demos
-    from worlds.config import NavConfig
-    from worlds.env import observation_space
-
-    endpoint, run, received = network
-    dataset = tmp_path / "demos" / "expert-v0"
-    write_demos(
-        dataset, expert_demos("rooms:10", 3, seed=5), observation_space(NavConfig()), spaces.Discrete(5)
-    )
-    astar = subprocess.Popen(
-        command(endpoint, run, "--source", "astar", "--maps", "rooms:10", "--episodes", "2", "--rate", "0",
-                "--noise", "0.3"),
-        env=clean_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-    )  # fmt: skip
-    from_file = subprocess.Popen(
-        command(endpoint, run, "--source", "file", "--file", str(dataset), "--batch-episodes", "2"),
-        env=clean_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-    )  # fmt: skip
-    got = collect(received, 5, timeout=180)
-    assert finish(astar) == 0, astar.stderr.read().decode()
-    assert finish(from_file) == 0, from_file.stderr.read().decode()
-    by_source: dict[str, int] = {}
-    for key, batch in got:
-        assert keys.parse(key).name == batch.source
-        by_source[batch.source] = by_source.get(batch.source, 0) + len(batch.episode_lengths)
-        if batch.source == "astar":
-            assert batch.quality == "suboptimal"
-    assert by_source == {"astar": 2, "file": 3}
 
 
 @pytest.mark.integration
