@@ -58,9 +58,9 @@ class ActorConfig:
     ack_window: int = 2
     """batches in flight without the learner's acknowledgement before the actor waits"""
     ack_timeout: float = 10.0
-    """seconds without any acknowledgement before in-flight batches are given up on"""
+    """seconds without any acknowledgement before the unacknowledged batches are sent again"""
     outbox_size: int = 64
-    """batches kept while the learner is unreachable; when full the actor waits for it"""
+    """batches held (unsent or unacknowledged); when full the actor waits for the learner (back-pressure)"""
     max_steps: int = 0
     """stop after this many robot-steps (0: run until stopped)"""
     log_every: float = 10.0
@@ -116,6 +116,8 @@ class Actor:
         self.acks = session.declare_subscriber(keys.acks(run, config.id), self._on_ack)
         self.learner_version = 0
         self.seq = 0
+        self.sender = f"{config.id}#{time.time_ns() // 1_000_000}"
+        """this incarnation: the learner de-duplicates by (sender, seq), and seq restarts with the process"""
         self.weights_applied = 0
         self.episodes: deque[int] = deque(maxlen=100)
         self.episodes_done = 0
@@ -175,7 +177,7 @@ class Actor:
         flat = concat_batches(pieces, self.rollout.num_envs)
         self.seq += 1
         return TransitionBatch(
-            sender=self.config.id,
+            sender=self.sender,
             seq=self.seq,
             actor=self.config.id,
             model=self.config.model,
@@ -223,7 +225,7 @@ class Actor:
         success = np.mean(self.episodes) if self.episodes else float("nan")
         log.info(
             "%.0f robot-steps/s | version %d (learner %d, lag %d) | episodes %d, success %.0f%% (last %d) | "
-            "sent %d, outbox %d, unacknowledged %d%s",
+            "sent %d, outbox %d (unacknowledged %d, resent %d)%s",
             rate,
             self.version,
             self.learner_version,
@@ -233,7 +235,8 @@ class Actor:
             len(self.episodes),
             self.outbox.sent,
             len(self.outbox),
-            self.outbox.acks_given_up,
+            self.outbox.in_flight,
+            self.outbox.resent,
             "" if reachable else " | learner unreachable",
         )
 

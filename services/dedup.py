@@ -22,6 +22,8 @@ class Deduplicator:
         self._state: OrderedDict[str, tuple[int, set[int]]] = OrderedDict()
 
     def seen(self, sender: str, seq: int) -> bool:
+        if seq < 1:  # unnumbered (seqs start at 1): nothing to recognise it by
+            return False
         floor, above = self._state.get(sender, (0, set()))
         if seq <= floor or seq in above:
             self._state.move_to_end(sender)

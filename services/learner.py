@@ -26,6 +26,7 @@ from protocols.flow import Ack
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, LearnerStatus, TransitionBatch
 from services.checkpoint import CheckpointDir
+from services.durable import DurableIngest
 from services.inbox import Inbox, Received
 from services.process import Scalars, connect
 from services.ratelimit import RateLimiter
@@ -75,6 +76,8 @@ class LearnerConfig:
     """seconds between progress lines on stdout"""
     max_updates: int = 0
     """stop (with a checkpoint) after this many updates; 0: run until stopped"""
+    wal_fsync: str = "always"
+    """write-ahead log (checkpoint_dir/wal) fsync: always, never, or milliseconds between fsyncs"""
     nirl: bool = False
     """also train NIRL (thesis ch. 5) on the demonstrations and the actors' experience; weights/nirl"""
     nirl_updates: int = 1
@@ -116,6 +119,12 @@ class LearnerService:
         self.status_bytes: bytes = b""
         self.status_seq = 0
         self.ack_seq = 0
+        self.durable = (
+            DurableIngest(Path(config.checkpoint_dir) / "wal", config.wal_fsync)
+            if config.checkpoint_dir
+            else None
+        )  # write-ahead log + duplicate filter: acknowledged means durably stored
+        self._replaying = False
         self.weights = WeightsBroadcaster(session, run, config.model, sender)
         self._status_queryable = session.declare_queryable(keys.status(run), self._on_status, complete=True)
 
@@ -140,10 +149,13 @@ class LearnerService:
                 },
                 "demo_episodes": self.demos.episodes,
                 "last_eval": self.last_eval,
+                "durable": self.durable.checkpoint_state() if self.durable else None,
             }
             (tmp / "service.json").write_text(json.dumps(state, indent=1) + "\n")
 
         path = self.checkpoints.save(write)
+        if self.durable is not None:
+            self.durable.checkpointed()
         self._count("checkpoints")
         log.info(
             "checkpoint %s (version %d, replay %d) in %.2f s",
@@ -166,6 +178,8 @@ class LearnerService:
         if self.nirl is not None:
             self.nirl.load(path / "nirl")
         self.last_eval = state["last_eval"]
+        if self.durable is not None:
+            self.durable.load_state(state.get("durable"))
         log.info(
             "resumed from %s: version %d, replay %d, demos %d",
             path,
@@ -173,6 +187,21 @@ class LearnerService:
             len(self.learner.replay),
             len(self.demos),
         )
+
+    def replay_log(self) -> None:
+        """Insert again what the write-ahead log holds after the checkpoint (before subscribing)."""
+        if self.durable is None:
+            return
+        self._replaying = True
+        for record in self.durable.replay():
+            item = Received(record.channel, record.name, record.message, time.time())
+            if record.channel == "transitions":
+                self._insert(item)
+            else:
+                self.inbox.other.put(item)
+                self._drain_other()
+        self._replaying = False
+        log.info("write-ahead log replayed: %s", self.durable.status_counters())
 
     # ---------------------------------------------------------------- the loop
 
@@ -237,6 +266,9 @@ class LearnerService:
                 "shape", f"batch from {item.name} has obs_dim {batch.obs.shape[1]}, not {obs_dim}"
             )
             return
+        if self.durable is not None and not self._replaying and not self.durable.admit(batch):
+            self._ack(item.name, batch.seq)  # a resend of a stored batch: acknowledge it again
+            return
         n = self.learner.add(batch)
         self.limiter.inserted(n)
         self.insert_rate.add(n)
@@ -244,15 +276,18 @@ class LearnerService:
         self.actors.setdefault(item.name, ActorStats()).add(n, batch.seq, item.arrived)
         self._count("transitions_received", n)
         self._count("batches_received")
+        self._ack(item.name, batch.seq)
+
+    def _ack(self, actor: str, seq: int) -> None:
         self.ack_seq += 1
         ack = Ack(
             sender=self.sender,
             seq=self.ack_seq,
-            actor=item.name,
-            accepted_seq=batch.seq,
+            actor=actor,
+            accepted_seq=seq,
             policy_version=self.learner.version,
         )
-        self.session.put(keys.acks(self.run_name, item.name), encode(ack))
+        self.session.put(keys.acks(self.run_name, actor), encode(ack))
 
     def _train(self, max_updates: int) -> bool:
         ran = 0
@@ -289,6 +324,8 @@ class LearnerService:
                 if item.message.obs.shape[1] != self.learner.architecture["obs_dim"]:
                     self.inbox.reject("shape", f"demos from {item.name} have the wrong obs_dim")
                     continue
+                if self.durable is not None and not self._replaying and not self.durable.admit(item.message):
+                    continue  # a demo batch already stored
                 steps = self.demos.add(item.message)
                 self._count("demo_steps", steps)
                 self._count("demo_batches")
@@ -324,6 +361,8 @@ class LearnerService:
 
     def status(self) -> LearnerStatus:
         counters = {**self.counters, **self.inbox.counts(), "updates": self.learner.version}
+        if self.durable is not None:
+            counters.update(self.durable.status_counters())
         counters["transitions_rejected"] = sum(v for k, v in counters.items() if k.startswith("rejected/"))
         rates = {
             "updates_per_s": self.update_rate.rate(),
@@ -387,6 +426,8 @@ class LearnerService:
 
     def close(self) -> None:
         self._status_queryable.undeclare()
+        if self.durable is not None:
+            self.durable.close()
         self.weights.close()
         if self.nirl is not None:
             self.nirl.close()
@@ -426,6 +467,7 @@ def run_learner(
     try:
         if config.resume and service.checkpoints is not None and (latest := service.checkpoints.latest()):
             service.resume(latest)
+        service.replay_log()
         subscribers = inbox.subscribe(session)
         token = declare_alive(session, settings.run, "learner", config.id)
         log.info(

@@ -1,13 +1,16 @@
-"""The actor's outbox: a bounded queue of encoded batches sent under an acknowledgement window.
+"""The actor's outbox: a bounded queue of encoded batches, each kept until the learner acknowledges it.
 
-A batch leaves only while fewer than ``window`` sent batches wait for the
-learner's acknowledgement (protocols.flow.Ack): the actor waits for acknowledgements
-while the window is full, so a learner whose rate limiter holds inserts back
-slows its actors down (Reverb's blocking insert). While nobody subscribes to
-the actor's key (router or learner gone) batches wait here and the actor keeps
-stepping until the outbox is full, then waits for the learner to come back. An
-acknowledgement that never comes (lost with a restarting learner) is given up
-on after ``ack_timeout`` seconds.
+At-least-once delivery: a sent batch stays here (``unacked``) until the
+learner's acknowledgement for its seq (protocols.flow.Ack, sent only once the
+batch is in the learner's write-ahead log) arrives; the learner drops
+duplicates by (sender, seq). At most ``window`` batches are in flight: the actor
+waits for acknowledgements while the window is full, so a learner whose rate
+limiter holds inserts back slows its actors down (Reverb's blocking insert).
+While nobody subscribes to the actor's key (router or learner gone) batches
+wait here and the actor keeps stepping until the outbox (waiting + unacknowledged)
+is full, then waits for the learner (back-pressure, never a drop). When the
+learner is reachable again, or no acknowledgement came for ``ack_timeout``
+seconds, the unacknowledged batches are sent again, oldest first (``resent``).
 """
 
 from __future__ import annotations
@@ -37,37 +40,60 @@ class Outbox:
         self.window = window
         self.ack_timeout = ack_timeout
         self._waiting: deque[tuple[int, bytes]] = deque()
+        self._unacked: dict[int, bytes] = {}
+        """sent batches without an acknowledgement, by seq (insertion order = send order)"""
         self._changed = threading.Condition()
         self.sent_seq = 0
         """seq of the newest batch sent"""
         self.acked_seq = 0
-        """seq of the newest batch the learner acknowledged (or that was given up on)"""
+        """seq of the newest batch the learner acknowledged"""
         self.sent = 0
-        self.acks_given_up = 0
+        """sends, resends included"""
+        self.acked = 0
+        """batches acknowledged (each once)"""
+        self.resent = 0
+        """batches sent again (acknowledgement lost or learner restarted)"""
         self._last_progress = time.monotonic()
+        self._was_reachable = True
 
     def __len__(self) -> int:
-        return len(self._waiting)
+        """Batches held: waiting to be sent plus sent but unacknowledged."""
+        return len(self._waiting) + len(self._unacked)
 
     @property
     def full(self) -> bool:
-        return len(self._waiting) >= self.capacity
+        return len(self) >= self.capacity
 
     @property
     def in_flight(self) -> int:
-        return max(self.sent_seq - self.acked_seq, 0)
+        return len(self._unacked)
+
+    @property
+    def acks_given_up(self) -> int:
+        """Old name, kept for callers: batches are never given up on any more, they are ``resent``."""
+        return self.resent
 
     def put(self, seq: int, payload: bytes) -> None:
         """Queue batch ``seq`` (seqs increase); ``flush`` afterwards keeps the outbox within capacity."""
         self._waiting.append((seq, payload))
 
     def on_ack(self, accepted_seq: int) -> None:
-        """The learner accepted batch ``accepted_seq`` (called from a Zenoh callback thread)."""
+        """The learner durably stored batch ``accepted_seq`` (called from a Zenoh callback thread)."""
         with self._changed:
-            if accepted_seq > self.acked_seq:
-                self.acked_seq = min(accepted_seq, self.sent_seq) if self.sent_seq else accepted_seq
-                self._last_progress = time.monotonic()
-                self._changed.notify_all()
+            if self._unacked.pop(accepted_seq, None) is not None:
+                self.acked += 1
+            self.acked_seq = max(self.acked_seq, accepted_seq)
+            self._last_progress = time.monotonic()
+            self._changed.notify_all()
+
+    def _requeue_unacked(self) -> None:
+        """Put every unacknowledged batch back at the front of the queue, oldest first."""
+        with self._changed:
+            again = sorted(self._unacked.items())
+            self._unacked.clear()
+            self.resent += len(again)
+            self._waiting.extendleft(reversed(again))
+            self._last_progress = time.monotonic()
 
     def flush(self, stop: threading.Event) -> None:
         """Send what the window allows, waiting for acknowledgements while the learner is reachable.
@@ -75,23 +101,34 @@ class Outbox:
         While nobody subscribes (router or learner gone) batches stay queued and this returns at
         once, unless the outbox is full: then it waits for room. Returns early when ``stop`` is set.
         """
-        while self._waiting and not stop.is_set():
+        while (self._waiting or self._unacked) and not stop.is_set():
             if not self._reachable():
+                self._was_reachable = False
                 if not self.full:
                     return
                 stop.wait(0.2)
                 continue
+            if not self._was_reachable:  # the learner (or router) is back: what it did not ack, again
+                self._was_reachable = True
+                self._requeue_unacked()
             with self._changed:
-                if self.in_flight >= self.window:
+                if self.in_flight >= self.window or not self._waiting:
+                    if not self.full and not self._waiting:
+                        return
                     if time.monotonic() - self._last_progress <= self.ack_timeout:
                         self._changed.wait(0.2)
                         continue
-                    self.acks_given_up += self.in_flight
-                    self.acked_seq = self.sent_seq
+                    timed_out = True
+                else:
+                    timed_out = False
+            if timed_out:
+                self._requeue_unacked()
+                continue
             seq, payload = self._waiting.popleft()
-            self._send(payload)
             with self._changed:
-                if self.in_flight == 0:
+                if not self._unacked:
                     self._last_progress = time.monotonic()
-                self.sent_seq = seq
+                self._unacked[seq] = payload
+                self.sent_seq = max(self.sent_seq, seq)
                 self.sent += 1
+            self._send(payload)

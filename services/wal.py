@@ -71,7 +71,6 @@ class WriteAheadLog:
         self.counters = {"appended": 0, "corrupt_records": 0, "cut_bytes": 0, "fsyncs": 0}
         self._file = None
         self._last_sync = time.monotonic()
-        self._records: list[tuple[int, bytes]] | None = None
 
     # ------------------------------------------------------------------ reading
 

@@ -100,3 +100,4 @@ def test_dedup_contiguous_gaps_and_state_round_trip():
     restored.load_state(d.state())
     assert restored.seen("a#1", 3) and restored.seen("a#2", 1)
     assert not restored.seen("a#1", 5)
+    assert not d.seen("b", 0) and not d.seen("b", 0)  # unnumbered messages are never duplicates

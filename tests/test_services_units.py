@@ -162,19 +162,39 @@ def test_outbox_holds_batches_while_unreachable_and_sends_them_in_order():
     assert wire.sent == [] and len(outbox) == 2
     outbox.put(3, b"3")
     threading.Timer(0.3, lambda: setattr(wire, "reachable", True)).start()
-    outbox.flush(stop)  # full: waits for the learner, then sends everything
-    assert wire.sent == [b"1", b"2", b"3"] and len(outbox) == 0
+    threading.Timer(0.6, lambda: [outbox.on_ack(s) for s in (1, 2, 3)]).start()
+    outbox.flush(stop)  # full: waits for the learner, sends everything, waits for room (the acks)
+    assert wire.sent == [b"1", b"2", b"3"] and len(outbox) == 0 and outbox.acked == 3
 
 
-def test_outbox_gives_up_on_lost_acknowledgements():
+def test_outbox_resends_unacknowledged_batches_after_the_timeout():
     wire = Wire()
     outbox = Outbox(wire.sent.append, lambda: True, capacity=4, window=1, ack_timeout=0.2)
     stop = threading.Event()
     outbox.put(1, b"1")
     outbox.flush(stop)
     outbox.put(2, b"2")
-    outbox.flush(stop)  # no ack ever comes for 1: after 0.2 s it is given up on
-    assert wire.sent == [b"1", b"2"] and outbox.acks_given_up == 1
+    threading.Timer(0.5, outbox.on_ack, args=(1,)).start()
+    outbox.flush(stop)  # no ack for 1 within 0.2 s: sent again until it is acknowledged, then 2
+    assert wire.sent[:2] == [b"1", b"1"] and wire.sent[-1] == b"2" and set(wire.sent) == {b"1", b"2"}
+    assert outbox.resent >= 1 and outbox.acked == 1 and outbox.in_flight == 1
+
+
+def test_outbox_resends_unacknowledged_batches_when_the_learner_is_back():
+    wire = Wire()
+    outbox = Outbox(wire.sent.append, lambda: wire.reachable, capacity=8, window=4, ack_timeout=60)
+    stop = threading.Event()
+    for seq in (1, 2):
+        outbox.put(seq, b"%d" % seq)
+        outbox.flush(stop)
+    outbox.on_ack(1)
+    wire.reachable = False  # the learner dies before acknowledging 2
+    outbox.put(3, b"3")
+    outbox.flush(stop)
+    assert wire.sent == [b"1", b"2"] and len(outbox) == 2
+    wire.reachable = True
+    outbox.flush(stop)
+    assert wire.sent == [b"1", b"2", b"2", b"3"] and outbox.resent == 1
 
 
 # ---------------------------------------------------------------- options

@@ -1,0 +1,109 @@
+"""Durable, de-duplicated ingest for the learner: write-ahead log + (sender, seq) de-duplication.
+
+The learner calls ``admit`` for every decoded batch before inserting it: a
+duplicate (an actor's resend of a batch already stored) is counted and must
+only be acknowledged again; anything else is appended to the write-ahead log
+first, so the acknowledgement sent after the insert means "durably stored".
+``checkpoint_state`` goes into each checkpoint (the log position and the
+de-duplication state); ``checkpointed`` then rotates the log. On start,
+``load_state`` (from the checkpoint, if any) and ``replay`` give back the
+batches accepted after that checkpoint, which the learner inserts again
+without logging them twice.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from protocols.codec import decode, encode
+from protocols.errors import ProtocolError
+from protocols.limits import Limits
+from protocols.messages import DemoBatch, Message, TransitionBatch
+from services.dedup import Deduplicator
+from services.wal import WriteAheadLog
+
+log = logging.getLogger("navlearn.durable")
+
+
+@dataclass
+class Replayed:
+    """A batch read back from the log: its channel (transitions/demos) and the key's name."""
+
+    channel: str
+    name: str
+    message: Message
+
+
+def dedup_key(message: Message) -> str:
+    """``<actor or source>/<envelope sender>``: an incarnation (``<id>#<start>``) on its own key."""
+    name = message.actor if isinstance(message, TransitionBatch) else getattr(message, "source", "")
+    return f"{name}/{message.sender}"
+
+
+class DurableIngest:
+    """The learner's write-ahead log and duplicate filter (one per learner process)."""
+
+    def __init__(self, directory: str | Path, fsync: str = "always", limits: Limits | None = None) -> None:
+        self.wal = WriteAheadLog(directory, fsync)
+        self.dedup = Deduplicator()
+        self.limits = limits
+        self.checkpoint_seq = 0
+        self.counters = {"duplicates_dropped": 0, "wal_replayed": 0, "wal_undecodable": 0}
+
+    def admit(self, message: Message) -> bool:
+        """False for a duplicate (counted); else log it durably and return True."""
+        if self.dedup.seen(dedup_key(message), message.seq):
+            self.counters["duplicates_dropped"] += 1
+            return False
+        self.wal.append(encode(message))
+        return True
+
+    def checkpoint_state(self) -> dict:
+        return {"wal_seq": self.wal.last_seq, "dedup": self.dedup.state(), "counters": self.counters}
+
+    def checkpointed(self) -> None:
+        """The checkpoint holding ``checkpoint_state()`` is in place: start a new log segment."""
+        self.checkpoint_seq = self.wal.last_seq
+        self.wal.rotate()
+
+    def load_state(self, state: dict | None) -> None:
+        if state:
+            self.checkpoint_seq = int(state["wal_seq"])
+            self.dedup.load_state(state["dedup"])
+            self.counters.update({k: int(v) for k, v in state.get("counters", {}).items()})
+
+    def replay(self) -> Iterator[Replayed]:
+        """The batches logged after the loaded checkpoint, in order (de-duplication state rebuilt)."""
+        for seq, payload in self.wal.recover(after=self.checkpoint_seq):
+            try:
+                message = decode(payload, self.limits) if self.limits else decode(payload)
+            except ProtocolError as exc:  # written by this code, so only if the format changed
+                self.counters["wal_undecodable"] += 1
+                log.error("write-ahead log record %d does not decode (%s); skipped", seq, exc)
+                continue
+            if isinstance(message, TransitionBatch):
+                channel, name = "transitions", message.actor
+            elif isinstance(message, DemoBatch):
+                channel, name = "demos", message.source
+            else:
+                continue
+            self.dedup.seen(dedup_key(message), message.seq)
+            self.counters["wal_replayed"] += 1
+            yield Replayed(channel, name, message)
+
+    def status_counters(self) -> dict[str, int]:
+        wal = self.wal.counters
+        return {
+            **self.counters,
+            "wal/appended": wal["appended"],
+            "wal/corrupt_records": wal["corrupt_records"],
+            "wal/cut_bytes": wal["cut_bytes"],
+            "wal/fsyncs": wal["fsyncs"],
+            "wal/seq": self.wal.last_seq,
+        }
+
+    def close(self) -> None:
+        self.wal.close()
