@@ -3,10 +3,13 @@ motion for collisions, moves its discs, casts its beams, scores the step and (fo
 vector env) resets finished robots. The single env calls the same functions with one
 robot, so both envs are the same program.
 
-Arrays are grouped in tuples built by :class:`worlds.batch.NavBatch`: ``maps`` and
-``entries`` (from :class:`worlds.bank.MapBank`), ``robots`` (per-robot state, incl. its
-random stream and the range of pool entries it draws episodes from), ``discs``
-(per-robot moving discs) and ``finals`` (terminal results of auto-reset robots).
+The entry points take arrays grouped in tuples built by :class:`worlds.batch.NavBatch`:
+``maps`` and ``entries`` (from :class:`worlds.bank.MapBank`), ``robots`` (per-robot state,
+incl. its random stream and the range of pool entries it draws episodes from), ``discs``
+(per-robot moving discs) and ``finals`` (terminal results of auto-reset robots). They
+unpack them once; the per-robot helpers take plain arrays, because taking arrays out of
+a tuple inside the robot loop costs reference counting on every robot (measured: it
+doubled the cost of a step).
 
 numba caches compiled code per source file and does not notice edits to the modules a
 function calls; :func:`_drop_stale_cache` clears the cache when any of them changed.
@@ -52,9 +55,6 @@ _drop_stale_cache()
 P_STEP, P_RADIUS, P_TNOISE, P_RNOISE, P_HEADINGS, P_MAXR, P_SNOISE = range(7)
 P_DROP, P_RGOAL, P_RCOLL, P_RSTEP, P_RPROG, P_MAXSTEPS, P_GOALTOL = range(7, 14)
 P_OCOUNT, P_ORAD, P_OSPEED, P_OPATROL, P_OLENGTH, P_OSPAWN = range(14, 20)
-# indices into the robots tuple built by worlds.batch.NavBatch
-R_X, R_Y, R_TH, R_GX, R_GY, R_STEPS, R_PLEN, R_PDIST = range(8)
-R_ENT, R_SCELL, R_GCELL, R_OUTCOME, R_RNG, R_PLO, R_PN, R_MAP = range(8, 16)
 
 RUNNING, GOAL = int(Outcome.RUNNING), int(Outcome.GOAL)
 HIT_STATIC, HIT_DYNAMIC, TIMEOUT = (
@@ -91,26 +91,17 @@ def _wrap(angle: float) -> float:
 
 
 @njit(cache=True, inline="always")
-def observe(i, maps, entries, robots, discs, params, beam_c, beam_s, obs):
+def _observe(i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
+             beam_s, obs):  # fmt: skip
     """Write robot ``i``'s observation: ranges / max_range, squashed goal distance, sin and cos
     of the goal bearing relative to the heading."""
-    field, moff, mh, mw, mcell = maps
-    x, y, th, gx, gy, rng = (
-        robots[R_X][i],
-        robots[R_Y][i],
-        robots[R_TH][i],
-        robots[R_GX][i],
-        robots[R_GY][i],
-        robots[R_RNG],
-    )
-    ox, oy, orad, n_discs = discs[0], discs[1], discs[4], discs[10][i]
-    m = robots[R_MAP][i]
+    m = mp[i]
     off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
     max_range, noise, drop = params[P_MAXR], params[P_SNOISE], params[P_DROP]
-    inv_range = 1.0 / max_range
-    c, s = math.cos(th), math.sin(th)
+    xi, yi = x[i], y[i]
+    c, s = math.cos(th[i]), math.sin(th[i])
     n_beams = beam_c.shape[0]
-    idx, col, row, px, py = ray_origin(field, off, height, width, cell, x, y)
+    idx, col, row, px, py = ray_origin(field, off, height, width, cell, xi, yi)
     limit = max_range / cell
     for k in range(n_beams):
         dx = c * beam_c[k] - s * beam_s[k]
@@ -118,14 +109,14 @@ def observe(i, maps, entries, robots, discs, params, beam_c, beam_s, obs):
         d = 0.0
         if idx >= 0:
             d = min(cast_from(field, off, width, idx, col, row, px, py, dx, dy, limit) * cell, max_range)
-        for j in range(n_discs):
-            d = min(d, ray_disc(x, y, dx, dy, ox[i, j], oy[i, j], orad[i, j]))
+        for j in range(ocount[i]):
+            d = min(d, ray_disc(xi, yi, dx, dy, ox[i, j], oy[i, j], orad[i, j]))
         if noise > 0.0:
             d = min(max(d + noise * gauss(rng, i), 0.0), max_range)
         if drop > 0.0 and uniform(rng, i) < drop:
             d = max_range
-        obs[i, k] = d * inv_range
-    ux, uy = gx - x, gy - y
+        obs[i, k] = d / max_range
+    ux, uy = gx[i] - xi, gy[i] - yi
     dist = math.hypot(ux, uy)
     obs[i, n_beams] = dist / (dist + max_range)
     if dist > 0.0:
@@ -136,19 +127,72 @@ def observe(i, maps, entries, robots, discs, params, beam_c, beam_s, obs):
         obs[i, n_beams + 2] = 1.0
 
 
+@njit(cache=True, inline="always")
+def _step(
+    i, action, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, discs,
+    n_discs, params, turns
+) -> float:  # fmt: skip
+    """Move robot ``i`` and its ``n_discs`` discs one step; set its outcome; return its reward.
+    (At most 30 arguments: CPython passes longer calls as ``*args``, which numba cannot inline.
+    The disc arrays stay in a tuple, opened only for robots that have discs.)"""
+    m = mp[i]
+    off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
+    radius = params[P_RADIUS]
+    heading = th[i] + turns[action]
+    if params[P_RNOISE] > 0.0:
+        heading += params[P_RNOISE] * gauss(rng, i)
+    distance = params[P_STEP]
+    if params[P_TNOISE] > 0.0:
+        distance = max(distance + params[P_TNOISE] * gauss(rng, i), 0.0)
+    heading = _wrap(heading)
+    th[i] = heading
+    x0, y0 = x[i], y[i]
+    x1, y1 = x0 + distance * math.cos(heading), y0 + distance * math.sin(heading)
+    result = RUNNING
+    if capsule_hits_grid(field, off, height, width, cell, x0, y0, x1, y1, radius):
+        result = HIT_STATIC
+    for k in range(n_discs):
+        ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby = discs
+        px, py = ox[i, k], oy[i, k]
+        ox[i, k], oy[i, k], ovx[i, k], ovy[i, k] = move_disc(
+            field, off, height, width, cell, px, py, ovx[i, k], ovy[i, k], orad[i, k], opat[i, k],
+            oax[i, k], oay[i, k], obx[i, k], oby[i, k],
+        )  # fmt: skip
+        reach = radius + orad[i, k]
+        if result == RUNNING and swept_contact(x0, y0, x1, y1, px, py, ox[i, k], oy[i, k], reach):
+            result = HIT_DYNAMIC
+    reward = params[P_RSTEP]
+    if result == RUNNING:
+        x[i], y[i] = x1, y1
+        plen[i] += distance
+        dist = math.hypot(gx[i] - x1, gy[i] - y1)
+        reward += params[P_RPROG] * (pdist[i] - dist)
+        pdist[i] = dist
+        if dist <= params[P_GOALTOL]:
+            result = GOAL
+            reward += params[P_RGOAL]
+    else:
+        reward += params[P_RCOLL]
+    steps[i] += 1
+    if result == RUNNING and steps[i] >= params[P_MAXSTEPS]:
+        result = TIMEOUT
+    outcome[i] = result
+    return reward
+
+
 @njit(cache=True)
-def reset_robot(i, forced, keep_discs, maps, entries, robots, discs, params, beam_c, beam_s, obs):
+def _reset(
+    i, forced, keep_discs, field, moff, mh, mw, mcell, etab, cand, mp, x, y, th, gx, gy, rng, steps, plen,
+    pdist, outcome, ent, scell, gcell, plo, pn, ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby, ocount,
+    params, beam_c, beam_s, obs
+):  # fmt: skip
     """Start a new episode for robot ``i``: entry ``forced`` (or a random pool entry when
     negative, with fresh random endpoints if the entry allows), random initial heading,
     new discs unless ``keep_discs``; then observe."""
-    field, moff, mh, mw, mcell = maps
-    etab, cand = entries
-    x, y, th, gx, gy, rng = robots[R_X], robots[R_Y], robots[R_TH], robots[R_GX], robots[R_GY], robots[R_RNG]
-    ent, scell, gcell = robots[R_ENT], robots[R_SCELL], robots[R_GCELL]
-    j = forced if forced >= 0 else robots[R_PLO][i] + randint(rng, i, robots[R_PN][i])
+    j = forced if forced >= 0 else plo[i] + randint(rng, i, pn[i])
     ent[i] = j
     m = etab[j, E_MAP]
-    robots[R_MAP][i] = m
+    mp[i] = m
     width, cell = mw[m], mcell[m]
     sr, sc, gr, gc = etab[j, E_SR], etab[j, E_SC], etab[j, E_GR], etab[j, E_GC]
     c_off, c_n = etab[j, E_COFF], etab[j, E_CN]
@@ -168,101 +212,47 @@ def reset_robot(i, forced, keep_discs, maps, entries, robots, discs, params, bea
         th[i] = _wrap(randint(rng, i, choices) * (TWO_PI / choices))
     else:
         th[i] = _wrap(TWO_PI * uniform(rng, i))
-    robots[R_STEPS][i] = 0
-    robots[R_PLEN][i] = 0.0
-    robots[R_PDIST][i] = math.hypot(gx[i] - x[i], gy[i] - y[i])
-    robots[R_OUTCOME][i] = RUNNING
+    steps[i] = 0
+    plen[i] = 0.0
+    pdist[i] = math.hypot(gx[i] - x[i], gy[i] - y[i])
+    outcome[i] = RUNNING
     if not keep_discs and params[P_OCOUNT] == 0.0:
-        discs[10][i] = 0
+        ocount[i] = 0
     elif not keep_discs:
-        count = min(int(params[P_OCOUNT]), discs[0].shape[1])
+        count = min(int(params[P_OCOUNT]), ox.shape[1])
         spec = (count, params[P_ORAD], params[P_OSPEED], params[P_OPATROL] > 0.0, params[P_OLENGTH])
         keep_out = params[P_RADIUS] + params[P_ORAD] + params[P_OSPAWN]
-        discs[10][i] = place_discs(
-            i,
-            rng,
-            field,
-            moff[m],
-            mh[m],
-            width,
-            cell,
-            cand,
-            c_off,
-            c_n,
-            x[i],
-            y[i],
-            keep_out,
-            spec,
-            discs,
+        discs = (ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby)
+        ocount[i] = place_discs(
+            i, rng, field, moff[m], mh[m], width, cell, cand, c_off, c_n, x[i], y[i], keep_out, spec, discs
         )
-    observe(i, maps, entries, robots, discs, params, beam_c, beam_s, obs)
-
-
-@njit(cache=True, inline="always")
-def step_robot(i, action, maps, entries, robots, discs, params, turns) -> float:
-    """Move robot ``i`` and its discs one step; set its outcome; return its reward."""
-    field, moff, mh, mw, mcell = maps
-    x, y, th, gx, gy, rng = robots[R_X], robots[R_Y], robots[R_TH], robots[R_GX], robots[R_GY], robots[R_RNG]
-    ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby, ocount = discs
-    m = robots[R_MAP][i]
-    off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
-    radius = params[P_RADIUS]
-    heading = th[i] + turns[action]
-    if params[P_RNOISE] > 0.0:
-        heading += params[P_RNOISE] * gauss(rng, i)
-    distance = params[P_STEP]
-    if params[P_TNOISE] > 0.0:
-        distance = max(distance + params[P_TNOISE] * gauss(rng, i), 0.0)
-    heading = _wrap(heading)
-    th[i] = heading
-    x0, y0 = x[i], y[i]
-    x1, y1 = x0 + distance * math.cos(heading), y0 + distance * math.sin(heading)
-    result = RUNNING
-    if capsule_hits_grid(field, off, height, width, cell, x0, y0, x1, y1, radius):
-        result = HIT_STATIC
-    for k in range(ocount[i]):
-        px, py = ox[i, k], oy[i, k]
-        ox[i, k], oy[i, k], ovx[i, k], ovy[i, k] = move_disc(
-            field, off, height, width, cell, px, py, ovx[i, k], ovy[i, k], orad[i, k], opat[i, k],
-            oax[i, k], oay[i, k], obx[i, k], oby[i, k],
-        )  # fmt: skip
-        reach = radius + orad[i, k]
-        if result == RUNNING and swept_contact(x0, y0, x1, y1, px, py, ox[i, k], oy[i, k], reach):
-            result = HIT_DYNAMIC
-    reward = params[P_RSTEP]
-    steps, pdist = robots[R_STEPS], robots[R_PDIST]
-    if result == RUNNING:
-        x[i], y[i] = x1, y1
-        robots[R_PLEN][i] += distance
-        dist = math.hypot(gx[i] - x1, gy[i] - y1)
-        reward += params[P_RPROG] * (pdist[i] - dist)
-        pdist[i] = dist
-        if dist <= params[P_GOALTOL]:
-            result = GOAL
-            reward += params[P_RGOAL]
-    else:
-        reward += params[P_RCOLL]
-    steps[i] += 1
-    if result == RUNNING and steps[i] >= params[P_MAXSTEPS]:
-        result = TIMEOUT
-    robots[R_OUTCOME][i] = result
-    return reward
+    _observe(
+        i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
+        beam_s, obs,
+    )  # fmt: skip
 
 
 @njit(cache=True)
-def step_all(
-    actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs, reward, terminated,
-    truncated, finals,
-):  # fmt: skip
+def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs, reward,
+             terminated, truncated, finals):  # fmt: skip
     """Step every robot; with ``autoreset``, a finished robot's terminal observation and results
     go to ``finals`` and it starts its next episode in the same call. Returns the number done."""
-    x, y, th, steps, plen = robots[R_X], robots[R_Y], robots[R_TH], robots[R_STEPS], robots[R_PLEN]
-    ent, scell, gcell, outcome = robots[R_ENT], robots[R_SCELL], robots[R_GCELL], robots[R_OUTCOME]
+    field, moff, mh, mw, mcell = maps
+    etab, cand = entries
+    x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp = robots
+    ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby, ocount = discs
     f_obs, f_outcome, f_plen, f_steps, f_pose, f_ent, f_scell, f_gcell, f_done = finals
+    moving = (ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby)
     n_done = 0
     for i in range(actions.shape[0]):
-        reward[i] = step_robot(i, actions[i], maps, entries, robots, discs, params, turns)
-        observe(i, maps, entries, robots, discs, params, beam_c, beam_s, obs)
+        reward[i] = _step(
+            i, actions[i], field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome,
+            moving, ocount[i], params, turns,
+        )  # fmt: skip
+        _observe(
+            i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
+            beam_s, obs
+        )  # fmt: skip
         result = outcome[i]
         terminated[i] = result in (GOAL, HIT_STATIC, HIT_DYNAMIC)
         truncated[i] = result == TIMEOUT
@@ -277,13 +267,24 @@ def step_all(
                 f_ent[i] = ent[i]
                 f_scell[i, 0], f_scell[i, 1] = scell[i, 0], scell[i, 1]
                 f_gcell[i, 0], f_gcell[i, 1] = gcell[i, 0], gcell[i, 1]
-                reset_robot(i, -1, False, maps, entries, robots, discs, params, beam_c, beam_s, obs)
+                _reset(
+                    i, -1, False, field, moff, mh, mw, mcell, etab, cand, mp, x, y, th, gx, gy, rng, steps,
+                    plen, pdist, outcome, ent, scell, gcell, plo, pn, ox, oy, ovx, ovy, orad, opat, oax, oay,
+                    obx, oby, ocount, params, beam_c, beam_s, obs
+                )  # fmt: skip
     return n_done
 
 
 @njit(cache=True)
 def reset_some(indices, forced, keep_discs, maps, entries, robots, discs, params, beam_c, beam_s, obs):
+    """Start new episodes for robots ``indices`` (see :func:`_reset` for ``forced``/``keep_discs``)."""
+    field, moff, mh, mw, mcell = maps
+    etab, cand = entries
+    x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp = robots
+    ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby, ocount = discs
     for n in range(indices.shape[0]):
-        reset_robot(
-            indices[n], forced[n], keep_discs[n], maps, entries, robots, discs, params, beam_c, beam_s, obs
-        )
+        _reset(
+            indices[n], forced[n], keep_discs[n], field, moff, mh, mw, mcell, etab, cand, mp, x, y, th, gx,
+            gy, rng, steps, plen, pdist, outcome, ent, scell, gcell, plo, pn, ox, oy, ovx, ovy, orad, opat,
+            oax, oay, obx, oby, ocount, params, beam_c, beam_s, obs
+        )  # fmt: skip
