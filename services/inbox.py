@@ -2,10 +2,14 @@
 
 Callbacks run on Zenoh's threads, so they do only what cannot wait: decode and
 validate the bytes (protocols.codec), check that the key matches the message,
-and put it in a bounded queue. Nothing here touches the replay buffer or the
+and put it in a bounded queue: transition batches in a FairQueue (a bound per
+actor, served round-robin, so a flooding actor neither crowds out the others
+nor grows memory). Nothing here touches the replay buffer or the
 network weights. A message that fails is counted under ``rejected/<reason>``
 (the ProtocolError reason); one that finds its queue full under
-``dropped/inbox_full``. Neither ever raises into Zenoh.
+``dropped/inbox_full``, or ``dropped/sender_full`` when only its actor's share
+is full (``dropped/sender_full/<actor>`` says who). Neither ever raises into
+Zenoh. Oversized messages are refused by the codec (``rejected/size``).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from protocols.codec import decode
 from protocols.errors import ProtocolError
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, Message, TransitionBatch
+from services.fairqueue import FairQueue, SenderFull
 
 log = logging.getLogger("navlearn.inbox")
 EXPECTED = {"transitions": TransitionBatch, "demos": DemoBatch, "eval": EvalReport}
@@ -41,10 +46,13 @@ class Received:
 class Inbox:
     """Bounded queues fed by Zenoh callbacks: transition batches, and the rest (demos, eval reports)."""
 
-    def __init__(self, limits: Limits, capacity: int, run: str, log_every: float = 10.0) -> None:
+    def __init__(
+        self, limits: Limits, capacity: int, run: str, log_every: float = 10.0, per_sender: int = 0
+    ) -> None:
+        """``per_sender``: transition batches one actor may have waiting (0: a quarter of ``capacity``)."""
         self.limits = limits
         self.run = run
-        self.transitions: queue.Queue[Received] = queue.Queue(maxsize=capacity)
+        self.transitions: FairQueue[Received] = FairQueue(capacity, per_sender or max(1, capacity // 4))
         self.other: queue.Queue[Received] = queue.Queue(maxsize=capacity)
         self._counts: Counter[str] = Counter()
         self._lock = threading.Lock()
@@ -70,9 +78,16 @@ class Inbox:
             self.count(f"rejected/{exc.reason}")
             self._warn(exc.reason, f"rejected a message on {sample.key_expr}: {exc}")
             return
-        target = self.transitions if parsed.channel == "transitions" else self.other
+        item = Received(parsed.channel, parsed.name, message, arrived)
         try:
-            target.put_nowait(Received(parsed.channel, parsed.name, message, arrived))
+            if parsed.channel == "transitions":
+                self.transitions.put_nowait(parsed.name, item)
+            else:
+                self.other.put_nowait(item)
+        except SenderFull:
+            self.count("dropped/sender_full")
+            self.count(f"dropped/sender_full/{parsed.name}")
+            self._warn("sender_full", f"{parsed.name} sends faster than its share; dropped a batch")
         except queue.Full:
             self.count("dropped/inbox_full")
             self._warn("inbox_full", f"inbox full, dropped a {parsed.channel} message from {parsed.name}")
