@@ -3,15 +3,20 @@ a remote actor in its own Linux network namespace reaches a learner across a vet
 
 from __future__ import annotations
 
+import os
+import shutil
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
 
 import pytest
 
+from services.status import query_status
 from services.transport import TransportError, ZenohSettings, open_session
 from tests.conftest import free_port
+from tests.reliability_helpers import learner_argv, start_learner, stop_process
 from tests.test_wire_zenoh import start_router, stop
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
@@ -68,3 +73,56 @@ def test_certs_tls_and_mtls_connect_and_a_wrong_ca_is_refused(tmp_path: Path) ->
             open_session(ZenohSettings(connect=[endpoint], connect_timeout=2, tls_mtls=True, **stranger))
     finally:
         stop(proc)
+
+
+def _ip(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=10)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(180)
+def test_remote_actor_in_a_network_namespace_feeds_the_learner(tmp_path: Path) -> None:
+    """A namespace of its own joined by a veth pair: 10.213.7.1/30 (host end), 10.213.7.2/30 (inside)."""
+    ns, host_if, ns_if = f"nlt{os.getpid()}", f"nlh{os.getpid()}", f"nln{os.getpid()}"
+    if shutil.which("ip") is None:
+        pytest.skip("the ip command (iproute2) is not installed")
+    made = _ip("netns", "add", ns)
+    if made.returncode != 0:
+        pytest.skip(f"ip netns not permitted here: {made.stderr.strip()}")
+    learner = actor = None
+    try:
+        for args in (
+            ("link", "add", host_if, "type", "veth", "peer", "name", ns_if),
+            ("link", "set", ns_if, "netns", ns),
+            ("addr", "add", "10.213.7.1/30", "dev", host_if),
+            ("link", "set", host_if, "up"),
+            ("-n", ns, "addr", "add", "10.213.7.2/30", "dev", ns_if),
+            ("-n", ns, "link", "set", ns_if, "up"),
+            ("-n", ns, "link", "set", "lo", "up"),
+        ):
+            done = _ip(*args)
+            if done.returncode != 0:
+                pytest.skip(f"cannot set up the veth pair (ip {' '.join(args)}): {done.stderr.strip()}")
+        port = free_port()
+        endpoint, run = f"tcp/10.213.7.1:{port}", f"netns{port}"
+        learner = start_learner(learner_argv(endpoint, run, tmp_path / "ckpt"), tmp_path / "learner.log")
+        env = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
+        argv = ["ip", "netns", "exec", ns, sys.executable, "-m", "services.cli", "actor",
+                "--connect", endpoint, "--run", run, "--id", "remote1", "--envs", "2",
+                "--maps", "rooms:16", "--connect-timeout", "120"]  # fmt: skip
+        with open(tmp_path / "actor.log", "wb") as log:
+            actor = subprocess.Popen(argv, env=env, stdout=log, stderr=subprocess.STDOUT, cwd=os.getcwd())
+        with open_session(ZenohSettings(connect=[endpoint], connect_timeout=120, run=run)) as session:
+            deadline, got = time.monotonic() + 120, 0
+            while time.monotonic() < deadline and got < 64:
+                status = query_status(session, run, timeout=3.0)
+                got = status.counters.get("transitions/remote1", 0) if status else 0
+                time.sleep(0.5)
+        assert got >= 64, (tmp_path / "actor.log").read_text()[-2000:]
+    finally:
+        for process in (actor, learner):
+            if process is not None:
+                stop_process(process)
+        _ip("link", "del", host_if)
+        _ip("netns", "del", ns)
+    assert ns not in _ip("netns", "list").stdout
