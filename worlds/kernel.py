@@ -180,15 +180,18 @@ def _step(
     return reward
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _reset(
-    i, forced, keep_discs, field, moff, mh, mw, mcell, etab, cand, mp, x, y, th, gx, gy, rng, steps, plen,
-    pdist, outcome, ent, scell, gcell, plo, pn, ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby, ocount,
-    params, beam_c, beam_s, obs
+    i, forced, keep_discs, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent, scell,
+    gcell, plo, pn, moving, ocount, params, beam_c, beam_s, obs
 ):  # fmt: skip
     """Start a new episode for robot ``i``: entry ``forced`` (or a random pool entry when
     negative, with fresh random endpoints if the entry allows), random initial heading,
-    new discs unless ``keep_discs``; then observe."""
+    new discs unless ``keep_discs``; then observe. (Resets are rare, so the map tables may
+    stay in their tuples here.)"""
+    field, moff, mh, mw, mcell = maps
+    etab, cand = entries
+    ox, oy, orad = moving[0], moving[1], moving[4]
     j = forced if forced >= 0 else plo[i] + randint(rng, i, pn[i])
     ent[i] = j
     m = etab[j, E_MAP]
@@ -222,9 +225,8 @@ def _reset(
         count = min(int(params[P_OCOUNT]), ox.shape[1])
         spec = (count, params[P_ORAD], params[P_OSPEED], params[P_OPATROL] > 0.0, params[P_OLENGTH])
         keep_out = params[P_RADIUS] + params[P_ORAD] + params[P_OSPAWN]
-        discs = (ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby)
         ocount[i] = place_discs(
-            i, rng, field, moff[m], mh[m], width, cell, cand, c_off, c_n, x[i], y[i], keep_out, spec, discs
+            i, rng, field, moff[m], mh[m], width, cell, cand, c_off, c_n, x[i], y[i], keep_out, spec, moving
         )
     _observe(
         i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
@@ -238,11 +240,10 @@ def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, be
     """Step every robot; with ``autoreset``, a finished robot's terminal observation and results
     go to ``finals`` and it starts its next episode in the same call. Returns the number done."""
     field, moff, mh, mw, mcell = maps
-    etab, cand = entries
     x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp = robots
-    ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby, ocount = discs
+    ox, oy, orad, ocount = discs[0], discs[1], discs[4], discs[10]
+    moving = discs[:10]
     f_obs, f_outcome, f_plen, f_steps, f_pose, f_ent, f_scell, f_gcell, f_done = finals
-    moving = (ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby)
     n_done = 0
     for i in range(actions.shape[0]):
         reward[i] = _step(
@@ -268,9 +269,8 @@ def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, be
                 f_scell[i, 0], f_scell[i, 1] = scell[i, 0], scell[i, 1]
                 f_gcell[i, 0], f_gcell[i, 1] = gcell[i, 0], gcell[i, 1]
                 _reset(
-                    i, -1, False, field, moff, mh, mw, mcell, etab, cand, mp, x, y, th, gx, gy, rng, steps,
-                    plen, pdist, outcome, ent, scell, gcell, plo, pn, ox, oy, ovx, ovy, orad, opat, oax, oay,
-                    obx, oby, ocount, params, beam_c, beam_s, obs
+                    i, -1, False, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent,
+                    scell, gcell, plo, pn, moving, ocount, params, beam_c, beam_s, obs,
                 )  # fmt: skip
     return n_done
 
@@ -278,13 +278,11 @@ def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, be
 @njit(cache=True)
 def reset_some(indices, forced, keep_discs, maps, entries, robots, discs, params, beam_c, beam_s, obs):
     """Start new episodes for robots ``indices`` (see :func:`_reset` for ``forced``/``keep_discs``)."""
-    field, moff, mh, mw, mcell = maps
-    etab, cand = entries
     x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp = robots
-    ox, oy, ovx, ovy, orad, opat, oax, oay, obx, oby, ocount = discs
+    ocount = discs[10]
+    moving = discs[:10]
     for n in range(indices.shape[0]):
         _reset(
-            indices[n], forced[n], keep_discs[n], field, moff, mh, mw, mcell, etab, cand, mp, x, y, th, gx,
-            gy, rng, steps, plen, pdist, outcome, ent, scell, gcell, plo, pn, ox, oy, ovx, ovy, orad, opat,
-            oax, oay, obx, oby, ocount, params, beam_c, beam_s, obs
+            indices[n], forced[n], keep_discs[n], maps, entries, mp, x, y, th, gx, gy, rng, steps, plen,
+            pdist, outcome, ent, scell, gcell, plo, pn, moving, ocount, params, beam_c, beam_s, obs,
         )  # fmt: skip
