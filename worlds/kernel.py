@@ -117,7 +117,7 @@ def _observe(i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, o
             d = max_range
         obs[i, k] = d / max_range
     ux, uy = gx[i] - xi, gy[i] - yi
-    dist = math.hypot(ux, uy)
+    dist = math.sqrt(ux * ux + uy * uy)  # not hypot: no overflow to guard against, and 3x cheaper
     obs[i, n_beams] = dist / (dist + max_range)
     if dist > 0.0:
         obs[i, n_beams + 1] = (-ux * s + uy * c) / dist
@@ -165,7 +165,8 @@ def _step(
     if result == RUNNING:
         x[i], y[i] = x1, y1
         plen[i] += distance
-        dist = math.hypot(gx[i] - x1, gy[i] - y1)
+        ux, uy = gx[i] - x1, gy[i] - y1
+        dist = math.sqrt(ux * ux + uy * uy)
         reward += params[P_RPROG] * (pdist[i] - dist)
         pdist[i] = dist
         if dist <= params[P_GOALTOL]:

@@ -105,7 +105,7 @@ def capsule_hits_grid(field, off, height, width, cell, x0, y0, x1, y1, radius) -
     pw = width + 2
     gap = field[off + (int(y0 / cell) + 1) * pw + int(x0 / cell) + 1]
     if (
-        gap != BLOCKED and gap * (GAP_UNIT * cell) > math.hypot(x1 - x0, y1 - y0) + radius
+        gap != BLOCKED and gap * (GAP_UNIT * cell) > math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2) + radius
     ):  # nothing within reach
         return False
     r_lo = max(int((min(y0, y1) - radius) / cell), 0)
