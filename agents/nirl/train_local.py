@@ -58,10 +58,10 @@ def train_nirl(
     config: NIRLConfig | None = None,
     run: NIRLRun | None = None,
     nav: Any = None,
-    on_iteration: Callable[[dict[str, float]], None] | None = None,
+    on_iteration: Callable[[dict[str, float], NIRLLearner], None] | None = None,
 ) -> NIRLResult:
     """Warm-start on ``demos`` (``agents.demos.Demo`` list), then ``config.iterations`` rounds of
-    neural policy iteration. ``on_iteration(point)`` sees each curve point."""
+    neural policy iteration. ``on_iteration(point, learner)`` sees each curve point."""
     from worlds.vector_env import NavigationVectorEnv
 
     config = config or NIRLConfig()
@@ -92,12 +92,13 @@ def train_nirl(
         history.record(learner.iteration, reward=learner.reward_weights(), policy=learner.get_weights())
         point = _curve_point(learner, rollout.steps, time.perf_counter() - start, recent, metrics)
         point["temperature"] = policy.temperature
-        if run.eval_every and (it + 1) % run.eval_every == 0 and it + 1 < config.iterations:
+        last = it + 1 == config.iterations
+        if run.eval_every and (it + 1) % run.eval_every == 0 and not (last and run.final_eval_episodes):
             report = evaluate_greedy(learner, run.eval_episodes, VALIDATION_SEED, nav)
             point["eval_success"] = report.metrics["unseen"].success.value
         result.curve.append(point)
         if on_iteration is not None:
-            on_iteration(point)
+            on_iteration(point, learner)
         if bar is not None:
             bar.update(1)
             bar.set_postfix_str(_postfix(point))
