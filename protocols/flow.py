@@ -24,6 +24,8 @@ class Ack(Message):
     KIND: ClassVar[str] = "ack"
     VERSION: ClassVar[int] = 1
     actor: str
+    """The batch's envelope sender (the actor incarnation, ``<id>#<start>``): a restarted actor
+    ignores acknowledgements meant for its predecessor's seqs."""
     accepted_seq: int
     """Envelope ``seq`` of that batch."""
     policy_version: int

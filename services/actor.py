@@ -134,7 +134,7 @@ class Actor:
         except ProtocolError as exc:
             log.warning("rejected an acknowledgement: %s", exc)
             return
-        if isinstance(ack, Ack):
+        if isinstance(ack, Ack) and ack.actor == self.sender:  # not a previous incarnation's ack
             self.learner_version = max(self.learner_version, ack.policy_version)
             self.outbox.on_ack(ack.accepted_seq)
 

@@ -267,7 +267,7 @@ class LearnerService:
             )
             return
         if self.durable is not None and not self._replaying and not self.durable.admit(batch):
-            self._ack(item.name, batch.seq)  # a resend of a stored batch: acknowledge it again
+            self._ack(item.name, batch.seq, batch.sender)  # a resend of a stored batch: ack it again
             return
         n = self.learner.add(batch)
         self.limiter.inserted(n)
@@ -276,14 +276,16 @@ class LearnerService:
         self.actors.setdefault(item.name, ActorStats()).add(n, batch.seq, item.arrived)
         self._count("transitions_received", n)
         self._count("batches_received")
-        self._ack(item.name, batch.seq)
+        self._ack(item.name, batch.seq, batch.sender)
 
-    def _ack(self, actor: str, seq: int) -> None:
+    def _ack(self, actor: str, seq: int, incarnation: str) -> None:
+        """Acknowledge batch ``seq`` of ``incarnation`` (its envelope sender, ``<id>#<start>``), so a
+        restarted actor with the same id never takes its predecessor's acks for its own seqs."""
         self.ack_seq += 1
         ack = Ack(
             sender=self.sender,
             seq=self.ack_seq,
-            actor=actor,
+            actor=incarnation,
             accepted_seq=seq,
             policy_version=self.learner.version,
         )

@@ -52,7 +52,7 @@ class TracedActor:
 
     def _on_ack(self, sample) -> None:
         ack = decode(sample.payload.to_bytes())
-        if isinstance(ack, Ack):
+        if isinstance(ack, Ack) and ack.actor == self.sender:
             with self._lock:
                 self.acked_seqs.add(ack.accepted_seq)
             self.outbox.on_ack(ack.accepted_seq)
