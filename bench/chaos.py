@@ -1,0 +1,274 @@
+"""Chaos benchmark: SIGKILLed learners, a restarted actor and router, a flooding actor - nothing
+acknowledged may be lost. Then ingest throughput with acknowledgements + write-ahead log on vs off.
+
+Processes: a stand-alone router, a learner (client, checkpoints every 2 s), traceable actors
+in this process (tests/reliability_helpers.TracedActor: unique ids in the rewards, the real
+Outbox, one Zenoh session each) and a flooder publishing the same big batch without waiting.
+At the end the learner is stopped with SIGTERM and its final checkpoint is read back:
+every acknowledged id must be stored exactly once.
+
+    python bench/chaos.py --actors 3 --kills 3 --seconds 45
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from protocols.codec import encode
+from services.checkpoint import CheckpointDir
+from services.status import query_status
+from services.transport import ZenohSettings, open_session
+from tests.conftest import free_port
+from tests.reliability_helpers import TracedActor, start_learner, stop_process, stored_ids
+
+
+def parse_args() -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--actors", type=int, default=3, help="traceable actors (2-4)")
+    p.add_argument("--kills", type=int, default=3, help="learner SIGKILLs")
+    p.add_argument("--seconds", type=float, default=45.0, help="length of the chaos phase")
+    p.add_argument("--throughput-seconds", type=float, default=8.0, help="each throughput measurement")
+    return p.parse_args()
+
+
+def peak_rss_mb(pid: int) -> float:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
+def learner_argv(endpoint: str, run: str, ckpt: Path | None, *extra: str) -> list[str]:
+    return [
+        sys.executable, "-m", "services.cli", "learner", "--connect", endpoint, "--mode", "client",
+        "--run", run, "--checkpoint-dir", str(ckpt) if ckpt else "", "--hidden-sizes", "16",
+        "--batch-size", "16", "--learning-starts", "64", "--broadcast-every", "20", "--log-every", "5",
+        "--connect-timeout", "120", *extra,
+    ]  # fmt: skip
+
+
+def start_router(endpoint: str, log: Path) -> subprocess.Popen:
+    with open(log, "ab") as fh:
+        return subprocess.Popen(
+            [sys.executable, "-m", "services.cli", "router", "--listen", endpoint], stdout=fh, stderr=fh
+        )
+
+
+class ActorThread:
+    """One traceable actor with its own session, sending until stopped."""
+
+    def __init__(self, endpoint: str, run: str, name: str, first_id: int) -> None:
+        self.session = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
+        self.actor = TracedActor(self.session, run, name, per_batch=16, first_id=first_id)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def _loop(self) -> None:
+        while not self.stop.is_set():
+            self.actor.send_one(self.stop)
+            time.sleep(0.005)
+
+    def drain(self, timeout: float) -> None:
+        self.stop.set()
+        self.thread.join(10)
+        deadline = time.monotonic() + timeout
+        flush_stop = threading.Event()
+        while len(self.actor.outbox) and time.monotonic() < deadline:
+            threading.Timer(1.0, flush_stop.set).start()
+            self.actor.outbox.flush(flush_stop)
+            flush_stop.clear()
+            time.sleep(0.2)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(10)
+        self.actor.close()
+        self.session.close()
+
+
+def chaos(args, root: Path) -> dict:
+    endpoint, run = f"tcp/127.0.0.1:{free_port()}", "chaos"
+    ckpt = root / "ckpt"
+    router = start_router(endpoint, root / "router.log")
+    argv = learner_argv(endpoint, run, ckpt, "--checkpoint-every", "2")
+    learner = start_learner(argv, root / "learner.log")
+    peak = 0.0
+    actors = [ActorThread(endpoint, run, f"a{i}", first_id=1 + i * 1_000_000) for i in range(args.actors)]
+    retired: list[ActorThread] = []
+    flood_session = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
+    flooder = TracedActor(flood_session, run, "flood", per_batch=512, first_id=9_000_000)
+    flood_payload = encode(flooder.make_batch())
+    flood_stop = threading.Event()
+
+    def flood() -> None:
+        while not flood_stop.is_set():
+            flooder.publisher.put(flood_payload)
+
+    flood_thread = threading.Thread(target=flood, daemon=True)
+    flood_thread.start()
+    watcher = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
+    resume_s: list[float] = []
+
+    def acks_total() -> int:
+        return sum(len(a.actor.acked_seqs) for a in actors + retired)
+
+    start = time.monotonic()
+    events = [("kill", start + args.seconds * (k + 1) / (args.kills + 2)) for k in range(args.kills)]
+    events += [("actor", start + args.seconds * 0.55), ("router", start + args.seconds * 0.75)]
+    for what, at in sorted(events, key=lambda e: e[1]):
+        while time.monotonic() < at:
+            peak = max(peak, peak_rss_mb(learner.pid))
+            time.sleep(0.2)
+        if what == "kill":
+            peak = max(peak, peak_rss_mb(learner.pid))
+            learner.send_signal(signal.SIGKILL)
+            learner.wait()
+            before = acks_total()
+            t0 = time.monotonic()
+            learner = start_learner(argv, root / "learner.log")
+            while acks_total() == before and time.monotonic() - t0 < 120:
+                time.sleep(0.05)
+            resume_s.append(time.monotonic() - t0)
+            print(f"learner SIGKILLed and restarted: acknowledging again after {resume_s[-1]:.1f} s")
+        elif what == "actor":
+            old = actors.pop(1)
+            old.close()  # a crash: its unacknowledged batches die with it (never acknowledged, not lost)
+            retired.append(old)
+            actors.append(ActorThread(endpoint, run, "a1", first_id=1 + args.actors * 1_000_000))
+            print("actor a1 restarted (new incarnation)")
+        else:
+            router.send_signal(signal.SIGTERM)
+            router.wait(30)
+            router = start_router(endpoint, root / "router.log")
+            print("router restarted")
+    while time.monotonic() < start + args.seconds:
+        time.sleep(0.2)
+    flood_stop.set()
+    flood_thread.join(10)
+    for a in actors:
+        a.drain(60)
+    status = query_status(watcher, run, timeout=5.0)
+    peak = max(peak, peak_rss_mb(learner.pid))
+    stop_process(learner)
+    stored = stored_ids(CheckpointDir(ckpt).latest())
+    unique, counts = np.unique(stored, return_counts=True)
+    everyone = actors + retired
+    sent = np.concatenate([a.actor.sent_ids() for a in everyone])
+    acked = np.concatenate([a.actor.acked_ids() for a in everyone])
+    counters = status.counters if status else {}
+    result = {
+        "actors": args.actors,
+        "learner_kills": args.kills,
+        "transitions_sent": int(sent.size),
+        "transitions_acknowledged": int(acked.size),
+        "transitions_stored": int(unique.size),
+        "stored_twice": int((counts > 1).sum()),
+        "acknowledged_lost": int(np.setdiff1d(acked, unique).size),
+        "unacknowledged_at_actor_crash": int(sum(len(a.actor.outbox) for a in retired)),
+        "duplicates_dropped": int(counters.get("duplicates_dropped", -1)),
+        "resent_batches": int(sum(a.actor.outbox.resent for a in everyone)),
+        "flood_dropped": int(counters.get("dropped/sender_full/flood", 0)),
+        "learner_peak_rss_mb": round(peak, 1),
+        "resume_seconds": [round(s, 2) for s in resume_s],
+        "policy_version_final": int(status.versions["nnql"]) if status else -1,
+    }
+    for a in actors:
+        a.close()
+    for s in (watcher, flood_session):
+        s.close()
+    stop_process(router)
+    return result
+
+
+def ingest_rate(root: Path, seconds: float, durable: bool) -> float:
+    """Transitions/s the learner stores from 2 actors: acks + WAL (fsync always) vs no WAL, no waiting."""
+    endpoint, run = f"tcp/127.0.0.1:{free_port()}", f"tp{int(durable)}"
+    ckpt = root / f"tp{int(durable)}" if durable else None
+    argv = learner_argv(endpoint, run, ckpt, "--utd-ratio", "0.0005", "--checkpoint-every", "0")
+    argv[argv.index("--connect") : argv.index("--connect") + 2] = ["--listen", endpoint]
+    argv[argv.index("--mode") + 1] = "router"
+    learner = start_learner(argv, root / f"tp{int(durable)}.log")
+    session = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
+    try:
+        actors = [
+            TracedActor(session, run, f"t{i}", per_batch=128, first_id=1 + i * 1_000_000) for i in (0, 1)
+        ]
+        stop = threading.Event()
+
+        def send(actor: TracedActor) -> None:
+            while not stop.is_set():
+                if durable:
+                    actor.send_one(stop)
+                else:
+                    actor.publisher.put(encode(actor.make_batch()))
+                    time.sleep(
+                        0.0005
+                    )  # without acks nothing paces the sender: keep the inbox from overflowing
+
+        while query_status(session, run, timeout=2.0) is None:
+            time.sleep(0.2)
+        threads = [threading.Thread(target=send, args=(a,), daemon=True) for a in actors]
+        for t in threads:
+            t.start()
+        time.sleep(2.0)  # warm-up
+        first = query_status(session, run, timeout=5.0)
+        t0 = time.monotonic()
+        time.sleep(seconds)
+        last = query_status(session, run, timeout=5.0)
+        elapsed = time.monotonic() - t0
+        stop.set()
+        for t in threads:
+            t.join(10)
+        n = last.counters.get("transitions_received", 0) - first.counters.get("transitions_received", 0)
+        for a in actors:
+            a.close()
+        return n / elapsed
+    finally:
+        session.close()
+        stop_process(learner)
+
+
+def main() -> None:
+    args = parse_args()
+    with tempfile.TemporaryDirectory(prefix="navlearn-chaos-") as tmp:
+        root = Path(tmp)
+        result = chaos(args, root)
+        print(
+            f"sent {result['transitions_sent']}, acknowledged {result['transitions_acknowledged']}, "
+            f"stored {result['transitions_stored']}, lost {result['acknowledged_lost']}, "
+            f"stored twice {result['stored_twice']}, duplicates dropped {result['duplicates_dropped']}, "
+            f"peak RSS {result['learner_peak_rss_mb']} MB, resume {result['resume_seconds']} s"
+        )
+        off = ingest_rate(root, args.throughput_seconds, durable=False)
+        on = ingest_rate(root, args.throughput_seconds, durable=True)
+        result.update(
+            {
+                "ingest_per_s_acks_wal_off": round(off, 1),
+                "ingest_per_s_acks_wal_on": round(on, 1),
+                "ingest_ratio_on_vs_off": round(on / off, 3) if off else None,
+            }
+        )
+        print(
+            f"ingest: acks+WAL off {off:.0f} transitions/s, on {on:.0f} transitions/s, ratio {on / off:.2f}"
+        )
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
