@@ -180,7 +180,7 @@ def chaos(args, root: Path) -> dict:
         "transitions_stored": int(unique.size),
         "stored_twice": int((counts > 1).sum()),
         "acknowledged_lost": int(np.setdiff1d(acked, unique).size),
-        "unacknowledged_at_actor_crash": int(sum(len(a.actor.outbox) for a in retired)),
+        "batches_unacknowledged_at_actor_crash": int(sum(len(a.actor.outbox) for a in retired)),
         "duplicates_dropped": int(counters.get("duplicates_dropped", -1)),
         "resent_batches": int(sum(a.actor.outbox.resent for a in everyone)),
         "flood_dropped": int(counters.get("dropped/sender_full/flood", 0)),
@@ -196,14 +196,16 @@ def chaos(args, root: Path) -> dict:
     return result
 
 
-def ingest_rate(root: Path, seconds: float, durable: bool) -> float:
-    """Transitions/s the learner stores from 2 actors: acks + WAL (fsync always) vs no WAL, no waiting."""
-    endpoint, run = f"tcp/127.0.0.1:{free_port()}", f"tp{int(durable)}"
-    ckpt = root / f"tp{int(durable)}" if durable else None
+def ingest_rate(root: Path, seconds: float, acks: bool, wal: bool) -> float:
+    """Transitions/s the learner stores from 2 actors, with or without waiting for acknowledgements
+    (window 4) and with or without the write-ahead log (fsync always)."""
+    name = f"tp{int(acks)}{int(wal)}"
+    endpoint, run = f"tcp/127.0.0.1:{free_port()}", name
+    ckpt = root / name if wal else None
     argv = learner_argv(endpoint, run, ckpt, "--utd-ratio", "0.0005", "--checkpoint-every", "0")
     argv[argv.index("--connect") : argv.index("--connect") + 2] = ["--listen", endpoint]
     argv[argv.index("--mode") + 1] = "router"
-    learner = start_learner(argv, root / f"tp{int(durable)}.log")
+    learner = start_learner(argv, root / f"{name}.log")
     session = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
     try:
         actors = [
@@ -213,7 +215,7 @@ def ingest_rate(root: Path, seconds: float, durable: bool) -> float:
 
         def send(actor: TracedActor) -> None:
             while not stop.is_set():
-                if durable:
+                if acks:
                     actor.send_one(stop)
                 else:
                     actor.publisher.put(encode(actor.make_batch()))
@@ -255,17 +257,21 @@ def main() -> None:
             f"stored twice {result['stored_twice']}, duplicates dropped {result['duplicates_dropped']}, "
             f"peak RSS {result['learner_peak_rss_mb']} MB, resume {result['resume_seconds']} s"
         )
-        off = ingest_rate(root, args.throughput_seconds, durable=False)
-        on = ingest_rate(root, args.throughput_seconds, durable=True)
+        off = ingest_rate(root, args.throughput_seconds, acks=False, wal=False)
+        acks_only = ingest_rate(root, args.throughput_seconds, acks=True, wal=False)
+        on = ingest_rate(root, args.throughput_seconds, acks=True, wal=True)
         result.update(
             {
                 "ingest_per_s_acks_wal_off": round(off, 1),
+                "ingest_per_s_acks_on_wal_off": round(acks_only, 1),
                 "ingest_per_s_acks_wal_on": round(on, 1),
                 "ingest_ratio_on_vs_off": round(on / off, 3) if off else None,
+                "ingest_ratio_wal_on_vs_off_with_acks": round(on / acks_only, 3) if acks_only else None,
             }
         )
         print(
-            f"ingest: acks+WAL off {off:.0f} transitions/s, on {on:.0f} transitions/s, ratio {on / off:.2f}"
+            f"ingest: acks+WAL off {off:.0f} transitions/s, acks only {acks_only:.0f}/s, "
+            f"acks+WAL {on:.0f}/s; ratio {on / off:.2f} (vs acks only {on / acks_only:.2f})"
         )
     print(json.dumps(result))
 
