@@ -183,3 +183,20 @@ def test_bad_arguments():
         NavigationEnv(maps="nowhere.map")
     with pytest.raises(RuntimeError, match="reset"):
         make().step(0)
+
+
+@pytest.mark.parametrize(
+    "build",
+    [
+        lambda: RobotConfig(n_actions=0),
+        lambda: RobotConfig(radius=0.0),
+        lambda: SensorConfig(n_beams=0),
+        lambda: SensorConfig(dropout_prob=1.5),
+        lambda: ObstacleConfig(mode="orbit"),
+        lambda: ObstacleConfig(count=-1),
+        lambda: NavConfig(max_steps=0),
+    ],
+)
+def test_config_rejects_bad_values(build):
+    with pytest.raises(ValueError, match="must"):
+        build()

@@ -32,6 +32,12 @@ class RobotConfig:
     heading_choices: int = 8
     """initial heading drawn uniformly among this many compass directions (0: uniform in [-pi, pi))"""
 
+    def __post_init__(self) -> None:
+        _check(self.n_actions >= 1, f"n_actions must be >= 1, got {self.n_actions}")
+        _check(self.step > 0 and self.radius > 0, "step and radius must be positive")
+        _check(self.trans_noise >= 0 and self.rot_noise >= 0, "noise standard deviations must be >= 0")
+        _check(self.heading_choices >= 0, f"heading_choices must be >= 0, got {self.heading_choices}")
+
     @property
     def turns(self) -> np.ndarray:
         """Heading change of each action (rad), shape ``(n_actions,)``."""
@@ -54,6 +60,12 @@ class SensorConfig:
     """standard deviation of the Gaussian noise on each range (m), result clipped to [0, max_range]"""
     dropout_prob: float = 0.0
     """probability that a beam returns nothing, read as ``max_range``"""
+
+    def __post_init__(self) -> None:
+        _check(self.n_beams >= 1, f"n_beams must be >= 1, got {self.n_beams}")
+        _check(0 < self.fov <= 2 * math.pi, f"fov must be in (0, 2*pi], got {self.fov}")
+        _check(self.max_range > 0 and self.noise_std >= 0, "max_range must be positive, noise_std >= 0")
+        _check(0 <= self.dropout_prob <= 1, f"dropout_prob must be in [0, 1], got {self.dropout_prob}")
 
     @property
     def beam_angles(self) -> np.ndarray:
@@ -100,8 +112,13 @@ class ObstacleConfig:
     """no disc starts closer than this to the robot's start (m, between the disc edges)"""
 
     def __post_init__(self) -> None:
-        if self.mode not in ("bounce", "patrol"):
-            raise ValueError(f"obstacle mode must be 'bounce' or 'patrol', got {self.mode!r}")
+        _check(
+            self.mode in ("bounce", "patrol"),
+            f"obstacle mode must be 'bounce' or 'patrol', got {self.mode!r}",
+        )
+        _check(
+            self.count >= 0 and self.radius > 0 and self.speed >= 0, "need count >= 0, radius > 0, speed >= 0"
+        )
 
 
 @dataclass(frozen=True)
@@ -120,3 +137,12 @@ class NavConfig:
     """number of maps drawn once from a map spec; episodes pick among them (see worlds.tasks)"""
     pool_seed: int = 0
     """seed of that draw (evaluation sets use other generator seeds, see worlds.tasks)"""
+
+    def __post_init__(self) -> None:
+        _check(self.max_steps >= 1 and self.pool_size >= 1, "max_steps and pool_size must be >= 1")
+        _check(self.goal_tolerance > 0, f"goal_tolerance must be positive, got {self.goal_tolerance}")
+
+
+def _check(ok: bool, message: str) -> None:
+    if not ok:
+        raise ValueError(message)
