@@ -117,7 +117,8 @@ class ObstacleConfig:
             f"obstacle mode must be 'bounce' or 'patrol', got {self.mode!r}",
         )
         _check(
-            self.count >= 0 and self.radius > 0 and self.speed >= 0, "need count >= 0, radius > 0, speed >= 0"
+            self.count >= 0 and self.radius > 0 and self.speed >= 0,
+            "obstacle count and speed must be >= 0, radius > 0",
         )
 
 
