@@ -42,7 +42,7 @@ class LocalTrainConfig:
     """seeds the env, the learner and the exploration"""
     out: str = "runs/nnql-local"
     """output directory: policy (model.safetensors + config.json), curve.png, curve.jsonl, summary.json"""
-    eval_every: int = 50_000
+    eval_every: int = 25_000
     """robot-steps between greedy evaluations on held-out maps (0: only the final one)"""
     eval_episodes: int = 100
     """episodes of each periodic evaluation (validation set, seed 1)"""

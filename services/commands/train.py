@@ -24,13 +24,13 @@ def register(subparsers) -> None:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--local", action="store_true", help="train in this process (required)")
-    parser.add_argument("--steps", type=int, default=300_000, help="robot-steps to collect (all robots)")
+    parser.add_argument("--steps", type=int, default=200_000, help="robot-steps to collect (all robots)")
     parser.add_argument("--envs", type=int, default=16, help="robots stepped together")
     parser.add_argument("--maps", default="mixed:16", help="training map spec: mixed:16, rooms:20, x.map ...")
     parser.add_argument("--out", default="runs/nnql-local", help="output directory")
     parser.add_argument("--seed", type=int, default=0, help="seed of env, network and exploration")
     parser.add_argument(
-        "--eval-every", type=int, default=50_000, help="robot-steps between validation evaluations (0: none)"
+        "--eval-every", type=int, default=25_000, help="robot-steps between validation evaluations (0: none)"
     )
     parser.add_argument(
         "--eval-episodes",
