@@ -200,3 +200,20 @@ def test_bad_arguments():
 def test_config_rejects_bad_values(build):
     with pytest.raises(ValueError, match="must"):
         build()
+
+
+def test_generated_patrols_are_free_segments():
+    from worlds.robot import collides
+
+    config = NavConfig(obstacles=ObstacleConfig(count=4, mode="patrol", radius=0.3), pool_size=8)
+    env = NavigationEnv(config, maps="rects:16")
+    moving = 0
+    for seed in range(5):
+        env.reset(seed=seed)
+        ox, oy, ovx, ovy, _, patrol, ax, ay, bx, by, count = (a[0] for a in env.batch.disc_arrays)
+        grid = env.batch.task(0).grid
+        for k in range(count):
+            assert patrol[k] and (ax[k], ay[k]) == (ox[k], oy[k])
+            assert not collides(grid, ax[k], ay[k], bx[k], by[k], 0.3)
+            moving += bool(np.hypot(ovx[k], ovy[k]) > 0)
+    assert moving >= 15  # boxed-in discs stand still, most find a free direction

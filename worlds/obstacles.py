@@ -104,15 +104,24 @@ def place_discs(
             ovx[i, k], ovy[i, k] = speed * dx, speed * dy
             opat[i, k] = patrol
             oax[i, k], oay[i, k], obx[i, k], oby[i, k] = x, y, x, y
-            if patrol:  # longest free segment along the direction, in quarter-metre steps
-                length = 0.0
-                while length + 0.25 <= patrol_length:
-                    ex, ey = x + (length + 0.25) * dx, y + (length + 0.25) * dy
-                    if capsule_hits_grid(field, off, height, width, cell, x, y, ex, ey, radius):
+            if patrol:  # the longest of 8 random directions' free segments, in quarter-metre steps
+                best = 0.0
+                for _turn in range(8):
+                    length = 0.0
+                    while length + 0.25 <= patrol_length:
+                        ex, ey = x + (length + 0.25) * dx, y + (length + 0.25) * dy
+                        if capsule_hits_grid(field, off, height, width, cell, x, y, ex, ey, radius):
+                            break
+                        length += 0.25
+                    if length > best:
+                        best = length
+                        ovx[i, k], ovy[i, k] = speed * dx, speed * dy
+                        obx[i, k], oby[i, k] = x + length * dx, y + length * dy
+                    if best >= patrol_length:
                         break
-                    length += 0.25
-                obx[i, k], oby[i, k] = x + length * dx, y + length * dy
-                if length < speed:
+                    angle = 2.0 * math.pi * uniform(rng, i)
+                    dx, dy = math.cos(angle), math.sin(angle)
+                if best < speed:  # boxed in: it stands still
                     ovx[i, k], ovy[i, k] = 0.0, 0.0
             placed += 1
             break
