@@ -117,7 +117,7 @@ def _observe(i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, o
             d = max_range
         obs[i, k] = d / max_range
     ux, uy = gx[i] - xi, gy[i] - yi
-    dist = math.sqrt(ux * ux + uy * uy)  # not hypot: no overflow to guard against, and 3x cheaper
+    dist = math.sqrt(ux * ux + uy * uy)  # not hypot: nothing to overflow here, and cheaper
     obs[i, n_beams] = dist / (dist + max_range)
     if dist > 0.0:
         obs[i, n_beams + 1] = (-ux * s + uy * c) / dist
