@@ -113,3 +113,15 @@ def test_arena_dynamics_build(arena_paths):
     dyn = GridDynamics.build(grid, (46, 47))
     assert dyn.n_states == 2054 and dyn.successor.shape == (2054, 8)
     assert (dyn.successor >= 0).all() and (dyn.successor < dyn.n_states).all()
+
+
+def test_importing_worlds_registers_both_envs():
+    import subprocess
+    import sys
+
+    code = (
+        "import gymnasium as gym, sys, worlds\n"
+        "assert 'worlds.gridworld' not in sys.modules\n"
+        "assert {'navlearn/Navigation-v0', 'navlearn/GridWorld-v0'} <= set(gym.registry)\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
