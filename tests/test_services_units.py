@@ -245,3 +245,13 @@ def test_bad_environment_value_is_one_clear_error(monkeypatch):
     monkeypatch.setenv("T_DEMO_ENVS", "many")
     with pytest.raises(OptionError, match="T_DEMO_ENVS='many' is not a valid int"):
         options_from_args(DemoConfig, _parse([]), "T_DEMO")
+
+
+@pytest.mark.parametrize("command", ["learner", "up"])
+def test_distributed_commands_refuse_sarsa(command, monkeypatch, capsys):
+    from services.cli import main
+
+    monkeypatch.setenv("NAVLEARN_NNQL_SARSA", "1")
+    monkeypatch.setenv("NAVLEARN_NNQL_DOUBLE_Q", "0")
+    assert main([command]) == 2
+    assert "navlearn train --local --sarsa" in capsys.readouterr().err

@@ -25,6 +25,13 @@ existing router as a client instead. Logs to stdout.
 """
 
 
+# Transition batches on the wire carry no next action, which SARSA bootstraps on.
+SARSA_LOCAL_ONLY = (
+    "the SARSA variant needs the next action taken, which transition batches do not carry; "
+    "use `navlearn train --local --sarsa` (unset NAVLEARN_NNQL_SARSA)"
+)
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "learner",
@@ -33,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_options(parser, LearnerConfig, "NAVLEARN_LEARNER", "learner service")
-    add_options(parser, NNQLConfig, "NAVLEARN_NNQL", "NNQL hyper-parameters")
+    add_options(parser, NNQLConfig, "NAVLEARN_NNQL", "NNQL hyper-parameters", skip=("sarsa",))
     parser.add_argument(
         "--nirl-config",
         metavar="FILE",
@@ -56,6 +63,8 @@ def main(args: argparse.Namespace) -> int:
     try:
         config = options_from_args(LearnerConfig, args, "NAVLEARN_LEARNER")
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL")
+        if nnql.sarsa:
+            raise ValueError(SARSA_LOCAL_ONLY)
         nirl = nirl_config(args, nnql.seed) if config.nirl else None
         settings = settings_from_args(args)
         if args.zenoh_mode is None and settings.connect:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from agents.nnql.config import NNQLConfig
+from services.commands.learner import SARSA_LOCAL_ONLY
 from services.options import add_options
 from services.up import UpConfig
 
@@ -30,7 +31,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_options(parser, UpConfig, "NAVLEARN_UP", "run")
     add_options(
-        parser, NNQLConfig, "NAVLEARN_NNQL", "NNQL hyper-parameters (passed to the learner)", skip=("seed",)
+        parser,
+        NNQLConfig,
+        "NAVLEARN_NNQL",
+        "NNQL hyper-parameters (passed to the learner)",
+        skip=("seed", "sarsa"),
     )
     parser.set_defaults(func=main)
 
@@ -51,6 +56,8 @@ def main(args: argparse.Namespace) -> int:
     try:
         config = options_from_args(UpConfig, args, "NAVLEARN_UP")
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=config.seed)
+        if nnql.sarsa:
+            raise OptionError(SARSA_LOCAL_ONLY)
     except OptionError as exc:
         print(f"navlearn up: {exc}", file=sys.stderr)
         return 2
