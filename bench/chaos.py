@@ -40,6 +40,8 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--kills", type=int, default=3, help="learner SIGKILLs")
     p.add_argument("--seconds", type=float, default=45.0, help="length of the chaos phase")
     p.add_argument("--throughput-seconds", type=float, default=8.0, help="each throughput measurement")
+    p.add_argument("--wal-fsync", default="always", help="learner --wal-fsync in the throughput run")
+    p.add_argument("--only-ingest", action="store_true", help="skip the chaos phase, measure ingest only")
     return p.parse_args()
 
 
@@ -196,13 +198,14 @@ def chaos(args, root: Path) -> dict:
     return result
 
 
-def ingest_rate(root: Path, seconds: float, acks: bool, wal: bool) -> float:
+def ingest_rate(root: Path, seconds: float, acks: bool, wal: bool, fsync: str = "always") -> float:
     """Transitions/s the learner stores from 2 actors, with or without waiting for acknowledgements
-    (window 4) and with or without the write-ahead log (fsync always)."""
+    (window 4) and with or without the write-ahead log (``fsync`` policy)."""
     name = f"tp{int(acks)}{int(wal)}"
     endpoint, run = f"tcp/127.0.0.1:{free_port()}", name
     ckpt = root / name if wal else None
-    argv = learner_argv(endpoint, run, ckpt, "--utd-ratio", "0.0005", "--checkpoint-every", "0")
+    extra = ("--utd-ratio", "0.0005", "--checkpoint-every", "0", "--wal-fsync", fsync)
+    argv = learner_argv(endpoint, run, ckpt, *extra)
     argv[argv.index("--connect") : argv.index("--connect") + 2] = ["--listen", endpoint]
     argv[argv.index("--mode") + 1] = "router"
     learner = start_learner(argv, root / f"{name}.log")
@@ -250,16 +253,17 @@ def main() -> None:
     args = parse_args()
     with tempfile.TemporaryDirectory(prefix="navlearn-chaos-") as tmp:
         root = Path(tmp)
-        result = chaos(args, root)
-        print(
-            f"sent {result['transitions_sent']}, acknowledged {result['transitions_acknowledged']}, "
-            f"stored {result['transitions_stored']}, lost {result['acknowledged_lost']}, "
-            f"stored twice {result['stored_twice']}, duplicates dropped {result['duplicates_dropped']}, "
-            f"peak RSS {result['learner_peak_rss_mb']} MB, resume {result['resume_seconds']} s"
-        )
+        result = {"wal_fsync": args.wal_fsync} if args.only_ingest else chaos(args, root)
+        if not args.only_ingest:
+            print(
+                f"sent {result['transitions_sent']}, acknowledged {result['transitions_acknowledged']}, "
+                f"stored {result['transitions_stored']}, lost {result['acknowledged_lost']}, "
+                f"stored twice {result['stored_twice']}, duplicates dropped {result['duplicates_dropped']}, "
+                f"peak RSS {result['learner_peak_rss_mb']} MB, resume {result['resume_seconds']} s"
+            )
         off = ingest_rate(root, args.throughput_seconds, acks=False, wal=False)
         acks_only = ingest_rate(root, args.throughput_seconds, acks=True, wal=False)
-        on = ingest_rate(root, args.throughput_seconds, acks=True, wal=True)
+        on = ingest_rate(root, args.throughput_seconds, acks=True, wal=True, fsync=args.wal_fsync)
         result.update(
             {
                 "ingest_per_s_acks_wal_off": round(off, 1),
