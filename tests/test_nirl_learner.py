@@ -54,18 +54,18 @@ class Episode:
 
 
 def test_map_refinement_down_weights_injected_wrong_actions():
-    obs, expert = goal_seeking_steps(1200, seed=0)
+    obs, expert = goal_seeking_steps(800, seed=0)
     rng = np.random.default_rng(1)
     injected = rng.random(len(expert)) < 0.25
     shift = rng.integers(1, 5, size=len(expert))
     recorded = np.where(injected, (expert + shift) % 5, expert)
-    learner = NIRLLearner(NIRLConfig(**SMALL, warmstart_updates=400, seed=0))
-    episodes = [Episode(obs[i : i + 21], recorded[i : i + 20]) for i in range(0, 1180, 20)]
+    learner = NIRLLearner(NIRLConfig(**SMALL, warmstart_updates=300, seed=0))
+    episodes = [Episode(obs[i : i + 21], recorded[i : i + 20]) for i in range(0, 780, 20)]
     learner.add_demos(episodes)
     learner.warm_start()
     steps, refined = learner.refine_all()
     n = len(steps)  # episode e holds rows 20 e .. 20 e + 19: stored step i is row i
-    assert n == 1180 and torch.equal(steps["action"], torch.as_tensor(recorded[:n]))
+    assert n == 780 and torch.equal(steps["action"], torch.as_tensor(recorded[:n]))
     wrong = torch.as_tensor(injected[:n])
     true_action = torch.as_tensor(expert[:n])
     # weight left on the recorded action: its posterior, or 0 where it was relabelled
