@@ -54,8 +54,9 @@ Neural policy iteration (``learner.NIRLLearner``, ``train_local.train_nirl``)
     policy improvement = the softmax over the new Q. The environment's reward is never
     used. The weights of both networks are recorded every iteration (``weights.py``).
 
-Modules: config (NIRLConfig) - networks - losses (pure maths) - learner (NIRLLearner) -
-weights (history and plot) - train_local (``navlearn nirl train``).
+Modules: config (NIRLConfig, NIRLRun) - networks - losses (pure maths) - buffers - learner
+(NIRLLearner) - persistence (policy files, checkpoints) - weights (history and plot) -
+train_local (``navlearn nirl train``).
 """
 
 from agents.nirl.config import NIRLConfig

@@ -1,4 +1,5 @@
-"""NIRL hyper-parameters: one flat dataclass (thesis ch. 5, cleanrl-style)."""
+"""NIRL hyper-parameters (NIRLConfig, one flat dataclass, cleanrl-style) and the local run's settings
+(NIRLRun: environment, evaluation, outputs of ``navlearn nirl train``)."""
 
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ Neural policy iteration, each round:
 2. ``NIRLLearner.iterate()``: MAP-refined max-margin reward updates, then Q-learning
    on replayed experience relabelled with the learned reward (policy evaluation);
 3. the policy takes the new Q-network (policy improvement), and the weights of both
-   networks are recorded.
+   networks are recorded (iteration 0 of the history is the warm-started pair).
 The environment's own reward is never used for learning; the greedy policy is evaluated
 on held-out maps to draw the learning curve.
 """
