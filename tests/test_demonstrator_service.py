@@ -23,6 +23,7 @@ from protocols import keys
 from protocols.codec import decode, encode
 from protocols.messages import DemoBatch
 from services.demonstrator import demo_batch
+from services.status import query_status
 from services.teleop import heading_glyph, render_frame
 
 CORRIDOR = """\
@@ -68,24 +69,31 @@ def test_render_frame_draws_map_goal_beams_and_robot():
 
 
 @pytest.fixture
-def network():
-    """This process is the router, a learner stand-in (liveliness token) and a demos subscriber."""
-    from services.transport import ZenohSettings, declare_alive, open_session
+def network(tmp_path):
+    """A real learner (hosting the router) and this process as a second demos subscriber."""
+    from services.transport import ZenohSettings, open_session
 
     port = free_port()
     endpoint, run = f"tcp/127.0.0.1:{port}", f"dm{port}"
-    session = open_session(ZenohSettings(mode="router", listen=[endpoint], run=run))
-    token = declare_alive(session, run, "learner", "stand-in")
-    received: queue.Queue = queue.Queue()
-    subscriber = session.declare_subscriber(
-        keys.everything(run, "demos"), lambda s: received.put((str(s.key_expr), decode(s.payload.to_bytes())))
-    )
+    argv = [sys.executable, "-m", "services.cli", "learner", "--listen", endpoint, "--run", run,
+            "--checkpoint-dir", "", "--hidden-sizes", "16"]  # fmt: skip
+    log = open(tmp_path / "learner.log", "wb")  # noqa: SIM115 - closed below
+    learner = subprocess.Popen(argv, env=clean_env(), stdout=log, stderr=subprocess.STDOUT)
+    session = None
     try:
-        yield endpoint, run, received
-    finally:
+        session = open_session(ZenohSettings(mode="client", connect=[endpoint], run=run, connect_timeout=120))
+        received: queue.Queue = queue.Queue()
+        subscriber = session.declare_subscriber(
+            keys.everything(run, "demos"),
+            lambda s: received.put((str(s.key_expr), decode(s.payload.to_bytes()))),
+        )
+        yield endpoint, run, received, session
         subscriber.undeclare()
-        token.undeclare()
-        session.close()
+    finally:
+        if session is not None:
+            session.close()
+        finish(learner, timeout=0)
+        log.close()
 
 
 def command(endpoint: str, run: str, *extra: str) -> list[str]:
@@ -129,7 +137,7 @@ def test_human_teleop_through_a_pseudo_terminal(network, tmp_path):
     from services.demonstrator import DemonstratorConfig, nav_config
     from worlds.env import NavigationEnv
 
-    endpoint, run, received = network
+    endpoint, run, received, session = network
     corridor = tmp_path / "corridor.txt"
     corridor.write_text(CORRIDOR)
     config = DemonstratorConfig(source="human", maps=str(corridor), seed=7)
@@ -182,3 +190,12 @@ def test_human_teleop_through_a_pseudo_terminal(network, tmp_path):
     assert batch.source == "human" and keys.parse(key).name == "human"
     assert batch.actions.tolist() == actions
     assert bool(batch.terminations[-1])
+    deadline = time.monotonic() + 30  # and the learner took it into its demonstration buffer
+    status = None
+    while time.monotonic() < deadline:
+        status = query_status(session, run)
+        if status is not None and status.counters.get("demo_episodes/human") == 1:
+            break
+        time.sleep(0.5)
+    assert status is not None and status.counters.get("demo_episodes/human") == 1, status
+    assert status.replay_sizes["demos"] == len(actions)
