@@ -3,7 +3,9 @@
 A checkpoint is written into a hidden temporary directory next to the final
 ones, flushed to disk, then renamed into place: on POSIX a rename is atomic,
 so a directory named ``ckpt-*`` is always complete and a crash mid-write only
-leaves a ``.tmp-*`` directory, removed on the next start. The newest ``keep``
+leaves a ``.tmp-*`` directory, which the writer removes when it starts again
+(:meth:`CheckpointDir.remove_unfinished`; readers never touch it, since the
+writer may still be filling it). The newest ``keep``
 checkpoints are kept; older ones are deleted after a new one is in place.
 """
 
@@ -47,6 +49,9 @@ class CheckpointDir:
         self.root = Path(root)
         self.keep = keep
         self.root.mkdir(parents=True, exist_ok=True)
+
+    def remove_unfinished(self) -> None:
+        """Delete temporary directories left by a writer that crashed. Only the writer calls this."""
         for leftover in self.root.glob(_TMP_PREFIX + "*"):
             log.warning("removing unfinished checkpoint %s", leftover)
             shutil.rmtree(leftover, ignore_errors=True)

@@ -108,6 +108,8 @@ class LearnerService:
         self.checkpoints = (
             CheckpointDir(config.checkpoint_dir, config.keep_checkpoints) if config.checkpoint_dir else None
         )
+        if self.checkpoints is not None:
+            self.checkpoints.remove_unfinished()
         self.scalars = Scalars(config.tensorboard)
         self.actors: dict[str, ActorStats] = {}
         self.lags = LagWindow()

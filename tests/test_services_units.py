@@ -121,7 +121,10 @@ def test_leftover_temporary_directory_is_ignored_then_removed(tmp_path):
     crashed = tmp_path / ".tmp-ckpt-00000002-999"  # a writer killed mid-checkpoint
     crashed.mkdir()
     (crashed / "data.txt").write_text("partial")
-    assert CheckpointDir(tmp_path).latest() == good
+    reader = CheckpointDir(tmp_path)
+    assert reader.latest() == good
+    assert crashed.exists()  # a reader leaves it: the writer may still be filling it
+    reader.remove_unfinished()  # the writer, on its next start
     assert not crashed.exists()
     assert ckpts.save(_write("next")).name == "ckpt-00000002"
 
