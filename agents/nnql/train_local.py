@@ -135,6 +135,8 @@ def train_local(
             curve.append(_curve_point(rollout.steps, now - start, learner, recent, policy, metrics))
             next_point += CURVE_EVERY
         if next_eval <= rollout.steps < run.steps:
+            if curve[-1]["env_steps"] != rollout.steps:
+                curve.append(_curve_point(rollout.steps, now - start, learner, recent, policy, metrics))
             best = _validate(policy, run, nav, curve[-1], best)
             next_eval += run.eval_every
         if bar is not None:
@@ -243,6 +245,7 @@ def plot_curve(result: TrainResult, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
     curve = result.curve
     steps = [p["env_steps"] for p in curve]
@@ -252,8 +255,9 @@ def plot_curve(result: TrainResult, path: Path) -> None:
     if evals:
         ax_s.plot(*zip(*evals, strict=True), "o-", label=f"greedy, validation maps (seed {VALIDATION_SEED})")
     if result.final_eval:
+        saved = [p["env_steps"] for p in curve if p["updates"] == result.selected_version] or [steps[-1]]
         test = result.final_eval["success"]["value"]
-        ax_s.plot([steps[-1]], [test], "*", ms=12, label=f"saved policy, test maps (seed {TEST_SEED})")
+        ax_s.plot(saved[:1], [test], "*", ms=12, label=f"saved policy, test maps (seed {TEST_SEED})")
     ax_s.set(xlabel="robot-steps", ylabel="success rate", ylim=(0, 1.02), title="NNQL success")
     ax_s.legend(loc="lower right")
     ax_s.grid(alpha=0.3)
@@ -262,6 +266,8 @@ def plot_curve(result: TrainResult, path: Path) -> None:
         ax_l.set_yscale("log")
     ax_l.set(xlabel="robot-steps", ylabel="TD loss", title="learner")
     ax_l.grid(alpha=0.3)
+    for ax in (ax_s, ax_l):
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:.0f}k"))
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
