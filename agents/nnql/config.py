@@ -76,7 +76,7 @@ class NNQLConfig:
     seed: int = 0
     """seeds network initialisation and replay sampling"""
     torch_threads: int = 1
-    """torch intra-op threads for the learner (small MLPs are fastest on one)"""
+    """torch intra-op threads, set process-wide by the learner (small MLPs are fastest on one)"""
 
     def __post_init__(self) -> None:
         self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)
