@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import os
 from pathlib import Path
 from typing import Any
 
@@ -191,24 +190,11 @@ def save_policy_dir(
     version: int,
     **metadata: Any,
 ) -> Path:
-    """Weights as safetensors plus a JSON config; files appear atomically (temp + rename)."""
-    from safetensors.numpy import save_file
+    """Weights as safetensors plus a JSON config; files appear atomically (temp + rename).
+    The one writer of that format is ``agents.evaluation.policies.save_policy``."""
+    from agents.evaluation.policies import save_policy
 
-    path = Path(path)
-    path.mkdir(parents=True, exist_ok=True)
-    config = {
-        "model": MODEL_NAME,
-        "kind": POLICY_KIND,
-        "version": int(version),
-        "architecture": dict(architecture),
-        **metadata,
-    }
-    tensors = {name: np.ascontiguousarray(value, dtype=np.float32) for name, value in weights.items()}
-    save_file(tensors, str(path / (WEIGHTS_FILE + ".tmp")))
-    os.replace(path / (WEIGHTS_FILE + ".tmp"), path / WEIGHTS_FILE)
-    (path / (CONFIG_FILE + ".tmp")).write_text(json.dumps(config, indent=2, sort_keys=True) + "\n")
-    os.replace(path / (CONFIG_FILE + ".tmp"), path / CONFIG_FILE)
-    return path
+    return save_policy(path, weights, architecture, MODEL_NAME, POLICY_KIND, version, **metadata)
 
 
 def load_policy_dir(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
