@@ -122,6 +122,48 @@ def run_in_chunks(run: Callable[[int, int], None], episodes: int, progress: Prog
             progress(last)
 
 
+def run_td_control(
+    episodes_kernel: Callable[..., None],
+    env: GridWorldEnv,
+    config: TabularConfig,
+    progress: Progress | None,
+) -> TabularResult:
+    """Drive a compiled TD-control episode kernel (Q-learning, SARSA) over ``config.episodes``
+    episodes in chunks, with progress; the kernels share one signature."""
+    dyn, start, max_steps = grid_dynamics(env)
+    q = np.zeros((dyn.n_states, dyn.n_actions))
+    visits = np.zeros(q.shape, dtype=np.int64)
+    cum_prob = np.cumsum(dyn.outcome_prob, axis=1)
+    params = exploration_schedule(config)
+    returns = np.zeros(config.episodes)
+    lengths = np.zeros(config.episodes, dtype=np.int64)
+    seed_numba(config.seed)
+
+    def run(first: int, last: int) -> None:
+        episodes_kernel(
+            q,
+            visits,
+            dyn.successor,
+            dyn.reward,
+            cum_prob,
+            dyn.goal_state,
+            start,
+            max_steps,
+            config.gamma,
+            config.alpha,
+            config.alpha_schedule == "visits",
+            config.alpha_power,
+            config.exploration == "boltzmann",
+            params[first:last],
+            returns,
+            lengths,
+            first,
+        )
+
+    run_in_chunks(run, config.episodes, progress)
+    return TabularResult(q, returns, lengths)
+
+
 @njit(cache=True)
 def seed_numba(seed: int) -> None:
     """Seed numba's generator (separate from numpy's)."""

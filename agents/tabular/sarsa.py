@@ -8,19 +8,15 @@ pairs it visits most (tests/test_tabular_learners.py uses alpha 0.1)."""
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 from agents.tabular.common import (
     Progress,
     TabularConfig,
     TabularResult,
-    exploration_schedule,
     explore,
-    grid_dynamics,
-    run_in_chunks,
+    run_td_control,
     sample_index,
-    seed_numba,
     start_state,
     step_size,
 )
@@ -72,36 +68,4 @@ def sarsa(
     env: GridWorldEnv, config: TabularConfig | None = None, progress: Progress | None = None
 ) -> TabularResult:
     """Learn the action values of a grid-world env by SARSA."""
-    config = config or TabularConfig()
-    dyn, start, max_steps = grid_dynamics(env)
-    q = np.zeros((dyn.n_states, dyn.n_actions))
-    visits = np.zeros(q.shape, dtype=np.int64)
-    cum_prob = np.cumsum(dyn.outcome_prob, axis=1)
-    params = exploration_schedule(config)
-    returns = np.zeros(config.episodes)
-    lengths = np.zeros(config.episodes, dtype=np.int64)
-    seed_numba(config.seed)
-
-    def run(first: int, last: int) -> None:
-        _episodes(
-            q,
-            visits,
-            dyn.successor,
-            dyn.reward,
-            cum_prob,
-            dyn.goal_state,
-            start,
-            max_steps,
-            config.gamma,
-            config.alpha,
-            config.alpha_schedule == "visits",
-            config.alpha_power,
-            config.exploration == "boltzmann",
-            params[first:last],
-            returns,
-            lengths,
-            first,
-        )
-
-    run_in_chunks(run, config.episodes, progress)
-    return TabularResult(q, returns, lengths)
+    return run_td_control(_episodes, env, config or TabularConfig(), progress)
