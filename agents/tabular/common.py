@@ -122,14 +122,16 @@ def run_in_chunks(run: Callable[[int, int], None], episodes: int, progress: Prog
             progress(last)
 
 
-def run_td_control(
+def run_control(
     episodes_kernel: Callable[..., None],
     env: GridWorldEnv,
     config: TabularConfig,
     progress: Progress | None,
+    *extra: object,
 ) -> TabularResult:
-    """Drive a compiled TD-control episode kernel (Q-learning, SARSA) over ``config.episodes``
-    episodes in chunks, with progress; the kernels share one signature."""
+    """Drive a compiled control episode kernel (Q-learning, SARSA, Monte Carlo) over
+    ``config.episodes`` episodes in chunks, with progress. The kernels share one signature;
+    ``extra`` arguments (Monte Carlo's first-visit flag) go after the exploration parameters."""
     dyn, start, max_steps = grid_dynamics(env)
     q = np.zeros((dyn.n_states, dyn.n_actions))
     visits = np.zeros(q.shape, dtype=np.int64)
@@ -155,6 +157,7 @@ def run_td_control(
             config.alpha_power,
             config.exploration == "boltzmann",
             params[first:last],
+            *extra,
             returns,
             lengths,
             first,

@@ -16,12 +16,9 @@ from agents.tabular.common import (
     Progress,
     TabularConfig,
     TabularResult,
-    exploration_schedule,
     explore,
-    grid_dynamics,
-    run_in_chunks,
+    run_control,
     sample_index,
-    seed_numba,
     start_state,
     step_size,
 )
@@ -91,37 +88,6 @@ def monte_carlo_control(
     """Learn the action values of a grid-world env by on-policy Monte Carlo control.
     Episodes cut by the env's ``max_steps`` give truncated returns."""
     config = config or MonteCarloConfig()
-    dyn, start, max_steps = grid_dynamics(env)
-    q = np.zeros((dyn.n_states, dyn.n_actions))
-    visits = np.zeros(q.shape, dtype=np.int64)
-    cum_prob = np.cumsum(dyn.outcome_prob, axis=1)
-    params = exploration_schedule(config)
-    returns = np.zeros(config.episodes)
-    lengths = np.zeros(config.episodes, dtype=np.int64)
-    seed_numba(config.seed)
-
-    def run(first: int, last: int) -> None:
-        # stamps are episode numbers within a call, so each call starts a fresh stamp table
-        _episodes(
-            q,
-            visits,
-            dyn.successor,
-            dyn.reward,
-            cum_prob,
-            dyn.goal_state,
-            start,
-            max_steps,
-            config.gamma,
-            config.alpha,
-            config.alpha_schedule == "visits",
-            config.alpha_power,
-            config.exploration == "boltzmann",
-            params[first:last],
-            config.first_visit,
-            returns,
-            lengths,
-            first,
-        )
-
-    run_in_chunks(run, config.episodes, progress)
-    return TabularResult(q, returns, lengths)
+    # the kernel runs once per chunk; its visit stamps are episode numbers within a call,
+    # so each call starts a fresh stamp table
+    return run_control(_episodes, env, config, progress, config.first_visit)

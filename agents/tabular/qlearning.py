@@ -10,7 +10,7 @@ from agents.tabular.common import (
     TabularConfig,
     TabularResult,
     explore,
-    run_td_control,
+    run_control,
     sample_index,
     start_state,
     step_size,
@@ -61,4 +61,4 @@ def q_learning(
     env: GridWorldEnv, config: TabularConfig | None = None, progress: Progress | None = None
 ) -> TabularResult:
     """Learn ``Q*`` of a grid-world env by Q-learning."""
-    return run_td_control(_episodes, env, config or TabularConfig(), progress)
+    return run_control(_episodes, env, config or TabularConfig(), progress)

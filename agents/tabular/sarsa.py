@@ -15,7 +15,7 @@ from agents.tabular.common import (
     TabularConfig,
     TabularResult,
     explore,
-    run_td_control,
+    run_control,
     sample_index,
     start_state,
     step_size,
@@ -68,4 +68,4 @@ def sarsa(
     env: GridWorldEnv, config: TabularConfig | None = None, progress: Progress | None = None
 ) -> TabularResult:
     """Learn the action values of a grid-world env by SARSA."""
-    return run_td_control(_episodes, env, config or TabularConfig(), progress)
+    return run_control(_episodes, env, config or TabularConfig(), progress)
