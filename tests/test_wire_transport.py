@@ -152,7 +152,7 @@ def test_tls_and_acl_settings_reach_the_config(tmp_path: Path) -> None:
     assert tls["root_ca_certificate"].endswith("ca.pem") and tls["enable_mtls"] is True
     assert tls["listen_certificate"] == tls["connect_certificate"] == str(tmp_path / "cert.pem")
     acl = get(conf, "access_control")
-    assert acl["enabled"] and acl["default_permission"] == "deny" and len(acl["policies"]) == 5
+    assert acl["enabled"] and acl["default_permission"] == "deny" and len(acl["policies"]) == 7
 
 
 @pytest.mark.parametrize("name", ["router.json5", "router-secure.json5"])

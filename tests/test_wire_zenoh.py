@@ -195,9 +195,9 @@ def test_router_stops_cleanly_on_a_signal(signum: int) -> None:
 
 def test_auth_and_the_deploy_acl(tmp_path: Path) -> None:
     users = tmp_path / "users.txt"
-    users.write_text("learner:lpw\nactor:apw\n")
+    users.write_text("learner:lpw\nactor1:apw\n")  # deploy's default ACL: one user per actor id
     creds = {}
-    for user, password in (("learner", "lpw"), ("actor", "apw"), ("intruder", "nope")):
+    for user, password in (("learner", "lpw"), ("actor1", "apw"), ("intruder", "nope")):
         creds[user] = tmp_path / f"{user}.credentials"
         creds[user].write_text(f"{user}:{password}\n")
     acl = str(REPO / "deploy" / "router-secure.json5")  # its access_control section, run "default"
@@ -211,10 +211,10 @@ def test_auth_and_the_deploy_acl(tmp_path: Path) -> None:
             open_session(ZenohSettings(connect=[endpoint], connect_timeout=1))
         at_learner: list[tuple[str, bytes]] = []
         at_actor: list[bytes] = []
-        transitions, weights = keys.transitions("default", "a1"), keys.weights("default", "nnql")
+        transitions, weights = keys.transitions("default", "actor1"), keys.weights("default", "nnql")
         with (
             client(endpoint, credentials_file=str(creds["learner"])) as learner,
-            client(endpoint, credentials_file=str(creds["actor"])) as actor,
+            client(endpoint, credentials_file=str(creds["actor1"])) as actor,
         ):
             learner.declare_subscriber(
                 "navlearn/default/**", lambda s: at_learner.append((str(s.key_expr), s.payload.to_bytes()))
