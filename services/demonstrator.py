@@ -13,7 +13,11 @@ Three sources, one publishing path:
 Demonstrations are only worth sending to a learner that hears them, so before each
 batch the demonstrator waits (as long as it takes, or until stopped) for a learner's
 liveliness token; while no learner is present nothing is lost, only delayed. Batches go
-out with congestion control BLOCK. The process declares ``alive/demonstrator/<id>``.
+out with congestion control BLOCK through an Outbox, as the actors' transitions do
+(at-least-once): each is kept until the learner acknowledges it on ``acks/<source>``
+(after its write-ahead log holds it) and sent again if the learner restarted; the
+learner drops duplicates by (sender, seq). Before exiting, the demonstrator waits for
+the acknowledgement of everything it published. It declares ``alive/demonstrator/<id>``.
 """
 
 from __future__ import annotations
@@ -29,8 +33,11 @@ import numpy as np
 
 from agents.demos import Demo
 from protocols import keys
-from protocols.codec import encode
+from protocols.codec import decode, encode
+from protocols.errors import ProtocolError
+from protocols.flow import Ack
 from protocols.messages import DemoBatch, EpisodeMeta
+from services.outbox import Outbox
 from services.process import connect
 from services.transport import Presence, ZenohSettings, declare_alive
 
@@ -68,6 +75,10 @@ class DemonstratorConfig:
     """hold each batch until a learner's liveliness token is present"""
     log_every: float = 10.0
     """seconds between progress lines (astar, file)"""
+    outbox_size: int = 16
+    """demo batches held unacknowledged; when full the demonstrator waits for the learner"""
+    ack_timeout: float = 10.0
+    """seconds without an acknowledgement before the unacknowledged batches are sent again"""
 
     def __post_init__(self) -> None:
         if self.source not in SOURCES:
@@ -78,6 +89,8 @@ class DemonstratorConfig:
             raise ValueError(f"noise must be in [0, 1], got {self.noise}")
         if self.rate < 0 or self.episodes < 0 or self.batch_episodes < 1 or self.obstacles < 0:
             raise ValueError("need rate >= 0, episodes >= 0, obstacles >= 0 and batch_episodes >= 1")
+        if self.outbox_size < 1 or self.ack_timeout <= 0:
+            raise ValueError("need outbox_size >= 1 and ack_timeout > 0")
 
 
 def demo_batch(demos: list[Demo], source: str, sender: str, seq: int) -> DemoBatch:
@@ -162,10 +175,27 @@ class DemoPublisher:
             congestion_control=zenoh.CongestionControl.BLOCK,
             reliability=zenoh.Reliability.RELIABLE,
         )
+        self.outbox = Outbox(
+            self.publisher.put,
+            lambda: self.publisher.matching_status.matching,
+            capacity=config.outbox_size,
+            window=min(4, config.outbox_size),
+            ack_timeout=config.ack_timeout,
+        )
+        self.acks = session.declare_subscriber(keys.acks(run, config.source), self._on_ack)
         self.learners = Presence(session, run, role="learner") if config.wait_learner else None
         self.seq = 0
         self.episodes = 0
         self.steps = 0
+
+    def _on_ack(self, sample) -> None:
+        try:
+            ack = decode(sample.payload.to_bytes())
+        except ProtocolError as exc:
+            log.warning("rejected an acknowledgement: %s", exc)
+            return
+        if isinstance(ack, Ack) and ack.actor == self.sender:  # acks/<source> is shared by its demonstrators
+            self.outbox.on_ack(ack.accepted_seq)
 
     def wait_for_learner(self) -> bool:
         """Block until a learner is alive (or stop); True when one is."""
@@ -185,7 +215,8 @@ class DemoPublisher:
             return False
         self.seq += 1
         batch = demo_batch(demos, self.config.source, self.sender, self.seq)
-        self.publisher.put(encode(batch))
+        self.outbox.put(batch.seq, encode(batch))
+        self.outbox.flush(self.stop)
         self.episodes += len(demos)
         self.steps += int(batch.episode_lengths.sum())
         log.debug("published %d episodes (%d steps) as batch %d", len(demos), len(batch.actions), self.seq)
@@ -211,7 +242,14 @@ class DemoPublisher:
             self.publish(pending)
         return self.episodes
 
+    def drain(self, timeout: float | None = None) -> bool:
+        """Wait (until stop or ``timeout``) for the learner to acknowledge every published batch."""
+        if len(self.outbox):
+            log.info("waiting for the learner to acknowledge %d demo batches", len(self.outbox))
+        return self.outbox.drain(self.stop, timeout)
+
     def close(self) -> None:
+        self.acks.undeclare()
         if self.learners is not None:
             self.learners.close()
         self.publisher.undeclare()
@@ -241,6 +279,7 @@ def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: 
             from services.teleop import drive
 
             drive(config, publisher, stop)
+        publisher.drain()
         log.info(
             "%s: %d episodes, %d steps published; stopping",
             config.source,

@@ -329,8 +329,10 @@ class LearnerService:
                     self.inbox.reject("shape", f"demos from {item.name} have the wrong obs_dim")
                     continue
                 if self.durable is not None and not self._replaying and not self.durable.admit(item.message):
-                    continue  # a demo batch already stored
+                    self._ack(item.name, item.message.seq, item.message.sender)  # a resend: ack again
+                    continue
                 steps = self.demos.add(item.message)
+                self._ack(item.name, item.message.seq, item.message.sender)
                 self._count("demo_steps", steps)
                 self._count("demo_batches")
                 self._count(f"demo_steps/{item.message.source}", steps)

@@ -53,6 +53,10 @@ class Outbox:
         """batches acknowledged (each once)"""
         self.resent = 0
         """batches sent again (acknowledgement lost or learner restarted)"""
+        self.blocked_s = 0.0
+        """seconds ``flush`` waited for the learner (window of unacknowledged batches or outbox full)"""
+        self.full_s = 0.0
+        """of which seconds with the outbox full (back-pressure on the producer)"""
         self._last_progress = time.monotonic()
         self._was_reachable = True
 
@@ -106,7 +110,7 @@ class Outbox:
                 self._was_reachable = False
                 if not self.full:
                     return
-                stop.wait(0.2)
+                self._wait(lambda: stop.wait(0.2))
                 continue
             if not self._was_reachable:  # the learner (or router) is back: what it did not ack, again
                 self._was_reachable = True
@@ -116,7 +120,7 @@ class Outbox:
                     if not self.full and not self._waiting:
                         return
                     if time.monotonic() - self._last_progress <= self.ack_timeout:
-                        self._changed.wait(0.2)
+                        self._wait(lambda: self._changed.wait(0.2))
                         continue
                     timed_out = True
                 else:
@@ -132,3 +136,25 @@ class Outbox:
                 self.sent_seq = max(self.sent_seq, seq)
                 self.sent += 1
             self._send(payload)
+
+    def _wait(self, wait: Callable[[], object]) -> None:
+        full, start = self.full, time.monotonic()
+        wait()
+        waited = time.monotonic() - start
+        self.blocked_s += waited
+        if full:
+            self.full_s += waited
+
+    def drain(self, stop: threading.Event, timeout: float | None = None) -> bool:
+        """Send everything and wait until all of it is acknowledged (resending after ``ack_timeout``
+        or when the learner is back), until ``stop`` or ``timeout`` s; True when the outbox is empty."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while len(self) and not stop.is_set() and (deadline is None or time.monotonic() < deadline):
+            self.flush(stop)
+            with self._changed:
+                stalled = time.monotonic() - self._last_progress > self.ack_timeout
+                if self._unacked and not self._waiting and stalled and self._reachable():
+                    self._requeue_unacked()
+                    continue
+                self._changed.wait(0.1)
+        return len(self) == 0
