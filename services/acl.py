@@ -122,7 +122,8 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
                 _rule(f"actor-{a}-receive", ["put"], "egress", [f"{p}/weights/*", f"{p}/acks/{a}"]),
                 _rule(f"actor-{a}-answers", ["reply"], "egress", [f"{p}/weights/*"]),
                 _rule(f"actor-{a}-status", ["declare_queryable", "reply"], "ingress", status),
-                _rule(f"actor-{a}-status-asked", ["query"], "egress", status),
+                # queries reach it as sent: `status/*` (navlearn status --actors) or its own key
+                _rule(f"actor-{a}-status-asked", ["query"], "egress", [all_status_keys(d.run)]),
             ],
         )
     for ident, source in d.demonstrator_sources():

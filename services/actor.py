@@ -7,6 +7,8 @@ router answers. Once connected, Zenoh itself re-establishes a lost router link
 (subscriptions, queryables and the liveliness token come back with it); batches
 made meanwhile wait in the outbox and the newest weights are asked for again.
 Until the first weights arrive the robots act uniformly at random (version 0).
+The actor answers ``status/actor:<id>`` (services.actor_status): outbox, acknowledgements,
+back-pressure, robot-steps and weights version.
 """
 
 from __future__ import annotations
@@ -30,6 +32,8 @@ from protocols.errors import ProtocolError
 from protocols.flow import Ack
 from protocols.limits import Limits
 from protocols.messages import TransitionBatch
+from services.acl import actor_status_key
+from services.actor_status import BACKPRESSURE_SHARE, BlockedShare, actor_status
 from services.outbox import Outbox
 from services.process import connect
 from services.transport import ZenohSettings, declare_alive
@@ -114,6 +118,12 @@ class Actor:
             ack_timeout=config.ack_timeout,
         )
         self.acks = session.declare_subscriber(keys.acks(run, config.id), self._on_ack)
+        self.blocked = BlockedShare()
+        """share of time waiting for the learner (back-pressure), for the status and the log"""
+        self.status_seq = 0
+        self.status_key = actor_status_key(run, config.id)
+        self._status = session.declare_queryable(self.status_key, self._on_status, complete=True)
+        self._steps_window: deque[tuple[float, int]] = deque(maxlen=64)
         self.learner_version = 0
         self.seq = 0
         self.sender = f"{config.id}#{time.time_ns() // 1_000_000}"
@@ -122,6 +132,17 @@ class Actor:
         self.episodes: deque[int] = deque(maxlen=100)
         self.episodes_done = 0
         self.reachable = True
+
+    def _on_status(self, query) -> None:
+        self.status_seq += 1
+        query.reply(self.status_key, encode(actor_status(self, self.status_seq)))
+
+    def steps_rate(self) -> float:
+        """Robot-steps per second over the last ticks."""
+        if len(self._steps_window) < 2:
+            return 0.0
+        (t0, s0), (t1, s1) = self._steps_window[0], self._steps_window[-1]
+        return (s1 - s0) / (t1 - t0) if t1 > t0 else 0.0
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         if self.policy is None:
@@ -197,6 +218,9 @@ class Actor:
         batch = self.step_batch()
         self.outbox.put(batch.seq, encode(batch))
         self.outbox.flush(stop)
+        now = time.monotonic()
+        self.blocked.add(self.outbox.blocked_s, now)
+        self._steps_window.append((now, self.rollout.steps))
 
     def run(self, stop: threading.Event) -> int:
         cfg = self.config
@@ -225,7 +249,7 @@ class Actor:
         success = np.mean(self.episodes) if self.episodes else float("nan")
         log.info(
             "%.0f robot-steps/s | version %d (learner %d, lag %d) | episodes %d, success %.0f%% (last %d) | "
-            "sent %d, outbox %d (unacknowledged %d, resent %d)%s",
+            "sent %d, outbox %d (unacknowledged %d, resent %d)%s%s",
             rate,
             self.version,
             self.learner_version,
@@ -238,9 +262,13 @@ class Actor:
             self.outbox.in_flight,
             self.outbox.resent,
             "" if reachable else " | learner unreachable",
+            f" | back-pressure: waiting for the learner {100 * share:.0f}% of the time"
+            if (share := self.blocked.share()) > BACKPRESSURE_SHARE
+            else "",
         )
 
     def close(self) -> None:
+        self._status.undeclare()
         self.acks.undeclare()
         self.receiver.close()
         self.publisher.undeclare()

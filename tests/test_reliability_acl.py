@@ -106,12 +106,22 @@ def test_an_actor_publishes_only_its_own_transitions(tmp_path: Path) -> None:
                 learner.put(acks, b"ack")
                 time.sleep(0.1)
             replies = [r.ok.payload.to_bytes() for r in actor.get(weights, timeout=5) if r.ok is not None]
+            own_status, learner_status = actor_status_key(RUN, "a1"), keys.status(RUN)
+            actor.declare_queryable(own_status, lambda q: q.reply(own_status, b"a1 status"))
+            actor.declare_queryable(learner_status, lambda q: q.reply(learner_status, b"forged status"))
+            with session("status") as operator:
+                time.sleep(0.5)
+                answers = {
+                    str(r.ok.key_expr): r.ok.payload.to_bytes()
+                    for r in operator.get(f"navlearn/{RUN}/status/*", timeout=3)
+                    if r.ok is not None
+                }
             time.sleep(0.3)
         assert (own, b"mine") in at_learner
         assert (other, b"forged") not in at_learner  # a1 may not publish as a2
         assert (weights, b"forged") not in at_learner  # nor weights
         assert (weights, b"real") in at_actor and (acks, b"ack") in at_actor
         assert replies == [b"queried weights"]  # it may ask the learner for the newest weights
-        assert actor_status_key(RUN, "a1") == f"navlearn/{RUN}/status/actor:a1"
+        assert answers == {own_status: b"a1 status"}  # an actor answers its own status, not the learner's
     finally:
         stop(proc)

@@ -15,10 +15,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Query navlearn/<run>/status/learner (policy version, replay sizes, updates/s, transitions "
             "received and rejected by reason, per-actor rate and last seen, losses, last evaluation) and "
             "the liveliness tokens under navlearn/<run>/alive/ (learner, actors, evaluator, router), then "
-            "print a table, or JSON with --json. Exit code 1 if the learner does not answer."
+            "print a table, or JSON with --json. With --actors, also ask every actor for its own status "
+            "on navlearn/<run>/status/actor:<id> (outbox held/bound, unacknowledged and resent batches, "
+            "time spent waiting for the learner and whether it is slowed by back-pressure, robot-steps/s, "
+            "weights version). Exit code 1 if the learner does not answer."
         ),
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    parser.add_argument(
+        "--actors",
+        action="store_true",
+        help="also query each actor's own status (outbox, back-pressure, weights version); "
+        "JSON key actor_status",
+    )
     parser.add_argument(
         "--watch",
         nargs="?",
@@ -53,7 +62,22 @@ def main(args: argparse.Namespace) -> int:
 
     def snapshot() -> dict:
         status = query_status(session, settings.run, timeout=args.timeout)
-        return status_dict(status, query_alive(session, settings.run, timeout=min(args.timeout, 1.0)))
+        view = status_dict(status, query_alive(session, settings.run, timeout=min(args.timeout, 1.0)))
+        if args.actors:
+            from services.actor_status import actor_status_dicts, query_actor_statuses
+
+            statuses = query_actor_statuses(session, settings.run, timeout=min(args.timeout, 2.0))
+            view["actor_status"] = actor_status_dicts(statuses)
+        return view
+
+    def show(view: dict):
+        if "actor_status" not in view:
+            return render(view)
+        from rich.console import Group
+
+        from services.actor_status import render_actor_statuses
+
+        return Group(render(view), render_actor_statuses(view["actor_status"]))
 
     try:
         if args.watch is None:
@@ -63,7 +87,7 @@ def main(args: argparse.Namespace) -> int:
             else:
                 from rich.console import Console
 
-                Console().print(render(view))
+                Console().print(show(view))
             return 0 if view["learner"] is not None else 1
         if args.json:
             while True:
@@ -71,10 +95,10 @@ def main(args: argparse.Namespace) -> int:
                 time.sleep(args.watch)
         from rich.live import Live
 
-        with Live(render(snapshot()), auto_refresh=False) as live:
+        with Live(show(snapshot()), auto_refresh=False) as live:
             while True:
                 time.sleep(args.watch)
-                live.update(render(snapshot()), refresh=True)
+                live.update(show(snapshot()), refresh=True)
     except KeyboardInterrupt:
         return 0
     finally:
