@@ -16,6 +16,8 @@ INT64_MIN = -(2**63)
 FLOAT_DTYPES = frozenset(np.dtype(s) for s in ("<f2", "<f4", "<f8"))
 INT_DTYPES = frozenset(np.dtype(s) for s in ("|u1", "|i1", "<u2", "<i2", "<u4", "<i4", "<u8", "<i8"))
 TENSOR_DTYPES = FLOAT_DTYPES | INT_DTYPES | {np.dtype("|b1")}
+_MISSING = object()
+_UNSIGNED = {dt: np.dtype(dt.str.replace("i", "u")) for dt in INT_DTYPES}
 
 JSONLike = None | bool | int | float | str | list["JSONLike"] | dict[str, "JSONLike"]
 
@@ -92,9 +94,9 @@ class BodyReader:
         return f"{self.kind}.{name}"
 
     def raw(self, name: str) -> Any:
-        self._read.add(name)
         if name not in self.body:
             raise ProtocolError("field", f"{self.what(name)} is missing")
+        self._read.add(name)  # so ``_read`` only holds names of the body (see finish)
         return self.body[name]
 
     def string(
@@ -119,16 +121,33 @@ class BodyReader:
         except ProtocolError as exc:  # name the field in full only when it failed
             raise ProtocolError(exc.reason, f"{self.kind}.{exc.message}") from None
 
-    def arrays(self, schema: dict[str, tuple[Collection[np.dtype], int]]) -> dict[str, np.ndarray]:
-        """Several array fields at once, ``schema`` mapping name -> (dtypes, ndim); the hot path."""
-        body, limits, out = self.body, self.limits, {}
+    def arrays(
+        self, schema: dict[str, tuple[Collection[np.dtype], int]], finite_later: Collection[str] = ()
+    ) -> dict[str, np.ndarray]:
+        """Several array fields at once, ``schema`` mapping name -> (dtypes, ndim); the hot path.
+
+        The checks are those of :func:`check_array`, inlined; a field that fails any of them goes
+        through :func:`check_array` again for its precise error. Float fields named in
+        ``finite_later`` skip the finite check: the caller must check them itself (e.g. two at once
+        with :func:`check_finite_pair`).
+        """
+        body, max_batch, out = self.body, self.limits.max_batch, {}
         for name, (dtypes, ndim) in schema.items():
-            if name not in body:
-                raise ProtocolError("field", f"{self.kind}.{name} is missing")
-            try:
-                out[name] = check_array(body[name], name, limits, dtypes, ndim)
-            except ProtocolError as exc:
-                raise ProtocolError(exc.reason, f"{self.kind}.{exc.message}") from None
+            value = body.get(name, _MISSING)
+            if (
+                type(value) is not np.ndarray
+                or value.dtype not in dtypes
+                or value.ndim != ndim
+                or (ndim and value.shape[0] > max_batch)
+                or (value.dtype.kind == "f" and name not in finite_later and not all_finite(value))
+            ):
+                if value is _MISSING:
+                    raise ProtocolError("field", f"{self.kind}.{name} is missing")
+                try:
+                    check_array(value, name, self.limits, dtypes, ndim)
+                except ProtocolError as exc:
+                    raise ProtocolError(exc.reason, f"{self.kind}.{exc.message}") from None
+            out[name] = value
         self._read.update(schema)
         return out
 
@@ -161,6 +180,8 @@ class BodyReader:
         return value
 
     def finish(self) -> None:
+        if len(self.body) == len(self._read):  # ``_read`` is a subset of the body's keys
+            return
         unknown = self.body.keys() - self._read
         if unknown:
             raise ProtocolError("field", f"unexpected {self.kind} fields {sorted(map(str, unknown))}")
@@ -180,10 +201,37 @@ def check_array(
         raise ProtocolError("shape", f"{what} has shape {value.shape}, expected {ndim} dimensions")
     if ndim and value.shape[0] > limits.max_batch:
         raise ProtocolError("oversize", f"{what} has {value.shape[0]} rows (limit {limits.max_batch})")
-    if finite and value.dtype.kind == "f" and value.size and not np.isfinite(value).all():
+    if finite and value.dtype.kind == "f" and not all_finite(value):
         bad = value.size - np.count_nonzero(np.isfinite(value))
         raise ProtocolError("nonfinite", f"{what} holds {bad} NaN or infinite values")
     return value
+
+
+def all_finite(values: np.ndarray, other: np.ndarray | None = None) -> bool:
+    """Whether float array ``values`` (and ``other``, if given) hold no NaN and no infinity.
+
+    Fast path, one BLAS pass and no temporary array: a dot product is finite only if every term is,
+    and a term ``x * y`` is finite only if both ``x`` and ``y`` are (``inf * 0`` is NaN, NaN
+    propagates, ``inf - inf`` is NaN). So ``values . values`` (or ``values . other``, same size and
+    dtype) being finite proves every element finite. The converse fails only when finite terms
+    overflow (elements beyond ~1e19 in float32): then the exact elementwise check decides.
+    """
+    a = values.reshape(-1)
+    b = a if other is None else other.reshape(-1)
+    if a.shape == b.shape and a.dtype == b.dtype:
+        with np.errstate(over="ignore", invalid="ignore"):  # overflow and NaN are expected inputs here
+            if math.isfinite(np.dot(a, b)):
+                return True
+    return bool(np.isfinite(a).all()) and (other is None or bool(np.isfinite(b).all()))
+
+
+def check_finite_pair(what: str, first: tuple[str, np.ndarray], second: tuple[str, np.ndarray]) -> None:
+    """Both (name, float array) hold only finite values; one pass when they have the same size."""
+    if not all_finite(first[1], second[1]):
+        for name, values in (first, second):
+            if not all_finite(values):
+                bad = values.size - np.count_nonzero(np.isfinite(values))
+                raise ProtocolError("nonfinite", f"{what}.{name} holds {bad} NaN or infinite values")
 
 
 def check_actions(actions: np.ndarray, what: str, limits: Limits) -> None:
@@ -193,7 +241,7 @@ def check_actions(actions: np.ndarray, what: str, limits: Limits) -> None:
     if limits.n_actions is None:
         ok = actions.min() >= 0
     else:  # one pass: negatives become huge unsigned values
-        ok = actions.view(actions.dtype.str.replace("i", "u")).max() < limits.n_actions
+        ok = actions.view(_UNSIGNED[actions.dtype]).max() < limits.n_actions
     if not ok:
         bound = "inf" if limits.n_actions is None else limits.n_actions
         raise ProtocolError(

@@ -29,57 +29,80 @@ _FIELD_NAMES: dict[type, frozenset[str]] = {}
 
 
 def _packer() -> msgpack.Packer:
-    """This thread's packer. Reusing one buffer (autoreset off) avoids msgpack re-allocating and
-    freeing its buffer for every large message, which costs ~10x the packing itself here."""
+    """This thread's packer: one long-lived internal buffer (``msgpack.packb`` allocates and frees
+    one per call). Only small values go through it; arrays are spliced in by :func:`_write_map`."""
     packer = getattr(_local, "packer", None)
     if packer is None:
-        packer = _local.packer = msgpack.Packer(default=default, use_bin_type=True, autoreset=False)
+        packer = _local.packer = msgpack.Packer(default=default, use_bin_type=True)
     return packer
 
 
 def encode(message: Message) -> bytes:
     """The wire bytes of ``message`` (validated by the receiver, not here)."""
-    if KINDS.get(type(message).KIND) is not type(message):
-        raise ProtocolError("kind", f"{type(message).__name__} is not a registered message kind")
-    packer = _packer()
-    parts: list[bytes | memoryview] = []
+    cls = type(message)
+    if KINDS.get(cls.KIND) is not cls:
+        raise ProtocolError("kind", f"{cls.__name__} is not a registered message kind")
+    pack = _packer().pack
     try:
-        packer.pack_map_header(5)
-        for key, value in (
-            ("v", message.VERSION),
-            ("k", message.KIND),
-            ("s", message.sender),
-            ("n", message.seq),
-        ):
-            packer.pack(key)
-            packer.pack(value)
-        packer.pack("b")
-        _write_map(message.to_body(), packer, parts)
-        parts.append(packer.bytes())
+        parts: list[bytes | memoryview] = [
+            _envelope_head(cls),  # {"v": VERSION, "k": KIND, "s":
+            pack(message.sender),
+            _N_KEY,
+            pack(message.seq),
+            _B_KEY,
+        ]
+        _write_map(message.to_body(), pack, parts)
         return b"".join(parts)
     except ProtocolError:
         raise
     except (TypeError, ValueError, OverflowError) as exc:
         raise ProtocolError("type", f"cannot encode {message.KIND}: {exc}") from exc
-    finally:
-        packer.reset()
 
 
-def _write_map(mapping: dict, packer: msgpack.Packer, parts: list[bytes | memoryview]) -> None:
-    """Pack ``mapping``, splicing arrays (at this level or in maps of arrays) straight into ``parts``."""
-    packer.pack_map_header(len(mapping))
+_N_KEY, _B_KEY = msgpack.packb("n"), msgpack.packb("b")
+_ENVELOPE_HEADS: dict[type, bytes] = {}
+_PACKED_KEYS: dict[str, bytes] = {}
+
+
+def _envelope_head(cls: type[Message]) -> bytes:
+    """The constant start of ``cls``'s envelopes: the map header, version, kind and the sender key."""
+    head = _ENVELOPE_HEADS.get(cls)
+    if head is None:
+        packer = msgpack.Packer(use_bin_type=True, autoreset=False)
+        packer.pack_map_header(5)
+        for item in ("v", cls.VERSION, "k", cls.KIND, "s"):
+            packer.pack(item)
+        head = _ENVELOPE_HEADS[cls] = packer.bytes()
+    return head
+
+
+def _write_map(mapping: dict, pack, parts: list[bytes | memoryview]) -> None:
+    """Pack ``mapping`` into ``parts``, splicing arrays (at this level or in maps of arrays) in place."""
+    parts.append(_map_header(len(mapping)))
     for key, value in mapping.items():
-        packer.pack(key)
+        packed_key = _PACKED_KEYS.get(key)
+        if packed_key is None:
+            packed_key = pack(key)
+            if type(key) is str and len(_PACKED_KEYS) < 4096:
+                _PACKED_KEYS[key] = packed_key
+        parts.append(packed_key)
         if isinstance(value, np.ndarray):
-            head, data = array_parts(value)
-            parts.append(packer.bytes())
-            packer.reset()
-            parts.append(head)
-            parts.append(data)
+            parts.extend(array_parts(value))
         elif isinstance(value, dict) and any(isinstance(v, np.ndarray) for v in value.values()):
-            _write_map(value, packer, parts)
+            _write_map(value, pack, parts)
         else:
-            packer.pack(value)  # arrays nested deeper still go through the ``default`` hook
+            parts.append(pack(value))  # arrays nested deeper still go through the ``default`` hook
+
+
+def _map_header(size: int) -> bytes:
+    if size < 16:
+        return _FIXMAPS[size]
+    packer = msgpack.Packer(autoreset=False)
+    packer.pack_map_header(size)
+    return packer.bytes()
+
+
+_FIXMAPS = [bytes([0x80 | size]) for size in range(16)]
 
 
 def decode(data: bytes | bytearray | memoryview, limits: Limits = DEFAULT_LIMITS) -> Message:

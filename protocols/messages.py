@@ -20,6 +20,7 @@ from protocols.checks import (
     BodyReader,
     check_actions,
     check_array,
+    check_finite_pair,
     check_int,
     check_rows,
     check_size,
@@ -33,6 +34,7 @@ I32 = frozenset({np.dtype("<i4")})
 BOOL = frozenset({np.dtype("|b1")})
 DEMO_SOURCES = ("astar", "human", "file")
 KINDS: dict[str, type[Message]] = {}
+_BODY_FIELDS: dict[type, tuple[str, ...]] = {}
 
 
 def register(cls: type[Message]) -> type[Message]:
@@ -56,7 +58,12 @@ class Message:
 
     def to_body(self) -> dict[str, Any]:
         """The body map (every field but the header)."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("sender", "seq")}
+        names = _BODY_FIELDS.get(type(self))
+        if names is None:
+            names = _BODY_FIELDS[type(self)] = tuple(
+                f.name for f in fields(self) if f.name not in ("sender", "seq")
+            )
+        return {name: getattr(self, name) for name in names}
 
     @classmethod
     def read_body(cls, body: BodyReader) -> dict[str, Any]:
@@ -103,7 +110,7 @@ class TransitionBatch(Message):
 
     @classmethod
     def read_body(cls, body: BodyReader) -> dict[str, Any]:
-        out: dict[str, Any] = body.arrays(_TRANSITION_SCHEMA)
+        out: dict[str, Any] = body.arrays(_TRANSITION_SCHEMA, finite_later=("obs", "next_obs"))
         out["actor"] = body.string("actor")
         out["model"] = body.string("model")
         out["policy_version"] = body.integer("policy_version")
@@ -114,7 +121,10 @@ class TransitionBatch(Message):
             raise ProtocolError(
                 "shape", f"transitions: next_obs {out['next_obs'].shape} differs from obs {out['obs'].shape}"
             )
-        check_rows("transitions", n, *((k, out[k]) for k in _TRANSITION_SCHEMA))
+        check_finite_pair("transitions", ("obs", out["obs"]), ("next_obs", out["next_obs"]))
+        for name in _TRANSITION_SCHEMA:
+            if out[name].shape[0] != n:
+                check_rows("transitions", n, (name, out[name]))
         check_actions(out["action"], "transitions.action", body.limits)
         return out
 
