@@ -129,10 +129,19 @@ class NavBatch:
                     oax[i, :m], oay[i, :m] = disc.waypoints[:, 0].T
                     obx[i, :m], oby[i, :m] = disc.waypoints[:, 1].T
                 ocount[i] = m
+        drivable = np.ones(len(indices), dtype=np.bool_)
         kernel.reset_some(
             indices, forced, keep, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
-            self.disc_arrays, self.params, self.beam_c, self.beam_s, self.obs,
+            self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.obs, drivable,
         )  # fmt: skip
+        stuck = [k for k in np.flatnonzero(~drivable) if forced[k] >= 0]
+        if stuck:
+            task = self.task(int(indices[stuck[0]]))
+            r = self.config.robot
+            raise ValueError(
+                f"task start {task.start} on map {task.map_id or task.grid.name or '(unnamed)'!r} has no "
+                f"collision-free action from any start heading (robot radius {r.radius} m, step {r.step} m)"
+            )
 
     def step(self, actions: np.ndarray, autoreset: bool) -> int:
         """Step every robot with ``actions`` (n,) ints; returns how many episodes ended."""

@@ -30,7 +30,8 @@ class RobotConfig:
     rot_noise: float = 0.02
     """standard deviation of the Gaussian noise added to the heading change (rad)"""
     heading_choices: int = 8
-    """initial heading drawn uniformly among this many compass directions (0: uniform in [-pi, pi))"""
+    """initial heading drawn uniformly among this many compass directions (0: uniform in [-pi, pi)),
+    then turned to the nearest one with a collision-free action if it has none (see worlds.kernel)"""
 
     def __post_init__(self) -> None:
         _check(self.n_actions >= 1, f"n_actions must be >= 1, got {self.n_actions}")

@@ -30,7 +30,10 @@ class NavigationEnv(gym.Env):
 
     ## Description
     Each episode puts the robot at the centre of a start cell with a random heading and asks
-    it to reach the centre of a goal cell. Maps come from a map spec (see
+    it to reach the centre of a goal cell. The heading is drivable: when no action is
+    collision-free from the drawn heading (a start in a dead end facing the walls), the nearest
+    heading that has one is used instead; a given task whose start has none is rejected with a
+    ValueError, a drawn one is redrawn. Maps come from a map spec (see
     :mod:`worlds.tasks`, default ``"mixed:16"``: 16x16 generated maps of random rectangles,
     discs or rooms) through a fixed pool of tasks; start and goal are free and connected.
     Optional moving discs (``config.obstacles``) bounce off walls or patrol between two

