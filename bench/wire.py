@@ -5,7 +5,10 @@
 (b) through a `navlearn router` subprocess on loopback, publisher (this process) ->
     subscriber (a second process) with CongestionControl.BLOCK: our encoded, decoded
     and validated TransitionBatches against raw Zenoh puts of byte payloads of the
-    same size, in the same run, counted on the subscriber;
+    same size, in the same run, counted on the subscriber (both kinds copy the payload out
+    of Zenoh with ``to_bytes()``; rounds interleaved, each kind first in every other round).
+    CPU time per message of the three processes, and of the subscriber's callback, is
+    reported for both kinds: it shows where the time goes;
 (c) WeightsUpdate of a 2x256 MLP: publish, the peer decodes and echoes it re-encoded,
     we decode the echo; p50/p99 against a raw echo of the same bytes.
 
@@ -17,6 +20,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import os
 import pickle
 import socket
 import subprocess
@@ -139,6 +143,7 @@ def peer_main(endpoint: str) -> None:
     session = open_session(ZenohSettings(connect=[endpoint]))
     lock = threading.Lock()
     state = {"count": 0, "transitions": 0, "bytes": 0, "first": 0.0, "last": 0.0, "rejected": 0}
+    state["handler_cpu_s"] = 0.0  # CPU time of the subscriber callbacks (payload copy + decode)
 
     def count(nbytes: int, transitions: int) -> None:
         now = time.perf_counter()
@@ -154,11 +159,15 @@ def peer_main(endpoint: str) -> None:
         # Decoding runs in Zenoh's callback thread, as a service's subscriber would (a FIFO channel
         # drained by a Python thread was slower here: the two threads contend for the GIL).
         def on_sample(sample) -> None:
+            start = time.thread_time()
             data = sample.payload.to_bytes()
             try:
-                count(len(data), handle(data))
+                transitions = handle(data)
             except ValueError:
                 state["rejected"] += 1
+            else:
+                count(len(data), transitions)
+            state["handler_cpu_s"] += time.thread_time() - start
 
         return on_sample
 
@@ -180,7 +189,7 @@ def peer_main(endpoint: str) -> None:
             time.sleep(0.01)
         with lock:
             print(json.dumps(state), flush=True)
-            state.update(count=0, transitions=0, bytes=0, first=0.0, last=0.0, rejected=0)
+            state.update(count=0, transitions=0, bytes=0, first=0.0, last=0.0, rejected=0, handler_cpu_s=0.0)
 
     subs = [
         session.declare_subscriber(END, on_end),
@@ -214,16 +223,31 @@ def wait_line(proc: subprocess.Popen, timeout: float) -> str:
     return result[0]
 
 
-def run_round(session, peer, key: str, payloads, args: Args) -> dict:
+def cpu_seconds(pid: int | None = None) -> float:
+    """CPU time (user + system, all threads) used so far by this process or by process ``pid``."""
+    if pid is None:
+        return time.process_time()
+    with open(f"/proc/{pid}/stat") as f:  # fields 14 and 15 (utime, stime), after the "(comm)" field
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def run_round(session, peer, router, key: str, payloads, args: Args) -> dict:
     import zenoh
 
     pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+    pids = {"publisher": None, "router": router.pid, "subscriber": peer.pid}
+    cpu_start = {name: cpu_seconds(pid) for name, pid in pids.items()}
     start = time.perf_counter()
     for i in range(args.messages):
         pub.put(payloads(i))
     publish_s = time.perf_counter() - start
     session.put(END, str(args.messages), congestion_control=zenoh.CongestionControl.BLOCK)
     stats = json.loads(wait_line(peer, 90))
+    stats["cpu_us_per_msg"] = {
+        name: (cpu_seconds(pid) - cpu_start[name]) / args.messages * 1e6 for name, pid in pids.items()
+    }
+    stats["cpu_us_per_msg"]["subscriber_callback"] = stats["handler_cpu_s"] / args.messages * 1e6
     pub.undeclare()
     span = max(stats["last"] - stats["first"], 1e-9)
     stats["msgs_per_s"] = (stats["count"] - 1) / span
@@ -234,14 +258,18 @@ def run_round(session, peer, key: str, payloads, args: Args) -> dict:
     return stats
 
 
-def bench_end_to_end(args: Args, session, peer, rng: np.random.Generator) -> dict:
+def bench_end_to_end(args: Args, session, peer, router, rng: np.random.Generator) -> dict:
     batches = [make_batch(args.batch, args.obs_dim, rng, seq=i) for i in range(8)]
     size = len(encode(batches[0]))
     raw_payloads = [bytes(rng.integers(0, 256, size, dtype=np.uint8)) for _ in range(8)]
     rounds: dict[str, list[dict]] = {"raw": [], "ours": []}
-    for _ in range(args.rounds):
-        rounds["raw"].append(run_round(session, peer, RAW, lambda i: raw_payloads[i % 8], args))
-        rounds["ours"].append(run_round(session, peer, MSG, lambda i: encode(batches[i % 8]), args))
+    kinds = {
+        "raw": lambda: run_round(session, peer, router, RAW, lambda i: raw_payloads[i % 8], args),
+        "ours": lambda: run_round(session, peer, router, MSG, lambda i: encode(batches[i % 8]), args),
+    }
+    for r in range(args.rounds):  # interleaved, and each kind goes first in every other round
+        for name in ("raw", "ours") if r % 2 == 0 else ("ours", "raw"):
+            rounds[name].append(kinds[name]())
     out = {"message_bytes": size, "messages_per_round": args.messages}
     for name, results in rounds.items():
         results.sort(key=lambda r: r["msgs_per_s"])
@@ -252,6 +280,10 @@ def bench_end_to_end(args: Args, session, peer, rng: np.random.Generator) -> dic
             "lost": sum(r["lost"] for r in results),
             "rejected": sum(r["rejected"] for r in results),
             "rounds_msgs_per_s": [r["msgs_per_s"] for r in results],
+            "cpu_us_per_msg": {
+                proc: float(np.median([r["cpu_us_per_msg"][proc] for r in results]))
+                for proc in ("publisher", "router", "subscriber", "subscriber_callback")
+            },
         }
         if name == "ours":
             out[name]["transitions_per_s"] = median["transitions_per_s"]
@@ -259,6 +291,12 @@ def bench_end_to_end(args: Args, session, peer, rng: np.random.Generator) -> dic
             f"e2e   {name:5s} {size} B  {median['msgs_per_s']:9.0f} msgs/s  "
             f"{median['bytes_per_s'] / 1e9:6.2f} GB/s  lost {out[name]['lost']}  "
             f"(rounds: {', '.join(f'{r:.0f}' for r in out[name]['rounds_msgs_per_s'])})"
+        )
+        cpu = out[name]["cpu_us_per_msg"]
+        print(
+            f"      {name:5s} CPU per message: publisher {cpu['publisher']:.0f} us, router "
+            f"{cpu['router']:.0f} us, subscriber {cpu['subscriber']:.0f} us of which its callback "
+            f"(payload copy + decode) {cpu['subscriber_callback']:.0f} us (medians over rounds)"
         )
     out["ratio_vs_raw"] = out["ours"]["msgs_per_s"] / out["raw"]["msgs_per_s"]
     print(
@@ -332,7 +370,7 @@ def main(args: Args) -> dict:
             raise RuntimeError("bench peer did not start")
         with open_session(ZenohSettings(connect=[endpoint], connect_timeout=20)) as session:
             time.sleep(0.5)  # let the peer's subscriptions reach us through the router
-            result["end_to_end"] = bench_end_to_end(args, session, peer, rng)
+            result["end_to_end"] = bench_end_to_end(args, session, peer, router, rng)
             result["latency"] = bench_latency(args, session, rng)
     finally:
         for proc in (peer, router):
