@@ -26,10 +26,14 @@ NOISY = NavConfig(
 )
 
 
-@pytest.mark.parametrize("config", [ZERO_NOISE, NOISY], ids=["zero-noise", "noisy"])
-def test_vector_env_equals_single_envs(config):
+@pytest.mark.parametrize(
+    ("config", "threads"),
+    [(ZERO_NOISE, 1), (NOISY, 1), (NOISY, 2)],
+    ids=["zero-noise", "noisy", "noisy-2-threads"],
+)
+def test_vector_env_equals_single_envs(config, threads):
     n, seed = 5, 11
-    vector = NavigationVectorEnv(n, config, maps="mixed:16", seed=seed)
+    vector = NavigationVectorEnv(n, config, maps="mixed:16", seed=seed, threads=threads)
     singles = [NavigationEnv(config, maps="mixed:16") for _ in range(n)]
     obs, _ = vector.reset()
     np.testing.assert_array_equal(

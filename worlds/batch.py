@@ -7,6 +7,7 @@ class, so their dynamics are the same code.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from worlds import kernel
@@ -20,12 +21,13 @@ from worlds.tasks import TaskSampler
 class NavBatch:
     """``n`` robots, robot ``i`` drawing its episodes from ``samplers[i]``'s task pool."""
 
-    def __init__(self, n: int, config: NavConfig, samplers: list[TaskSampler]) -> None:
+    def __init__(self, n: int, config: NavConfig, samplers: list[TaskSampler], threads: int = 1) -> None:
         if n < 1:
             raise ValueError(f"need at least one robot, got {n}")
         if len(samplers) != n:
             raise ValueError(f"need one task sampler per robot: {len(samplers)} for {n} robots")
         self.n, self.config = n, config
+        self.threads = max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS, n))
         self.bank, pool_lo, pool_n = merged_bank(samplers, config.pool_size, config.pool_seed)
         self._bank_is_shared = True
         self.turns = np.asarray(config.robot.turns, dtype=np.float64)
@@ -148,6 +150,13 @@ class NavBatch:
         actions = np.asarray(actions, dtype=np.int64).reshape(self.n)
         if actions.min() < 0 or actions.max() >= len(self.turns):
             raise ValueError(f"actions must be integers in [0, {len(self.turns)})")
+        if self.threads > 1:
+            numba.set_num_threads(self.threads)
+            return kernel.step_all_threaded(
+                4 * self.threads, actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(),
+                self._robots(), self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.obs,
+                self.reward, self.terminated, self.truncated, self._finals(),
+            )  # fmt: skip
         return kernel.step_all(
             actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
             self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.obs, self.reward,

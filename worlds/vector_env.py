@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from typing import Any, ClassVar
 
 import numpy as np
@@ -16,6 +17,9 @@ from worlds.env import observation_space
 from worlds.rng import seed_state
 from worlds.tasks import DEFAULT_MAPS, TaskSampler, as_sampler
 
+THREADS_VARIABLE = "NAVLEARN_ENV_THREADS"
+"""environment variable with the default thread count of NavigationVectorEnv"""
+
 
 class NavigationVectorEnv(VectorEnv):
     """``num_envs`` robots of :class:`worlds.env.NavigationEnv`, each on its own map (or a shared
@@ -27,6 +31,10 @@ class NavigationVectorEnv(VectorEnv):
       per robot). Robots drawing from the same spec share one task pool.
     - ``seed``: the seed of the first ``reset()`` when it gets none. Robot ``i`` of an env seeded
       ``s`` is the single env seeded ``s + i``: same tasks, noise and results (tested).
+    - ``threads``: threads stepping the robots (numba ``prange`` over ranges of robots; at most
+      ``NUMBA_NUM_THREADS``, the core count by default). ``None`` reads the environment variable
+      ``NAVLEARN_ENV_THREADS``, default 1: navlearn runs several actor processes per machine,
+      which already use the cores. Results do not depend on it (tested).
     - ``reset(seed=s | [s_0, ...], options={"tasks": [Task | None, ...], "obstacles":
       [DiscObstacles | None, ...], "reset_mask": bool array})``: given tasks/discs for some
       robots; ``reset_mask`` resets only the marked robots.
@@ -47,6 +55,7 @@ class NavigationVectorEnv(VectorEnv):
         config: NavConfig | None = None,
         maps: str | TaskSampler | list[str | TaskSampler] = DEFAULT_MAPS,
         seed: int | None = None,
+        threads: int | None = None,
     ) -> None:
         self.num_envs = int(num_envs)
         self.config = config or NavConfig()
@@ -55,7 +64,9 @@ class NavigationVectorEnv(VectorEnv):
             raise ValueError(f"maps has {len(specs)} entries for {self.num_envs} robots")
         parsed: dict[int, TaskSampler] = {}  # parse each distinct spec once
         samplers = [parsed.setdefault(id(s), as_sampler(s)) for s in specs]
-        self.batch = NavBatch(self.num_envs, self.config, samplers)
+        if threads is None:
+            threads = int(os.environ.get(THREADS_VARIABLE, "1"))
+        self.batch = NavBatch(self.num_envs, self.config, samplers, threads)
         self.single_observation_space = observation_space(self.config)
         self.single_action_space = spaces.Discrete(self.config.robot.n_actions)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
