@@ -212,17 +212,17 @@ def all_finite(values: np.ndarray, other: np.ndarray | None = None) -> bool:
 
     Fast path, one BLAS pass and no temporary array: a dot product is finite only if every term is,
     and a term ``x * y`` is finite only if both ``x`` and ``y`` are (``inf * 0`` is NaN, NaN
-    propagates, ``inf - inf`` is NaN). So ``values . values`` (or ``values . other``, same size and
-    dtype) being finite proves every element finite. The converse fails only when finite terms
+    propagates, ``inf - inf`` is NaN). So ``values . values`` (or ``values . other``, same size)
+    being finite proves every element finite. The converse fails only when finite terms
     overflow (elements beyond ~1e19 in float32): then the exact elementwise check decides.
     """
-    a = values.reshape(-1)
-    b = a if other is None else other.reshape(-1)
-    if a.shape == b.shape and a.dtype == b.dtype:
+    if other is None:
+        other = values
+    if values.size == other.size:
         with np.errstate(over="ignore", invalid="ignore"):  # overflow and NaN are expected inputs here
-            if math.isfinite(np.dot(a, b)):
+            if math.isfinite(np.vdot(values, other)):  # vdot flattens both
                 return True
-    return bool(np.isfinite(a).all()) and (other is None or bool(np.isfinite(b).all()))
+    return bool(np.isfinite(values).all()) and (other is values or bool(np.isfinite(other).all()))
 
 
 def check_finite_pair(what: str, first: tuple[str, np.ndarray], second: tuple[str, np.ndarray]) -> None:
