@@ -5,17 +5,17 @@ learner's TorchRL replay while the rate limiter lets it insert, runs updates
 while the limiter lets it train, broadcasts weights every ``broadcast_every``
 updates, acknowledges each inserted batch to its actor (flow control), keeps the
 status snapshot that the ``status/learner`` queryable serves, writes TensorBoard
-scalars and checkpoints. ``run_learner`` does the process set-up around it.
+scalars and checkpoints. ``run_learner`` does the process set-up around it. Its settings
+are in services.learner_config, what a checkpoint holds besides the networks in
+services.learner_state, the status snapshot in services.learner_status.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import queue
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +28,9 @@ from protocols.messages import DemoBatch, EvalReport, LearnerStatus, TransitionB
 from services.checkpoint import CheckpointDir
 from services.durable import DurableIngest
 from services.inbox import Inbox, Received
+from services.learner_config import EXPLORATION_FIELDS, LearnerConfig
+from services.learner_state import load_service_state, write_service_state
+from services.learner_status import build_status
 from services.process import Scalars, connect
 from services.ratelimit import RateLimiter
 from services.stats import ActorStats, LagWindow, RateWindow
@@ -35,53 +38,6 @@ from services.status import eval_summary
 from services.transport import ZenohSettings, declare_alive
 
 log = logging.getLogger("navlearn.learner")
-EXPLORATION_FIELDS = (
-    "exploration",
-    "temperature_start",
-    "temperature_end",
-    "temperature_decay_updates",
-    "epsilon_start",
-    "epsilon_end",
-    "epsilon_decay_updates",
-)
-
-
-@dataclass
-class LearnerConfig:
-    """The learner service (NNQL hyper-parameters, incl. the update-to-data ratio, are NNQLConfig's)."""
-
-    id: str = "learner"
-    """learner id: its liveliness token is alive/learner/<id>"""
-    model: str = "nnql"
-    """model name: weights go out on weights/<model>"""
-    checkpoint_dir: str = "runs/default/checkpoints"
-    """where checkpoints go (ckpt-NNNNNNNN directories); empty: no checkpoints"""
-    checkpoint_every: float = 300.0
-    """seconds between checkpoints; one is also written on SIGTERM/SIGINT (0: only then)"""
-    keep_checkpoints: int = 3
-    """checkpoints kept; older ones are deleted"""
-    resume: bool = True
-    """resume from the newest checkpoint in checkpoint_dir if there is one"""
-    broadcast_every: int = 50
-    """updates between weight broadcasts (M)"""
-    rate_tolerance: float = 64.0
-    """updates the learner may run ahead of or fall behind the update-to-data ratio before waiting"""
-    inbox_size: int = 256
-    """transition batches waiting to be inserted; more are dropped and counted (dropped/inbox_full)"""
-    demo_capacity: int = 200_000
-    """demonstration steps kept (a separate buffer: actor transitions never evict demonstrations)"""
-    tensorboard: str = ""
-    """directory for TensorBoard scalars (charts/, losses/); empty: none"""
-    log_every: float = 10.0
-    """seconds between progress lines on stdout"""
-    max_updates: int = 0
-    """stop (with a checkpoint) after this many updates; 0: run until stopped"""
-    wal_fsync: str = "always"
-    """write-ahead log (checkpoint_dir/wal) fsync: always, never, or milliseconds between fsyncs"""
-    nirl: bool = False
-    """also train NIRL (thesis ch. 5) on the demonstrations and the actors' experience; weights/nirl"""
-    nirl_updates: int = 1
-    """NIRL updates per NNQL update once NIRL's warm start on the demonstrations is done"""
 
 
 class LearnerService:
@@ -137,25 +93,7 @@ class LearnerService:
             return None
         start = time.perf_counter()
 
-        def write(tmp: Path) -> None:
-            self.learner.save_checkpoint(tmp / "nnql")
-            self.demos.save(tmp / "demos")
-            if self.nirl is not None:
-                self.nirl.save(tmp / "nirl")
-            state = {
-                "limiter": self.limiter.state(),
-                "counters": self.counters,
-                "inbox_counts": self.inbox.counts(),
-                "actors": {
-                    a: {"transitions": s.transitions, "batches": s.batches} for a, s in self.actors.items()
-                },
-                "demo_episodes": self.demos.episodes,
-                "last_eval": self.last_eval,
-                "durable": self.durable.checkpoint_state() if self.durable else None,
-            }
-            (tmp / "service.json").write_text(json.dumps(state, indent=1) + "\n")
-
-        path = self.checkpoints.save(write)
+        path = self.checkpoints.save(lambda tmp: write_service_state(self, tmp))
         if self.durable is not None:
             self.durable.checkpointed()
         self._count("checkpoints")
@@ -169,19 +107,7 @@ class LearnerService:
         return path
 
     def resume(self, path: Path) -> None:
-        self.learner.load_checkpoint(path / "nnql")
-        state = json.loads((path / "service.json").read_text())
-        self.limiter.load_state(state["limiter"])
-        self.counters = {k: int(v) for k, v in state["counters"].items()}
-        self.inbox.load_counts(state["inbox_counts"])
-        for actor, saved in state["actors"].items():
-            self.actors[actor] = ActorStats(transitions=saved["transitions"], batches=saved["batches"])
-        self.demos.load(path / "demos", state["demo_episodes"])
-        if self.nirl is not None:
-            self.nirl.load(path / "nirl")
-        self.last_eval = state["last_eval"]
-        if self.durable is not None:
-            self.durable.load_state(state.get("durable"))
+        load_service_state(self, path)
         log.info(
             "resumed from %s: version %d, replay %d, demos %d",
             path,
@@ -366,38 +292,8 @@ class LearnerService:
     # ---------------------------------------------------------------- status
 
     def status(self) -> LearnerStatus:
-        counters = {**self.counters, **self.inbox.counts(), "updates": self.learner.version}
-        if self.durable is not None:
-            counters.update(self.durable.status_counters())
-        counters["transitions_rejected"] = sum(v for k, v in counters.items() if k.startswith("rejected/"))
-        rates = {
-            "updates_per_s": self.update_rate.rate(),
-            "transitions_per_s": self.insert_rate.rate(),
-            "policy_lag": self.lags.mean(),
-            "update_to_data": self.limiter.updates / max(self.limiter.inserts, 1),
-        }
-        for actor, stats in self.actors.items():
-            rates[f"transitions_per_s/{actor}"] = stats.rate.rate()
-            counters[f"transitions/{actor}"] = stats.transitions
-        versions = {self.config.model: self.learner.version}
-        losses = {k.removeprefix("losses/"): v for k, v in self.metrics.items() if k.startswith("losses/")}
-        if self.nirl is not None:
-            nirl_counters, nirl_losses = self.nirl.status_fields()
-            counters.update(nirl_counters)
-            losses.update(nirl_losses)
-            versions["nirl"] = self.nirl.version
         self.status_seq += 1
-        return LearnerStatus(
-            sender=self.sender,
-            seq=self.status_seq,
-            counters=counters,
-            rates=rates,
-            versions=versions,
-            replay_sizes={"transitions": len(self.learner.replay), "demos": len(self.demos)},
-            actors_last_seen={a: s.last_seen for a, s in self.actors.items() if s.last_seen},
-            losses=losses,
-            last_eval=self.last_eval,
-        )
+        return build_status(self, self.status_seq)
 
     def refresh_status(self) -> None:
         status = self.status()

@@ -1,0 +1,53 @@
+"""The learner service's settings (``navlearn learner`` flags; NNQL's own are NNQLConfig's)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+EXPLORATION_FIELDS = (
+    "exploration",
+    "temperature_start",
+    "temperature_end",
+    "temperature_decay_updates",
+    "epsilon_start",
+    "epsilon_end",
+    "epsilon_decay_updates",
+)
+
+
+@dataclass
+class LearnerConfig:
+    """The learner service (NNQL hyper-parameters, incl. the update-to-data ratio, are NNQLConfig's)."""
+
+    id: str = "learner"
+    """learner id: its liveliness token is alive/learner/<id>"""
+    model: str = "nnql"
+    """model name: weights go out on weights/<model>"""
+    checkpoint_dir: str = "runs/default/checkpoints"
+    """where checkpoints go (ckpt-NNNNNNNN directories); empty: no checkpoints"""
+    checkpoint_every: float = 300.0
+    """seconds between checkpoints; one is also written on SIGTERM/SIGINT (0: only then)"""
+    keep_checkpoints: int = 3
+    """checkpoints kept; older ones are deleted"""
+    resume: bool = True
+    """resume from the newest checkpoint in checkpoint_dir if there is one"""
+    broadcast_every: int = 50
+    """updates between weight broadcasts (M)"""
+    rate_tolerance: float = 64.0
+    """updates the learner may run ahead of or fall behind the update-to-data ratio before waiting"""
+    inbox_size: int = 256
+    """transition batches waiting to be inserted; more are dropped and counted (dropped/inbox_full)"""
+    demo_capacity: int = 200_000
+    """demonstration steps kept (a separate buffer: actor transitions never evict demonstrations)"""
+    tensorboard: str = ""
+    """directory for TensorBoard scalars (charts/, losses/); empty: none"""
+    log_every: float = 10.0
+    """seconds between progress lines on stdout"""
+    max_updates: int = 0
+    """stop (with a checkpoint) after this many updates; 0: run until stopped"""
+    wal_fsync: str = "always"
+    """write-ahead log (checkpoint_dir/wal) fsync: always, never, or milliseconds between fsyncs"""
+    nirl: bool = False
+    """also train NIRL (thesis ch. 5) on the demonstrations and the actors' experience; weights/nirl"""
+    nirl_updates: int = 1
+    """NIRL updates per NNQL update once NIRL's warm start on the demonstrations is done"""
