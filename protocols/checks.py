@@ -215,14 +215,20 @@ def all_finite(values: np.ndarray, other: np.ndarray | None = None) -> bool:
     propagates, ``inf - inf`` is NaN). So ``values . values`` (or ``values . other``, same size)
     being finite proves every element finite. The converse fails only when finite terms
     overflow (elements beyond ~1e19 in float32): then the exact elementwise check decides.
+
+    numpy warns about the overflow or NaN it meets on the fast path; :func:`protocols.codec.decode`
+    runs every check under ``quiet_float_errors()``, other callers should too.
     """
     if other is None:
         other = values
-    if values.size == other.size:
-        with np.errstate(over="ignore", invalid="ignore"):  # overflow and NaN are expected inputs here
-            if math.isfinite(np.vdot(values, other)):  # vdot flattens both
-                return True
+    if values.size == other.size and math.isfinite(np.vdot(values, other)):  # vdot flattens both
+        return True
     return bool(np.isfinite(values).all()) and (other is values or bool(np.isfinite(other).all()))
+
+
+def quiet_float_errors() -> np.errstate:
+    """Context in which :func:`all_finite` meets NaN and overflow silently (they are expected input)."""
+    return np.errstate(over="ignore", invalid="ignore")
 
 
 def check_finite_pair(what: str, first: tuple[str, np.ndarray], second: tuple[str, np.ndarray]) -> None:
@@ -234,15 +240,18 @@ def check_finite_pair(what: str, first: tuple[str, np.ndarray], second: tuple[st
                 raise ProtocolError("nonfinite", f"{what}.{name} holds {bad} NaN or infinite values")
 
 
-def check_actions(actions: np.ndarray, what: str, limits: Limits) -> None:
+def actions_in_range(actions: np.ndarray, limits: Limits) -> bool:
     """Integer ``actions`` lie in [0, n_actions) (only >= 0 when n_actions is None)."""
     if not actions.size:
-        return
+        return True
     if limits.n_actions is None:
-        ok = actions.min() >= 0
-    else:  # one pass: negatives become huge unsigned values
-        ok = actions.view(_UNSIGNED[actions.dtype]).max() < limits.n_actions
-    if not ok:
+        return bool(actions.min() >= 0)
+    return bool(actions.view(_UNSIGNED[actions.dtype]).max() < limits.n_actions)  # negatives wrap
+
+
+def check_actions(actions: np.ndarray, what: str, limits: Limits) -> None:
+    """Integer ``actions`` lie in [0, n_actions) (only >= 0 when n_actions is None)."""
+    if not actions_in_range(actions, limits):
         bound = "inf" if limits.n_actions is None else limits.n_actions
         raise ProtocolError(
             "action_range", f"{what} spans [{actions.min()}, {actions.max()}], outside [0, {bound})"

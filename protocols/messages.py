@@ -16,8 +16,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 from protocols.checks import (
+    INT64_MAX,
     TENSOR_DTYPES,
     BodyReader,
+    actions_in_range,
+    all_finite,
     check_actions,
     check_array,
     check_finite_pair,
@@ -27,6 +30,7 @@ from protocols.checks import (
     check_string,
 )
 from protocols.errors import ProtocolError
+from protocols.limits import Limits
 
 F32 = frozenset({np.dtype("<f4")})
 I64 = frozenset({np.dtype("<i8")})
@@ -70,6 +74,15 @@ class Message:
         """Check a decoded body and return the constructor's keyword arguments."""
         raise NotImplementedError
 
+    @classmethod
+    def accept_body(cls, body: object, limits: Limits) -> dict[str, Any] | None:
+        """Optional fast path for hot kinds: :meth:`read_body`'s result if ``body`` passes all of
+        its checks, else None (then :meth:`read_body` runs and reports what is wrong).
+
+        It must never accept a body :meth:`read_body` rejects; None is always safe.
+        """
+        return None
+
 
 def _arrays(obj: Message, dtypes: dict[str, np.dtype]) -> None:
     for name, dtype in dtypes.items():
@@ -109,6 +122,64 @@ class TransitionBatch(Message):
         return int(self.action.shape[0])
 
     @classmethod
+    def accept_body(cls, body: object, limits: Limits) -> dict[str, Any] | None:
+        """Every check of :meth:`read_body` as one conjunction, without its per-field machinery
+        (about half the cost of decoding a batch of 1024 is that machinery)."""
+        if type(body) is not dict or len(body) != len(_TRANSITION_FIELDS):  # no unknown fields
+            return None
+        get = body.get
+        obs, next_obs, reward, action = get("obs"), get("next_obs"), get("reward"), get("action")
+        env_ids, terminated, truncated = get("env_ids"), get("terminated"), get("truncated")
+        actor, model, version = get("actor"), get("model"), get("policy_version")
+        array, max_string = np.ndarray, limits.max_string
+        if not (
+            type(obs) is array
+            and type(next_obs) is array
+            and type(reward) is array
+            and type(action) is array
+            and type(env_ids) is array
+            and type(terminated) is array
+            and type(truncated) is array
+            and obs.dtype == _F32
+            and next_obs.dtype == _F32
+            and reward.dtype == _F32
+            and action.dtype == _I64
+            and env_ids.dtype == _I32
+            and terminated.dtype == _BOOL
+            and truncated.dtype == _BOOL
+            and obs.ndim == 2
+            and next_obs.shape == obs.shape
+            and 1 <= obs.shape[1] <= limits.max_obs_dim
+            and obs.shape[0] <= limits.max_batch
+            and reward.shape == action.shape == env_ids.shape == terminated.shape == truncated.shape
+            and reward.shape == obs.shape[:1]
+            and type(actor) is str
+            and 0 < len(actor) <= max_string
+            and actor.isprintable()
+            and type(model) is str
+            and 0 < len(model) <= max_string
+            and model.isprintable()
+            and type(version) is int
+            and 0 <= version <= INT64_MAX
+            and all_finite(obs, next_obs)
+            and all_finite(reward)
+            and actions_in_range(action, limits)
+        ):
+            return None
+        return {
+            "env_ids": env_ids,
+            "obs": obs,
+            "action": action,
+            "reward": reward,
+            "next_obs": next_obs,
+            "terminated": terminated,
+            "truncated": truncated,
+            "actor": actor,
+            "model": model,
+            "policy_version": version,
+        }
+
+    @classmethod
     def read_body(cls, body: BodyReader) -> dict[str, Any]:
         out: dict[str, Any] = body.arrays(_TRANSITION_SCHEMA, finite_later=("obs", "next_obs"))
         out["actor"] = body.string("actor")
@@ -139,6 +210,8 @@ _TRANSITION_SCHEMA = {
     "truncated": (BOOL, 1),
 }
 _TRANSITION_DTYPES = {name: next(iter(dtypes)) for name, (dtypes, _) in _TRANSITION_SCHEMA.items()}
+_TRANSITION_FIELDS = (*_TRANSITION_SCHEMA, "actor", "model", "policy_version")
+_F32, _I64, _I32, _BOOL = (np.dtype(s) for s in ("<f4", "<i8", "<i4", "|b1"))
 
 
 @dataclass(kw_only=True)

@@ -7,6 +7,9 @@ up in a cache of layouts that passed the full checks; the encoder caches array h
 
 from __future__ import annotations
 
+import contextlib
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -15,11 +18,11 @@ from hypothesis.extra import numpy as hnp
 from wire_helpers import N_ACTIONS, small_transitions
 
 from protocols.arrays import pack_array, unpack_array
-from protocols.checks import all_finite
+from protocols.checks import BodyReader, all_finite, quiet_float_errors
 from protocols.codec import decode, encode
 from protocols.errors import ProtocolError
 from protocols.limits import Limits
-from protocols.messages import WeightsUpdate
+from protocols.messages import TransitionBatch, WeightsUpdate
 
 LIMITS = Limits(n_actions=N_ACTIONS)
 N, DIM = 1024, 11  # the benchmark's batch: longer than any SIMD block, with a ragged tail
@@ -96,12 +99,23 @@ def test_finite_values_whose_dot_product_overflows_still_decode() -> None:
     paired=st.booleans(),
 )
 def test_all_finite_equals_the_elementwise_check(values: np.ndarray, paired: bool) -> None:
-    if paired:
-        other = np.flip(values).copy()
-        expected = bool(np.isfinite(values).all() and np.isfinite(other).all())
-        assert all_finite(values, other) is expected
-    else:
-        assert all_finite(values) is bool(np.isfinite(values).all())
+    with quiet_float_errors():
+        if paired:
+            other = np.flip(values).copy()
+            expected = bool(np.isfinite(values).all() and np.isfinite(other).all())
+            assert all_finite(values, other) is expected
+        else:
+            assert all_finite(values) is bool(np.isfinite(values).all())
+
+
+def test_decoding_hostile_floats_warns_about_nothing() -> None:
+    obs = np.full((N, DIM), 3e38, np.float32)  # overflows the fast path's dot product
+    obs[0, 0] = np.inf  # and inf * x, inf - inf on the way
+    obs[1, 1] = -np.inf
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert rejection(batch(obs=obs, next_obs=obs)).reason == "nonfinite"
+        decode(encode(batch(reward=np.full(N, 3e38, np.float32))), LIMITS)
 
 
 def test_cached_array_layouts_still_check_the_data() -> None:
@@ -128,3 +142,80 @@ def test_cached_array_headers_follow_dtype_and_shape() -> None:
         for _ in range(2):  # the second encoding uses the cached header
             out = unpack_array(pack_array(array).data)
             assert out.dtype == array.dtype.newbyteorder("<") and np.array_equal(out, array)
+
+
+def body_arrays(message) -> dict:
+    """The body map as the decoder hands it to the schema (arrays decoded, read-only views)."""
+    return decode(encode(message), LIMITS).to_body()
+
+
+MUTATIONS = {
+    "obs f64": lambda b: b | {"obs": b["obs"].astype(np.float64)},
+    "obs big-endian": lambda b: b | {"obs": b["obs"].astype(">f4")},
+    "obs 1-d": lambda b: b | {"obs": b["obs"].reshape(-1)},
+    "obs 3-d": lambda b: b | {"obs": b["obs"][:, :, None]},
+    "obs dim 0": lambda b: b | {"obs": b["obs"][:, :0], "next_obs": b["next_obs"][:, :0]},
+    "obs nan": lambda b: b | {"obs": np.concatenate([np.full_like(b["obs"][:1], np.nan), b["obs"][1:]])},
+    "next_obs inf": lambda b: b | {"next_obs": np.full_like(b["next_obs"], np.inf)},
+    "next_obs shape": lambda b: b | {"next_obs": b["next_obs"][:, :-1]},
+    "reward nan": lambda b: b | {"reward": np.full_like(b["reward"], np.nan)},
+    "reward rows": lambda b: b | {"reward": b["reward"][:-1]},
+    "reward 2-d": lambda b: b | {"reward": b["reward"][:, None]},
+    "action i32": lambda b: b | {"action": b["action"].astype(np.int32)},
+    "action high": lambda b: b | {"action": b["action"] + N_ACTIONS},
+    "action negative": lambda b: b | {"action": b["action"] - N_ACTIONS},
+    "env_ids i64": lambda b: b | {"env_ids": b["env_ids"].astype(np.int64)},
+    "terminated u1": lambda b: b | {"terminated": b["terminated"].view(np.uint8)},
+    "truncated rows": lambda b: b | {"truncated": np.concatenate([b["truncated"], [False]])},
+    "obs list": lambda b: b | {"obs": b["obs"].tolist()},
+    "actor empty": lambda b: b | {"actor": ""},
+    "actor long": lambda b: b | {"actor": "a" * (LIMITS.max_string + 1)},
+    "actor control": lambda b: b | {"actor": "a\nb"},
+    "model int": lambda b: b | {"model": 3},
+    "version negative": lambda b: b | {"policy_version": -1},
+    "version bool": lambda b: b | {"policy_version": True},
+    "version float": lambda b: b | {"policy_version": 1.0},
+    "version huge": lambda b: b | {"policy_version": 2**63},
+    "extra field": lambda b: b | {"extra": 1},
+    "missing field": lambda b: {k: v for k, v in b.items() if k != "truncated"},
+    "swapped field": lambda b: {("extra" if k == "truncated" else k): v for k, v in b.items()},
+}
+
+
+def full_checks(body: dict, limits: Limits) -> dict | ProtocolError:
+    reader = BodyReader("transitions", body, limits)
+    try:
+        fields = TransitionBatch.read_body(reader)
+        reader.finish()
+    except ProtocolError as exc:
+        return exc
+    return fields
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    n=st.integers(0, 40),
+    dim=st.integers(1, 12),
+    mutations=st.lists(st.sampled_from(sorted(MUTATIONS)), max_size=3),
+    n_actions=st.sampled_from([N_ACTIONS, None]),
+    max_batch=st.sampled_from([LIMITS.max_batch, 8]),
+)
+def test_fast_accept_is_sound(n, dim, mutations, n_actions, max_batch) -> None:
+    """The fast path never accepts a body the full checks reject, and takes every valid one."""
+    limits = Limits(n_actions=n_actions, max_batch=max_batch, max_obs_dim=10)
+    body = body_arrays(small_transitions(n=n, dim=dim))
+    for name in mutations:
+        with contextlib.suppress(TypeError, IndexError, AttributeError, KeyError):  # made moot earlier
+            body = MUTATIONS[name](body)
+    fast = TransitionBatch.accept_body(body, limits)
+    full = full_checks(body, limits)
+    if fast is not None:
+        assert not isinstance(full, ProtocolError), full
+        assert fast.keys() == full.keys() and all(fast[k] is full[k] for k in fast)
+    elif not mutations and n <= max_batch and dim <= 10:
+        raise AssertionError("the fast path refused a valid batch")
+
+
+def test_hot_path_is_taken_for_valid_batches() -> None:
+    body = body_arrays(batch())
+    assert TransitionBatch.accept_body(body, LIMITS) is not None
