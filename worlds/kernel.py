@@ -97,15 +97,15 @@ def _wrap(angle: float) -> float:
 
 
 @njit(cache=True, inline="always")
-def _observe(i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
+def _observe(i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
              beam_s, obs):  # fmt: skip
     """Write robot ``i``'s observation: ranges / max_range, squashed goal distance, sin and cos
-    of the goal bearing relative to the heading."""
+    of the goal bearing relative to the heading (``c``, ``s``: cosine and sine of the heading,
+    already known to the caller)."""
     m = mp[i]
     off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
     max_range, noise, drop = params[P_MAXR], params[P_SNOISE], params[P_DROP]
     xi, yi = x[i], y[i]
-    c, s = math.cos(th[i]), math.sin(th[i])
     n_beams = beam_c.shape[0]
     idx, col, row, px, py = ray_origin(field, off, height, width, cell, xi, yi)
     limit = max_range / cell
@@ -137,8 +137,9 @@ def _observe(i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, o
 def _step(
     i, action, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, discs,
     n_discs, params, turns
-) -> float:  # fmt: skip
-    """Move robot ``i`` and its ``n_discs`` discs one step; set its outcome; return its reward.
+):  # fmt: skip
+    """Move robot ``i`` and its ``n_discs`` discs one step; set its outcome; return its reward and
+    the cosine and sine of its new heading (for :func:`_observe`).
     (At most 30 arguments: CPython passes longer calls as ``*args``, which numba cannot inline.
     The disc arrays stay in a tuple, opened only for robots that have discs.)"""
     m = mp[i]
@@ -153,7 +154,8 @@ def _step(
     heading = _wrap(heading)
     th[i] = heading
     x0, y0 = x[i], y[i]
-    x1, y1 = x0 + distance * math.cos(heading), y0 + distance * math.sin(heading)
+    c, s = math.cos(heading), math.sin(heading)
+    x1, y1 = x0 + distance * c, y0 + distance * s
     result = RUNNING
     if capsule_hits_grid(field, off, height, width, cell, x0, y0, x1, y1, radius):
         result = HIT_STATIC
@@ -184,7 +186,7 @@ def _step(
     if result == RUNNING and steps[i] >= params[P_MAXSTEPS]:
         result = TIMEOUT
     outcome[i] = result
-    return reward
+    return reward, c, s
 
 
 MAX_START_DRAWS = 64
@@ -272,8 +274,8 @@ def _reset(
             i, rng, field, moff[m], mh[m], width, cell, cand, c_off, c_n, x[i], y[i], keep_out, spec, moving
         )
     _observe(
-        i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
-        beam_s, obs,
+        i, field, moff, mh, mw, mcell, mp, x, y, math.cos(th[i]), math.sin(th[i]), gx, gy, rng, ox, oy, orad,
+        ocount, params, beam_c, beam_s, obs,
     )  # fmt: skip
     return drivable
 
@@ -316,12 +318,12 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
     f_obs, f_outcome, f_plen, f_steps, f_pose, f_ent, f_scell, f_gcell, f_done = finals
     n_done = 0
     for i in range(lo, hi):
-        reward[i] = _step(
+        reward[i], c, s = _step(
             i, actions[i], field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome,
             moving, ocount[i], params, turns,
         )  # fmt: skip
         _observe(
-            i, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
+            i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
             beam_s, obs
         )  # fmt: skip
         result = outcome[i]
