@@ -22,7 +22,6 @@ import threading
 import time
 import zlib
 from collections import deque
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,6 +32,7 @@ from protocols.flow import Ack
 from protocols.limits import Limits
 from protocols.messages import TransitionBatch
 from services.acl import actor_status_key
+from services.actor_config import ActorConfig
 from services.actor_status import BACKPRESSURE_SHARE, BlockedShare, actor_status
 from services.outbox import Outbox
 from services.process import connect
@@ -41,34 +41,6 @@ from services.weights import WeightsReceiver, split_architecture
 
 log = logging.getLogger("navlearn.actor")
 SUCCESS = 1  # worlds.outcomes.Outcome.GOAL
-
-
-@dataclass
-class ActorConfig:
-    """One actor process: its robots, its maps and how it sends."""
-
-    id: str = ""
-    """actor id (key transitions/<id>, token alive/actor/<id>); empty: <hostname>-<pid>"""
-    envs: int = 8
-    """robots stepped together in the vector env"""
-    maps: str = "mixed:16"
-    """training map spec (worlds.tasks): rooms:16, rects:24x32, maze:15, mixed:16, a .map/.scen path"""
-    seed: int | None = None
-    """env and exploration seed; empty: derived from the actor id (give each actor its own)"""
-    model: str = "nnql"
-    """model whose weights the actor follows (weights/<model>)"""
-    batch_steps: int = 16
-    """vector-env steps per published TransitionBatch (K); a batch holds K x envs transitions"""
-    ack_window: int = 2
-    """batches in flight without the learner's acknowledgement before the actor waits"""
-    ack_timeout: float = 10.0
-    """seconds without any acknowledgement before the unacknowledged batches are sent again"""
-    outbox_size: int = 64
-    """batches held (unsent or unacknowledged); when full the actor waits for the learner (back-pressure)"""
-    max_steps: int = 0
-    """stop after this many robot-steps (0: run until stopped)"""
-    log_every: float = 10.0
-    """seconds between progress lines on stdout"""
 
 
 def default_actor_id() -> str:

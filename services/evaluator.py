@@ -15,7 +15,6 @@ import json
 import logging
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +22,7 @@ from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
 from protocols.messages import EvalReport
+from services.evaluator_config import EvaluatorConfig
 from services.process import Scalars, connect
 from services.transport import ZenohSettings, declare_alive
 from services.weights import WeightsReceiver, split_architecture
@@ -32,36 +32,6 @@ CURVE_FILE = "learning_curve.png"
 LINES_FILE = "evaluations.jsonl"
 REFERENCE = "reference"
 """model field of points that evaluate a fixed saved policy (the imitation policy) once"""
-
-
-@dataclass
-class EvaluatorConfig:
-    """The evaluator service: which versions, which held-out sets, where results go."""
-
-    id: str = "evaluator"
-    """evaluator id (key eval/<id>, token alive/evaluator/<id>)"""
-    model: str = "nnql"
-    """model whose weights are evaluated (weights/<model>)"""
-    families: tuple[str, ...] = ("unseen", "dynamic")
-    """evaluation sets (agents.evaluation): unseen (held-out generated maps), dynamic (the same with
-    moving discs), movingai (the arena map's scenarios)"""
-    episodes: int = 50
-    """episodes per family (the same fixed, seeded tasks for every version)"""
-    eval_seed: int = 0
-    """seed of the evaluation sets (never overlaps training maps)"""
-    every_versions: int = 0
-    """evaluate a version only if it is at least this many updates past the last one evaluated
-    (0: any newer version)"""
-    out: str = "runs/default/eval"
-    """directory for evaluations.jsonl and learning_curve.png"""
-    tensorboard: str = ""
-    """directory for TensorBoard scalars (eval/<family>/success, spl, path_ratio); empty: none"""
-    max_evals: int = 0
-    """stop after this many evaluations (0: run until stopped)"""
-    compare: tuple[str, ...] = ()
-    """more models evaluated beside --model on the same sets (e.g. nirl): each follows weights/<name>"""
-    imitation: str = ""
-    """a saved imitation policy directory (navlearn imitate train), evaluated once as a reference"""
 
 
 def summary_scalars(metrics: dict[str, Any]) -> dict[str, float]:

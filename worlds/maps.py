@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 Cell = tuple[int, int]
 
@@ -277,13 +276,17 @@ def load_map(path: str | Path, cell_size: float = 1.0) -> GridMap:
 # --------------------------------------------------------------------------- geometry
 
 
-_FOUR = ndimage.generate_binary_structure(2, 1)
+_FOUR = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)
+"""4-connectivity (scipy.ndimage.generate_binary_structure(2, 1)); scipy is imported where used, so
+importing worlds stays fast."""
 
 
 def components(grid: GridMap) -> np.ndarray:
     """4-connected components of free space (0 = blocked). A 4-connected path is
     drivable by every motion model in navlearn, so this is the safe notion of
     'connected' for start/goal guarantees."""
+    from scipy import ndimage
+
     labels, _ = ndimage.label(~grid.blocked, structure=_FOUR)
     return labels
 
@@ -298,6 +301,8 @@ def connected(grid: GridMap, a: Cell, b: Cell) -> bool:
 def clearance(grid: GridMap) -> np.ndarray:
     """Distance in metres from each cell centre to the nearest blocked cell
     centre or the map border (0 on blocked cells)."""
+    from scipy import ndimage
+
     padded = np.pad(~grid.blocked, 1, constant_values=False)
     dist = ndimage.distance_transform_edt(padded)[1:-1, 1:-1]
     return (dist * grid.cell_size).astype(np.float32)

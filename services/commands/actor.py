@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from services.actor import ActorConfig
+from services.actor_config import ActorConfig
 from services.options import add_options
 from services.transport import add_zenoh_args
 

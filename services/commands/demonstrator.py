@@ -28,7 +28,7 @@ Examples:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from services.demonstrator import DemonstratorConfig
+    from services.demonstrator_config import DemonstratorConfig
     from services.options import add_options
     from services.transport import add_zenoh_args
 

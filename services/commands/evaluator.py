@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from services.evaluator import EvaluatorConfig
+from services.evaluator_config import EvaluatorConfig
 from services.options import add_options
 from services.transport import add_zenoh_args
 

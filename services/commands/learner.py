@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from agents.nnql.config import NNQLConfig
-from services.learner import LearnerConfig
+from services.learner_config import LearnerConfig
 from services.options import add_options
 from services.transport import add_zenoh_args
 

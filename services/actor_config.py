@@ -1,0 +1,33 @@
+"""The actor service's settings (`navlearn actor` flags), apart so the CLI parser builds fast."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class ActorConfig:
+    """One actor process: its robots, its maps and how it sends."""
+
+    id: str = ""
+    """actor id (key transitions/<id>, token alive/actor/<id>); empty: <hostname>-<pid>"""
+    envs: int = 8
+    """robots stepped together in the vector env"""
+    maps: str = "mixed:16"
+    """training map spec (worlds.tasks): rooms:16, rects:24x32, maze:15, mixed:16, a .map/.scen path"""
+    seed: int | None = None
+    """env and exploration seed; empty: derived from the actor id (give each actor its own)"""
+    model: str = "nnql"
+    """model whose weights the actor follows (weights/<model>)"""
+    batch_steps: int = 16
+    """vector-env steps per published TransitionBatch (K); a batch holds K x envs transitions"""
+    ack_window: int = 2
+    """batches in flight without the learner's acknowledgement before the actor waits"""
+    ack_timeout: float = 10.0
+    """seconds without any acknowledgement before the unacknowledged batches are sent again"""
+    outbox_size: int = 64
+    """batches held (unsent or unacknowledged); when full the actor waits for the learner (back-pressure)"""
+    max_steps: int = 0
+    """stop after this many robot-steps (0: run until stopped)"""
+    log_every: float = 10.0
+    """seconds between progress lines on stdout"""

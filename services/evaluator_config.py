@@ -1,0 +1,35 @@
+"""The evaluator service's settings (`navlearn evaluator` flags), apart so the CLI parser builds fast."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class EvaluatorConfig:
+    """The evaluator service: which versions, which held-out sets, where results go."""
+
+    id: str = "evaluator"
+    """evaluator id (key eval/<id>, token alive/evaluator/<id>)"""
+    model: str = "nnql"
+    """model whose weights are evaluated (weights/<model>)"""
+    families: tuple[str, ...] = ("unseen", "dynamic")
+    """evaluation sets (agents.evaluation): unseen (held-out generated maps), dynamic (the same with
+    moving discs), movingai (the arena map's scenarios)"""
+    episodes: int = 50
+    """episodes per family (the same fixed, seeded tasks for every version)"""
+    eval_seed: int = 0
+    """seed of the evaluation sets (never overlaps training maps)"""
+    every_versions: int = 0
+    """evaluate a version only if it is at least this many updates past the last one evaluated
+    (0: any newer version)"""
+    out: str = "runs/default/eval"
+    """directory for evaluations.jsonl and learning_curve.png"""
+    tensorboard: str = ""
+    """directory for TensorBoard scalars (eval/<family>/success, spl, path_ratio); empty: none"""
+    max_evals: int = 0
+    """stop after this many evaluations (0: run until stopped)"""
+    compare: tuple[str, ...] = ()
+    """more models evaluated beside --model on the same sets (e.g. nirl): each follows weights/<name>"""
+    imitation: str = ""
+    """a saved imitation policy directory (navlearn imitate train), evaluated once as a reference"""
