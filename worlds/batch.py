@@ -7,7 +7,8 @@ class, so their dynamics are the same code.
 
 from __future__ import annotations
 
-import numba
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from worlds import kernel
@@ -27,7 +28,8 @@ class NavBatch:
         if len(samplers) != n:
             raise ValueError(f"need one task sampler per robot: {len(samplers)} for {n} robots")
         self.n, self.config = n, config
-        self.threads = max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS, n))
+        self.threads = max(1, min(int(threads), n))
+        self._pool: ThreadPoolExecutor | None = None
         self.bank, pool_lo, pool_n = merged_bank(samplers, config.pool_size, config.pool_seed)
         self._bank_is_shared = True
         self.turns = np.asarray(config.robot.turns, dtype=np.float64)
@@ -151,17 +153,38 @@ class NavBatch:
         if actions.min() < 0 or actions.max() >= len(self.turns):
             raise ValueError(f"actions must be integers in [0, {len(self.turns)})")
         if self.threads > 1:
-            numba.set_num_threads(self.threads)
-            return kernel.step_all_threaded(
-                4 * self.threads, actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(),
-                self._robots(), self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.obs,
-                self.reward, self.terminated, self.truncated, self._finals(),
-            )  # fmt: skip
+            return self._step_threaded(actions, autoreset)
         return kernel.step_all(
             actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
             self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.obs, self.reward,
             self.terminated, self.truncated, self._finals(),
         )  # fmt: skip
+
+    def _step_threaded(self, actions: np.ndarray, autoreset: bool) -> int:
+        """Step ``self.threads`` ranges of robots at once: the calling thread and a pool of
+        Python threads each run :func:`worlds.kernel.step_range` (which releases the GIL) on one
+        range. Plain threads rather than a numba parallel loop: waiting threads sleep instead
+        of spinning, which matters on machines whose cores are busy with other processes."""
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="navlearn-env")
+        arrays = (
+            actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
+            self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.obs, self.reward,
+            self.terminated, self.truncated, self._finals(),
+        )  # fmt: skip
+        bounds = [self.n * k // self.threads for k in range(self.threads + 1)]
+        others = [
+            self._pool.submit(kernel.step_range, bounds[k], bounds[k + 1], *arrays)
+            for k in range(1, self.threads)
+        ]
+        n_done = kernel.step_range(bounds[0], bounds[1], *arrays)
+        return n_done + sum(f.result() for f in others)
+
+    def close(self) -> None:
+        """Stop the stepping threads (if any)."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
 
     # ----------------------------------------------------------------- reading state
     def pose(self) -> np.ndarray:

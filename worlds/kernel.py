@@ -28,7 +28,7 @@ import math
 from pathlib import Path
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from worlds.bank import E_CN, E_COFF, E_GC, E_GR, E_MAP, E_MIN_D2, E_RESAMPLE, E_SC, E_SR
 from worlds.config import NavConfig
@@ -291,26 +291,12 @@ def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, be
     )  # fmt: skip
 
 
-@njit(cache=True, parallel=True)
-def step_all_threaded(chunks, actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s,
-                      obs, reward, terminated, truncated, finals):  # fmt: skip
-    """:func:`step_all` with the robots split into ``chunks`` ranges stepped by numba's threads
-    (``numba.set_num_threads``). Robots share nothing they write and each owns its random
-    stream, so the results equal :func:`step_all`'s whatever the thread count."""
-    n = actions.shape[0]
-    n_done = 0
-    for c in prange(chunks):
-        n_done += step_range(
-            c * n // chunks, (c + 1) * n // chunks, actions, autoreset, maps, entries, robots, discs, params,
-            turns, beam_c, beam_s, obs, reward, terminated, truncated, finals,
-        )  # fmt: skip
-    return n_done
-
-
-@njit(cache=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False)
 def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs,
                reward, terminated, truncated, finals):  # fmt: skip
-    """The work of :func:`step_all` for robots ``lo .. hi - 1``."""
+    """The work of :func:`step_all` for robots ``lo .. hi - 1``. Releases the GIL: robots share
+    nothing they write and each owns its random stream, so threads may step disjoint ranges at
+    once with results equal to :func:`step_all`'s (see :class:`worlds.batch.NavBatch`)."""
     field, moff, mh, mw, mcell = maps
     x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp = robots
     ox, oy, orad, ocount = discs[0], discs[1], discs[4], discs[10]

@@ -31,10 +31,10 @@ class NavigationVectorEnv(VectorEnv):
       per robot). Robots drawing from the same spec share one task pool.
     - ``seed``: the seed of the first ``reset()`` when it gets none. Robot ``i`` of an env seeded
       ``s`` is the single env seeded ``s + i``: same tasks, noise and results (tested).
-    - ``threads``: threads stepping the robots (numba ``prange`` over ranges of robots; at most
-      ``NUMBA_NUM_THREADS``, the core count by default). ``None`` reads the environment variable
-      ``NAVLEARN_ENV_THREADS``, default 1: navlearn runs several actor processes per machine,
-      which already use the cores. Results do not depend on it (tested).
+    - ``threads``: threads stepping ranges of robots at once (the compiled kernel releases the
+      GIL). ``None`` reads the environment variable ``NAVLEARN_ENV_THREADS``, default 1:
+      navlearn runs several actor processes per machine, which already use the cores, and
+      threads only pay off on idle cores. Results do not depend on it (tested).
     - ``reset(seed=s | [s_0, ...], options={"tasks": [Task | None, ...], "obstacles":
       [DiscObstacles | None, ...], "reset_mask": bool array})``: given tasks/discs for some
       robots; ``reset_mask`` resets only the marked robots.
@@ -131,6 +131,9 @@ class NavigationVectorEnv(VectorEnv):
                 "_final_info": done,
             }
         return b.obs.copy(), b.reward.copy(), b.terminated.copy(), b.truncated.copy(), info
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self.batch.close()
 
     def poses(self) -> np.ndarray:
         """Current (x, y, theta) of every robot, ``(num_envs, 3)``."""
