@@ -6,11 +6,11 @@ frequent (about one robot-step in ten). Robot-steps/s at 1, 64 and 1024 robots; 
 gymnasium.vector.SyncVectorEnv of gym.make("navlearn/Navigation-v0") envs (the usual way to batch
 a gymnasium env; its SAME_STEP autoreset), timed for a bounded number of steps. Our env is
 measured twice: with one thread (``threads=1``: the serial kernel, no parallel code; the
-one-core figure) and with ``--threads`` threads (numba prange over ranges of robots; 64 robots
-and more). SyncVectorEnv steps its envs one after the other in one thread. The machine is
-shared, so each figure is reported per wall-clock second and per CPU second of this process
-(all its threads), with the load average; the threaded ratio is a wall-clock ratio (what
-threads buy is wall-clock time).
+one-core figure) and with ``--threads`` threads (Python threads stepping ranges of robots in
+the GIL-free kernel; 64 robots and more). SyncVectorEnv steps its envs one after the other in
+one thread. The machine is shared, so each figure is reported per wall-clock second and per
+CPU second of this process (all its threads), with the load average; the threaded ratio is a
+wall-clock ratio (what threads buy is wall-clock time).
 
     python bench/env_throughput.py     # human lines, then one JSON object on the last line
 """
@@ -29,7 +29,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import gymnasium as gym
-import numba
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import worlds  # noqa: F401  (registers navlearn/Navigation-v0)
@@ -76,8 +75,8 @@ def main() -> int:
     parser.add_argument(
         "--threads",
         type=int,
-        default=numba.config.NUMBA_NUM_THREADS,
-        help="threads of the threaded measurement (default: NUMBA_NUM_THREADS, the core count)",
+        default=os.cpu_count() or 1,
+        help="threads of the threaded measurement (default: the core count)",
     )
     args = parser.parse_args()
     config = NavConfig()
@@ -89,6 +88,7 @@ def main() -> int:
         if n >= 64 and args.threads > 1:
             env = NavigationVectorEnv(n, config, threads=args.threads)
             threaded = measure(env, n, args.seconds, 10**9, args.seed) | {"threads": env.batch.threads}
+            env.close()
         sync = SyncVectorEnv(
             [lambda: gym.make("navlearn/Navigation-v0", config=config) for _ in range(n)],
             autoreset_mode=AutoresetMode.SAME_STEP,
@@ -124,8 +124,7 @@ def main() -> int:
     summary = {
         "bench": "env_throughput",
         "config": "NavConfig() defaults, maps mixed:16, random actions; ours with threads=1 and "
-        f"threads={args.threads} (NUMBA_NUM_THREADS={numba.config.NUMBA_NUM_THREADS}, "
-        f"{os.cpu_count()} cores)",
+        f"threads={args.threads} ({os.cpu_count()} cores)",
         "load_average_before": load_before,
         "load_average_after": os.getloadavg()[0],
         "results": results,
