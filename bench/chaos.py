@@ -1,5 +1,6 @@
 """Chaos benchmark: SIGKILLed learners, a restarted actor and router, a flooding actor - nothing
-acknowledged may be lost. Then ingest throughput with acknowledgements + write-ahead log on vs off.
+acknowledged may be lost. Then ingest throughput with acknowledgements + write-ahead log on vs off
+(bench/ingest.py: the same offered loads in every setting, interleaved rounds).
 
 Processes: a stand-alone router, a learner (client, checkpoints every 2 s), traceable actors
 in this process (tests/reliability_helpers.TracedActor: unique ids in the rewards, the real
@@ -26,6 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench import ingest
 from protocols.codec import encode
 from services.checkpoint import CheckpointDir
 from services.status import query_status
@@ -39,8 +41,11 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--actors", type=int, default=3, help="traceable actors (2-4)")
     p.add_argument("--kills", type=int, default=3, help="learner SIGKILLs")
     p.add_argument("--seconds", type=float, default=45.0, help="length of the chaos phase")
-    p.add_argument("--throughput-seconds", type=float, default=8.0, help="each throughput measurement")
-    p.add_argument("--wal-fsync", default="always", help="learner --wal-fsync in the throughput run")
+    p.add_argument(
+        "--throughput-seconds", type=float, default=3.0, help="each ingest measurement (bench/ingest.py)"
+    )
+    p.add_argument("--ingest-rounds", type=int, default=4, help="ingest rounds after the warm-up")
+    p.add_argument("--wal-fsync", default="always", help="learner --wal-fsync in the ingest comparison")
     p.add_argument("--only-ingest", action="store_true", help="skip the chaos phase, measure ingest only")
     return p.parse_args()
 
@@ -198,62 +203,11 @@ def chaos(args, root: Path) -> dict:
     return result
 
 
-def ingest_rate(root: Path, seconds: float, acks: bool, wal: bool, fsync: str = "always") -> float:
-    """Transitions/s the learner stores from 2 actors, with or without waiting for acknowledgements
-    (window 4) and with or without the write-ahead log (``fsync`` policy)."""
-    name = f"tp{int(acks)}{int(wal)}"
-    endpoint, run = f"tcp/127.0.0.1:{free_port()}", name
-    ckpt = root / name if wal else None
-    extra = ("--utd-ratio", "0.0005", "--checkpoint-every", "0", "--wal-fsync", fsync)
-    argv = learner_argv(endpoint, run, ckpt, *extra)
-    argv[argv.index("--connect") : argv.index("--connect") + 2] = ["--listen", endpoint]
-    argv[argv.index("--mode") + 1] = "router"
-    learner = start_learner(argv, root / f"{name}.log")
-    session = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
-    try:
-        actors = [
-            TracedActor(session, run, f"t{i}", per_batch=128, first_id=1 + i * 1_000_000) for i in (0, 1)
-        ]
-        stop = threading.Event()
-
-        def send(actor: TracedActor) -> None:
-            while not stop.is_set():
-                if acks:
-                    actor.send_one(stop)
-                else:
-                    actor.publisher.put(encode(actor.make_batch()))
-                    time.sleep(
-                        0.0005
-                    )  # without acks nothing paces the sender: keep the inbox from overflowing
-
-        while query_status(session, run, timeout=2.0) is None:
-            time.sleep(0.2)
-        threads = [threading.Thread(target=send, args=(a,), daemon=True) for a in actors]
-        for t in threads:
-            t.start()
-        time.sleep(2.0)  # warm-up
-        first = query_status(session, run, timeout=5.0)
-        t0 = time.monotonic()
-        time.sleep(seconds)
-        last = query_status(session, run, timeout=5.0)
-        elapsed = time.monotonic() - t0
-        stop.set()
-        for t in threads:
-            t.join(10)
-        n = last.counters.get("transitions_received", 0) - first.counters.get("transitions_received", 0)
-        for a in actors:
-            a.close()
-        return n / elapsed
-    finally:
-        session.close()
-        stop_process(learner)
-
-
 def main() -> None:
     args = parse_args()
     with tempfile.TemporaryDirectory(prefix="navlearn-chaos-") as tmp:
         root = Path(tmp)
-        result = {"wal_fsync": args.wal_fsync} if args.only_ingest else chaos(args, root)
+        result = {} if args.only_ingest else chaos(args, root)
         if not args.only_ingest:
             print(
                 f"sent {result['transitions_sent']}, acknowledged {result['transitions_acknowledged']}, "
@@ -261,22 +215,12 @@ def main() -> None:
                 f"stored twice {result['stored_twice']}, duplicates dropped {result['duplicates_dropped']}, "
                 f"peak RSS {result['learner_peak_rss_mb']} MB, resume {result['resume_seconds']} s"
             )
-        off = ingest_rate(root, args.throughput_seconds, acks=False, wal=False)
-        acks_only = ingest_rate(root, args.throughput_seconds, acks=True, wal=False)
-        on = ingest_rate(root, args.throughput_seconds, acks=True, wal=True, fsync=args.wal_fsync)
-        result.update(
-            {
-                "ingest_per_s_acks_wal_off": round(off, 1),
-                "ingest_per_s_acks_on_wal_off": round(acks_only, 1),
-                "ingest_per_s_acks_wal_on": round(on, 1),
-                "ingest_ratio_on_vs_off": round(on / off, 3) if off else None,
-                "ingest_ratio_wal_on_vs_off_with_acks": round(on / acks_only, 3) if acks_only else None,
-            }
-        )
-        print(
-            f"ingest: acks+WAL off {off:.0f} transitions/s, acks only {acks_only:.0f}/s, "
-            f"acks+WAL {on:.0f}/s; ratio {on / off:.2f} (vs acks only {on / acks_only:.2f})"
-        )
+        rounds, seconds, fsync = str(args.ingest_rounds), str(args.throughput_seconds), args.wal_fsync
+        ingest_args = ingest.parse_args(["--rounds", rounds, "--seconds", seconds, "--wal-fsync", fsync])
+        (root / "ingest").mkdir()
+        figures = ingest.run_ingest(ingest_args, root / "ingest")
+        ingest.report(figures)
+        result.update({f"ingest/{k}": v for k, v in figures.items()})
     print(json.dumps(result))
 
 
