@@ -53,7 +53,7 @@ class Args:
     """Time spent on each codec measurement."""
     messages: int = 3000
     """Messages per end-to-end round."""
-    rounds: int = 3
+    rounds: int = 5
     """End-to-end rounds of each kind (raw, ours), interleaved; the median is reported."""
     pings: int = 300
     """Weights round trips measured (after 20 warm-up ones)."""
