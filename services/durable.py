@@ -53,13 +53,17 @@ class DurableIngest:
         self.checkpoint_seq = 0
         self.counters = {"duplicates_dropped": 0, "wal_replayed": 0, "wal_undecodable": 0}
 
-    def admit(self, message: Message) -> bool:
-        """False for a duplicate (counted); else log it durably and return True."""
+    def admit(self, message: Message, sync: bool = True) -> bool:
+        """False for a duplicate (counted); else log it and return True: durable now, or with
+        ``sync=False`` once ``sync()`` has returned (one fsync for a group of batches)."""
         if self.dedup.seen(dedup_key(message), message.seq):
             self.counters["duplicates_dropped"] += 1
             return False
-        self.wal.append(encode(message))
+        self.wal.append(encode(message), sync=sync)
         return True
+
+    def sync(self) -> None:
+        self.wal.sync()
 
     def checkpoint_state(self) -> dict:
         return {"wal_seq": self.wal.last_seq, "dedup": self.dedup.state(), "counters": self.counters}

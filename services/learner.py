@@ -3,7 +3,8 @@
 Main thread only: it drains the inbox (filled by Zenoh callbacks) into the NNQL
 learner's TorchRL replay while the rate limiter lets it insert, runs updates
 while the limiter lets it train, broadcasts weights every ``broadcast_every``
-updates, acknowledges each inserted batch to its actor (flow control), keeps the
+updates, acknowledges each inserted batch to its actor (flow control; the batches
+drained together share one write-ahead-log fsync before their acks go out), keeps the
 status snapshot that the ``status/learner`` queryable serves, writes TensorBoard
 scalars and checkpoints. ``run_learner`` does the process set-up around it. Its settings
 are in services.learner_config, what a checkpoint holds besides the networks in
@@ -77,6 +78,7 @@ class LearnerService:
         self.status_bytes: bytes = b""
         self.status_seq = 0
         self.ack_seq = 0
+        self._unacked: list[tuple[str, int, str]] = []  # (key name, seq, incarnation) awaiting commit
         self.durable = (
             DurableIngest(Path(config.checkpoint_dir) / "wal", config.wal_fsync)
             if config.checkpoint_dir
@@ -128,6 +130,7 @@ class LearnerService:
             else:
                 self.inbox.other.put(item)
                 self._drain_other()
+        self._commit()
         self._replaying = False
         log.info("write-ahead log replayed: %s", self.durable.status_counters())
 
@@ -174,6 +177,7 @@ class LearnerService:
         except queue.Empty:
             return
         self._insert(item)
+        self._commit()
 
     def _ingest(self, max_batches: int) -> bool:
         done = 0
@@ -184,6 +188,7 @@ class LearnerService:
                 break
             self._insert(item)
             done += 1
+        self._commit()
         return done > 0
 
     def _insert(self, item: Received) -> None:
@@ -194,7 +199,7 @@ class LearnerService:
                 "shape", f"batch from {item.name} has obs_dim {batch.obs.shape[1]}, not {obs_dim}"
             )
             return
-        if self.durable is not None and not self._replaying and not self.durable.admit(batch):
+        if self.durable is not None and not self._replaying and not self.durable.admit(batch, sync=False):
             self._ack(item.name, batch.seq, batch.sender)  # a resend of a stored batch: ack it again
             return
         n = self.learner.add(batch)
@@ -208,16 +213,28 @@ class LearnerService:
 
     def _ack(self, actor: str, seq: int, incarnation: str) -> None:
         """Acknowledge batch ``seq`` of ``incarnation`` (its envelope sender, ``<id>#<start>``), so a
-        restarted actor with the same id never takes its predecessor's acks for its own seqs."""
-        self.ack_seq += 1
-        ack = Ack(
-            sender=self.sender,
-            seq=self.ack_seq,
-            actor=incarnation,
-            accepted_seq=seq,
-            policy_version=self.learner.version,
-        )
-        self.session.put(keys.acks(self.run_name, actor), encode(ack))
+        restarted actor with the same id never takes its predecessor's acks for its own seqs. The ack
+        goes out at the next ``_commit``, once the write-ahead log holds the batch durably."""
+        self._unacked.append((actor, seq, incarnation))
+
+    def _commit(self) -> None:
+        """Group commit: one write-ahead-log sync for the batches logged since the last commit,
+        then their acknowledgements."""
+        if not self._unacked:
+            return
+        if self.durable is not None:
+            self.durable.sync()
+        for actor, seq, incarnation in self._unacked:
+            self.ack_seq += 1
+            ack = Ack(
+                sender=self.sender,
+                seq=self.ack_seq,
+                actor=incarnation,
+                accepted_seq=seq,
+                policy_version=self.learner.version,
+            )
+            self.session.put(keys.acks(self.run_name, actor), encode(ack))
+        self._unacked.clear()
 
     def _train(self, max_updates: int) -> bool:
         ran = 0
@@ -248,13 +265,18 @@ class LearnerService:
             try:
                 item = self.inbox.other.get_nowait()
             except queue.Empty:
+                self._commit()
                 return busy
             busy = True
             if isinstance(item.message, DemoBatch):
                 if item.message.obs.shape[1] != self.learner.architecture["obs_dim"]:
                     self.inbox.reject("shape", f"demos from {item.name} have the wrong obs_dim")
                     continue
-                if self.durable is not None and not self._replaying and not self.durable.admit(item.message):
+                if (
+                    self.durable is not None
+                    and not self._replaying
+                    and not self.durable.admit(item.message, sync=False)
+                ):
                     self._ack(item.name, item.message.seq, item.message.sender)  # a resend: ack again
                     continue
                 steps = self.demos.add(item.message)

@@ -15,8 +15,9 @@ corrupt record (bad magic, length, checksum or seq) ends the log: it is
 reported (log line + ``corrupt_records`` / ``cut_bytes``), the file is cut
 there and later segments are removed; it never raises.
 
-fsync policy: ``always`` (each append), ``<N>`` (at most every N ms, and on
-rotate/close) or ``never``. A process crash loses nothing written with any of
+fsync policy: ``always`` (each append, or once per group of appends made with
+``sync=False`` and closed by ``sync()``: a group commit, as databases do), ``<N>``
+(at most every N ms, and on rotate/close) or ``never``. A process crash loses nothing written with any of
 them (the bytes are in the OS page cache); a machine crash only with ``always``.
 """
 
@@ -71,6 +72,7 @@ class WriteAheadLog:
         self.counters = {"appended": 0, "corrupt_records": 0, "cut_bytes": 0, "fsyncs": 0}
         self._file = None
         self._last_sync = time.monotonic()
+        self._unsynced = False
 
     # ------------------------------------------------------------------ reading
 
@@ -152,8 +154,9 @@ class WriteAheadLog:
         self._file = open(path, "ab")  # noqa: SIM115 - held open across appends, closed in close()
         _fsync_dir(self.dir)
 
-    def append(self, payload: bytes) -> int:
-        """Write one record; durable per the fsync policy when this returns. Returns its seq."""
+    def append(self, payload: bytes, sync: bool = True) -> int:
+        """Write one record; durable per the fsync policy when this returns, or, with
+        ``sync=False``, once ``sync()`` has returned (group commit). Returns its seq."""
         if self._file is None:
             raise RuntimeError("WriteAheadLog.recover() must run before append()")
         seq = self.last_seq + 1
@@ -161,8 +164,15 @@ class WriteAheadLog:
         self._file.flush()
         self.last_seq = seq
         self.counters["appended"] += 1
-        self._sync()
+        self._unsynced = True
+        if sync:
+            self._sync()
         return seq
+
+    def sync(self) -> None:
+        """Make the appends made with ``sync=False`` durable per the fsync policy (one fsync for all)."""
+        if self._unsynced:
+            self._sync()
 
     def _sync(self, force: bool = False) -> None:
         if self._file is None or (self.fsync_every is None and not force):
@@ -171,6 +181,7 @@ class WriteAheadLog:
         if force or now - self._last_sync >= (self.fsync_every or 0.0):
             os.fsync(self._file.fileno())
             self._last_sync = now
+            self._unsynced = False
             self.counters["fsyncs"] += 1
 
     def rotate(self) -> None:

@@ -90,6 +90,24 @@ def test_fsync_policies():
         parse_fsync("sometimes")
 
 
+def test_group_commit_one_fsync_for_a_group(tmp_path):
+    wal = WriteAheadLog(tmp_path, "always")
+    list(wal.recover())
+    wal.append(b"single")
+    assert wal.counters["fsyncs"] == 1
+    for i in range(5):
+        wal.append(bytes([i]) * 10, sync=False)
+    assert wal.counters["fsyncs"] == 1  # not yet durable
+    wal.sync()
+    assert wal.counters["fsyncs"] == 2  # one fsync for the five
+    wal.sync()
+    assert wal.counters["fsyncs"] == 2  # nothing new to sync
+    wal.close()
+    reread = WriteAheadLog(tmp_path, "never")
+    assert [seq for seq, _ in reread.recover()] == list(range(1, 7))
+    reread.close()
+
+
 def test_dedup_contiguous_gaps_and_state_round_trip():
     d = Deduplicator()
     assert [d.seen("a#1", s) for s in (1, 2, 4)] == [False, False, False]
