@@ -102,16 +102,16 @@ def test_nirl_on_a_tiny_map_reaches_the_goal(tmp_path):
     config = NIRLConfig(
         **SMALL,
         warmstart_updates=200,
-        iterations=3,
+        iterations=6,
         steps_per_iteration=384,
         reward_updates=20,
         q_updates=128,
-        temperature_decay_iterations=3,
-    )
+        temperature_decay_iterations=6,
+    )  # 3 iterations reached 8/10 only by luck of the random streams (6/10 once start headings changed)
     out = tmp_path / "run"
     run = NIRLRun(envs=8, maps=str(tiny), out=str(out), eval_every=0, final_eval_episodes=0, progress=False)
     result = train_nirl(demos, config, run, nav)
-    assert result.env_steps == 3 * 384 and result.learner.iteration == 3
+    assert result.env_steps == 6 * 384 and result.learner.iteration == 6
     policy = load_policy(out)  # the saved greedy policy, as `navlearn evaluate` loads it
     assert policy.model == "nirl" and policy.kind == "q_network"
     env = NavigationEnv(nav, maps=str(tiny))
