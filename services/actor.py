@@ -26,15 +26,13 @@ from collections import deque
 import numpy as np
 
 from protocols import keys
-from protocols.codec import decode, encode
-from protocols.errors import ProtocolError
-from protocols.flow import Ack
+from protocols.codec import encode
 from protocols.limits import Limits
 from protocols.messages import TransitionBatch
 from services.acl import actor_status_key
 from services.actor_config import ActorConfig
 from services.actor_status import BACKPRESSURE_SHARE, BlockedShare, actor_status
-from services.outbox import Outbox
+from services.outbox import Outbox, decode_ack
 from services.process import connect
 from services.transport import ZenohSettings, declare_alive
 from services.weights import WeightsReceiver, split_architecture
@@ -122,12 +120,8 @@ class Actor:
         return self.policy(obs)
 
     def _on_ack(self, sample) -> None:
-        try:
-            ack = decode(sample.payload.to_bytes())
-        except ProtocolError as exc:
-            log.warning("rejected an acknowledgement: %s", exc)
-            return
-        if isinstance(ack, Ack) and ack.actor == self.sender:  # not a previous incarnation's ack
+        ack = decode_ack(sample.payload.to_bytes(), self.sender)
+        if ack is not None:
             self.learner_version = max(self.learner_version, ack.policy_version)
             self.outbox.on_ack(ack.accepted_seq)
 

@@ -13,10 +13,9 @@ import time
 from collections import deque
 from typing import Any
 
-from protocols.codec import decode
-from protocols.errors import ProtocolError
 from protocols.messages import LearnerStatus
 from services.acl import ACTOR_STATUS_PREFIX, all_status_keys
+from services.status import status_replies
 
 BACKPRESSURE_SHARE = 0.5
 """the actor reports back-pressure when it waited for the learner more than this share of the window"""
@@ -82,20 +81,11 @@ def actor_status(actor: Any, seq: int) -> LearnerStatus:
 
 def query_actor_statuses(session, run: str, timeout: float = 2.0) -> dict[str, LearnerStatus]:
     """Every actor's answer on ``status/actor:<id>``, by actor id."""
-    found: dict[str, LearnerStatus] = {}
-    for reply in session.get(all_status_keys(run), timeout=timeout):
-        if reply.ok is None:
-            continue
-        name = str(reply.ok.key_expr).rsplit("/", 1)[-1]
-        if not name.startswith(ACTOR_STATUS_PREFIX):
-            continue
-        try:
-            message = decode(reply.ok.payload.to_bytes())
-        except ProtocolError:
-            continue
-        if isinstance(message, LearnerStatus):
-            found[name.removeprefix(ACTOR_STATUS_PREFIX)] = message
-    return found
+    return {
+        name.removeprefix(ACTOR_STATUS_PREFIX): message
+        for name, message in status_replies(session, all_status_keys(run), timeout)
+        if name.startswith(ACTOR_STATUS_PREFIX)
+    }
 
 
 def actor_status_dicts(statuses: dict[str, LearnerStatus]) -> dict[str, dict]:

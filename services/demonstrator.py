@@ -32,12 +32,10 @@ import numpy as np
 
 from agents.demos import Demo
 from protocols import keys
-from protocols.codec import decode, encode
-from protocols.errors import ProtocolError
-from protocols.flow import Ack
+from protocols.codec import encode
 from protocols.messages import DemoBatch, EpisodeMeta
 from services.demonstrator_config import DemonstratorConfig
-from services.outbox import Outbox
+from services.outbox import Outbox, decode_ack
 from services.process import connect
 from services.transport import Presence, ZenohSettings, declare_alive
 
@@ -140,12 +138,10 @@ class DemoPublisher:
         self.steps = 0
 
     def _on_ack(self, sample) -> None:
-        try:
-            ack = decode(sample.payload.to_bytes())
-        except ProtocolError as exc:
-            log.warning("rejected an acknowledgement: %s", exc)
-            return
-        if isinstance(ack, Ack) and ack.actor == self.sender:  # acks/<source> is shared by its demonstrators
+        ack = decode_ack(
+            sample.payload.to_bytes(), self.sender
+        )  # acks/<source> is shared by its demonstrators
+        if ack is not None:
             self.outbox.on_ack(ack.accepted_seq)
 
     def wait_for_learner(self) -> bool:

@@ -15,10 +15,28 @@ seconds, the unacknowledged batches are sent again, oldest first (``resent``).
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
+
+from protocols.codec import decode
+from protocols.errors import ProtocolError
+from protocols.flow import Ack
+
+log = logging.getLogger("navlearn.outbox")
+
+
+def decode_ack(payload: bytes, incarnation: str) -> Ack | None:
+    """The acknowledgement in ``payload`` if it is addressed to ``incarnation`` (an envelope sender,
+    ``<id>#<start>``: a previous incarnation's or a sibling's acks on a shared key are ignored)."""
+    try:
+        ack = decode(payload)
+    except ProtocolError as exc:
+        log.warning("rejected an acknowledgement: %s", exc)
+        return None
+    return ack if isinstance(ack, Ack) and ack.actor == incarnation else None
 
 
 class Outbox:

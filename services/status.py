@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 from typing import Any
 
 from protocols import keys
@@ -32,9 +33,9 @@ def eval_summary(evaluator: str, report: EvalReport, arrived: float) -> dict[str
     }
 
 
-def query_status(session, run: str, timeout: float = 3.0) -> LearnerStatus | None:
-    """The learner's answer on ``status/learner``, or None if no learner answered in time."""
-    for reply in session.get(keys.status(run), timeout=timeout):
+def status_replies(session, key: str, timeout: float) -> Iterator[tuple[str, LearnerStatus]]:
+    """(last key chunk, status) of each valid LearnerStatus answer to a get on ``key``."""
+    for reply in session.get(key, timeout=timeout):
         if reply.ok is None:
             continue
         try:
@@ -42,8 +43,12 @@ def query_status(session, run: str, timeout: float = 3.0) -> LearnerStatus | Non
         except ProtocolError:
             continue
         if isinstance(message, LearnerStatus):
-            return message
-    return None
+            yield str(reply.ok.key_expr).rsplit("/", 1)[-1], message
+
+
+def query_status(session, run: str, timeout: float = 3.0) -> LearnerStatus | None:
+    """The learner's answer on ``status/learner``, or None if no learner answered in time."""
+    return next((message for _, message in status_replies(session, keys.status(run), timeout)), None)
 
 
 def query_alive(session, run: str, timeout: float = 2.0) -> list[tuple[str, str]]:
