@@ -3,7 +3,7 @@
 The learner calls ``admit`` for every decoded batch before inserting it: a
 duplicate (an actor's resend of a batch already stored) is counted and must
 only be acknowledged again; anything else is appended to the write-ahead log
-first, so the acknowledgement sent after the insert means "durably stored".
+first and synced (``sync``) before the acknowledgement goes out, so an acknowledgement means "durably stored".
 ``checkpoint_state`` goes into each checkpoint (the log position and the
 de-duplication state); ``checkpointed`` then rotates the log. On start,
 ``load_state`` (from the checkpoint, if any) and ``replay`` give back the
@@ -53,13 +53,13 @@ class DurableIngest:
         self.checkpoint_seq = 0
         self.counters = {"duplicates_dropped": 0, "wal_replayed": 0, "wal_undecodable": 0}
 
-    def admit(self, message: Message, sync: bool = True) -> bool:
-        """False for a duplicate (counted); else log it and return True: durable now, or with
-        ``sync=False`` once ``sync()`` has returned (one fsync for a group of batches)."""
+    def admit(self, message: Message) -> bool:
+        """False for a duplicate (counted); else log it and return True. It is durable once
+        ``sync()`` has returned: one fsync for the group of batches admitted before it."""
         if self.dedup.seen(dedup_key(message), message.seq):
             self.counters["duplicates_dropped"] += 1
             return False
-        self.wal.append(encode(message), sync=sync)
+        self.wal.append(encode(message), sync=False)
         return True
 
     def sync(self) -> None:

@@ -199,7 +199,7 @@ class LearnerService:
                 "shape", f"batch from {item.name} has obs_dim {batch.obs.shape[1]}, not {obs_dim}"
             )
             return
-        if self.durable is not None and not self._replaying and not self.durable.admit(batch, sync=False):
+        if self.durable is not None and not self._replaying and not self.durable.admit(batch):
             self._ack(item.name, batch.seq, batch.sender)  # a resend of a stored batch: ack it again
             return
         n = self.learner.add(batch)
@@ -272,11 +272,7 @@ class LearnerService:
                 if item.message.obs.shape[1] != self.learner.architecture["obs_dim"]:
                     self.inbox.reject("shape", f"demos from {item.name} have the wrong obs_dim")
                     continue
-                if (
-                    self.durable is not None
-                    and not self._replaying
-                    and not self.durable.admit(item.message, sync=False)
-                ):
+                if self.durable is not None and not self._replaying and not self.durable.admit(item.message):
                     self._ack(item.name, item.message.seq, item.message.sender)  # a resend: ack again
                     continue
                 steps = self.demos.add(item.message)
