@@ -6,7 +6,9 @@ Envelope (a msgpack map)::
 
 :func:`decode` trusts nothing: size, layout, kind, version and every body field
 are checked, and any failure is a :class:`ProtocolError` with a reason code.
-Nothing is ever unpickled.
+Nothing is ever unpickled. TransitionBatches, the hot kind, are written and read
+straight from their canonical bytes by :mod:`protocols.fastpath` (same bytes, same
+checks); whatever it declines goes through msgpack and the schema checks here.
 """
 
 from __future__ import annotations
@@ -20,8 +22,9 @@ import numpy as np
 from protocols.arrays import array_parts, default, ext_hook
 from protocols.checks import BodyReader, check_int, check_string, quiet_float_errors
 from protocols.errors import ProtocolError
+from protocols.fastpath import decode_transitions, encode_transitions
 from protocols.limits import DEFAULT_LIMITS, Limits
-from protocols.messages import KINDS, Message
+from protocols.messages import KINDS, Message, TransitionBatch
 
 _ENVELOPE_KEYS = frozenset("vksnb")
 _local = threading.local()
@@ -39,11 +42,21 @@ def _packer() -> msgpack.Packer:
 
 def encode(message: Message) -> bytes:
     """The wire bytes of ``message`` (validated by the receiver, not here)."""
+    return _encode(message, fast=True)
+
+
+def _encode(message: Message, *, fast: bool) -> bytes:
+    """``encode``; ``fast=False`` skips the TransitionBatch templates of :mod:`protocols.fastpath`
+    (the general path, which the tests hold the fast one byte-equal to)."""
     cls = type(message)
     if KINDS.get(cls.KIND) is not cls:
         raise ProtocolError("kind", f"{cls.__name__} is not a registered message kind")
     pack = _packer().pack
     try:
+        if fast and cls is TransitionBatch:
+            wire = encode_transitions(message, pack)
+            if wire is not None:
+                return wire
         parts: list[bytes | memoryview] = [
             _envelope_head(cls),  # {"v": VERSION, "k": KIND, "s":
             pack(message.sender),
@@ -107,11 +120,21 @@ _FIXMAPS = [bytes([0x80 | size]) for size in range(16)]
 
 def decode(data: bytes | bytearray | memoryview, limits: Limits = DEFAULT_LIMITS) -> Message:
     """The message in ``data``, fully validated against ``limits``; raises only ProtocolError."""
+    return _decode(data, limits, fast=True)
+
+
+def _decode(data: bytes | bytearray | memoryview, limits: Limits, *, fast: bool) -> Message:
+    """``decode``; ``fast=False`` skips :func:`protocols.fastpath.decode_transitions` (the general path,
+    which decides every message the fast one does not accept, and which the tests compare it with)."""
     if not isinstance(data, bytes | bytearray | memoryview):
         raise ProtocolError("type", f"expected bytes, got {type(data).__name__}")
     size = len(data) if isinstance(data, bytes) else memoryview(data).nbytes
     if size > limits.max_message_bytes:
         raise ProtocolError("oversize", f"message of {size} bytes (limit {limits.max_message_bytes})")
+    if fast:
+        message = decode_transitions(data, limits)  # None unless a canonical, valid TransitionBatch
+        if message is not None:
+            return message
     try:
         envelope = msgpack.unpackb(
             data,
