@@ -60,12 +60,17 @@ def peak_rss_mb(pid: int) -> float:
     return 0.0
 
 
+REPLAY_CAPACITY = 1_000_000
+"""the learner's replay ring: larger than all a chaos phase sends, so nothing stored is evicted
+(an evicted transition would read back as lost)"""
+
+
 def learner_argv(endpoint: str, run: str, ckpt: Path | None, *extra: str) -> list[str]:
     return [
         sys.executable, "-m", "services.cli", "learner", "--connect", endpoint, "--mode", "client",
         "--run", run, "--checkpoint-dir", str(ckpt) if ckpt else "", "--hidden-sizes", "16",
         "--batch-size", "16", "--learning-starts", "64", "--broadcast-every", "20", "--log-every", "5",
-        "--connect-timeout", "120", *extra,
+        "--connect-timeout", "120", "--replay-capacity", str(REPLAY_CAPACITY), *extra,
     ]  # fmt: skip
 
 
@@ -174,6 +179,8 @@ def chaos(args, root: Path) -> dict:
     peak = max(peak, peak_rss_mb(learner.pid))
     stop_process(learner)
     stored = stored_ids(CheckpointDir(ckpt).latest())
+    if stored.size >= REPLAY_CAPACITY:
+        raise RuntimeError(f"the replay ring filled up ({REPLAY_CAPACITY}): evictions would read as losses")
     unique, counts = np.unique(stored, return_counts=True)
     everyone = actors + retired
     sent = np.concatenate([a.actor.sent_ids() for a in everyone])
