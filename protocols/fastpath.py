@@ -65,6 +65,8 @@ _BODY_START = b"\x8a".join((_packed("b"), _packed("actor")))  # "b", the body's 
 _MODEL_KEY = _packed("model")
 _VERSION_KEY = _packed("policy_version")
 _KEY_SIZES = tuple(len(_packed(name)) for name in _ARRAY_FIELDS)
+_LONGEST_KEY = max(map(len, ("transitions", "policy_version", *_ARRAY_FIELDS)))
+"""Longest string of the layout, in bytes (msgpack's max_str_len applies to it as to any other)."""
 _EXT_HEAD = 6  # 0xc9, u32 payload length, type
 _ENV_IDS_DATA = _KEY_SIZES[0] + _EXT_HEAD + 8  # offset of env_ids' data from its key (shape[0] just before)
 _OBS_DIM = _KEY_SIZES[1] + _EXT_HEAD + 8  # offset of obs' shape[1] from its key
@@ -165,7 +167,7 @@ def decode_transitions(data: bytes, limits: Limits) -> TransitionBatch | None:
 
 def _decode(data: bytes, limits: Limits) -> TransitionBatch | None:
     max_string, max_bytes = limits.max_string, 4 * limits.max_string  # msgpack's max_str_len in decode
-    if limits.max_items < 10:  # the body map's 10 entries would exceed msgpack's max_map_len
+    if limits.max_items < 10 or max_bytes < _LONGEST_KEY:  # msgpack's limits bind keys and maps too
         return None
     sender, at = _str(data, len(_HEAD), max_bytes)
     if sender is None or len(sender) > max_string or not sender.isprintable():
