@@ -50,6 +50,7 @@ _WIRE_DTYPES = tuple(np.dtype(s) for s in ("<i4", "<f4", "<i8", "<f4", "<f4", "|
 _VIEW_DTYPES = tuple(np.dtype(s) for s in ("<i4", "<f4", "<u8", "<f4", "<f4", "|b1", "|b1"))
 """The arrays' dtypes as first viewed: actions as unsigned (for the range check), then as int64."""
 _I64 = np.dtype("<i8")
+_NDARRAYS = (np.ndarray,) * len(_ARRAY_FIELDS)
 _OBS_FIELDS = frozenset({"obs", "next_obs"})
 _MAX_LAYOUTS = 256
 """Most (N, D) layouts remembered (bounds memory whatever shapes arrive)."""
@@ -78,30 +79,36 @@ _STR_SIZES = {0xD9: 1, 0xDA: 2, 0xDB: 4}
 class _Layout:
     """The constant parts of the array section for one (N, D), offsets from the env_ids key."""
 
-    __slots__ = ("arrays", "flags_at", "flags_rest", "size", "templates", "wire")
+    __slots__ = ("flags_at", "flags_rest", "parts", "plans", "shapes", "size", "templates")
 
     def __init__(self, n: int, d: int) -> None:
-        self.templates: list[tuple[int, bytes]] = []
-        """(offset, the field's key and its extension and array headers), in wire order."""
-        self.arrays: list[tuple[int, tuple[int, ...], np.dtype, int, bool]] = []
-        """(offset of the data, shape, dtype to view it with, bytes, whether it needs 8-byte alignment)."""
-        self.wire: list[tuple[np.dtype, tuple[int, ...]]] = []
-        """(dtype, shape) of each array on the wire."""
-        at = 0
+        templates, arrays, self.shapes, at = [], [], [], 0
         for name, dtype, view in zip(_ARRAY_FIELDS, _WIRE_DTYPES, _VIEW_DTYPES, strict=True):
             shape = (n, d) if name in _OBS_FIELDS else (n,)
             template = _packed(name) + _array_head(dtype, shape)
-            nbytes = math.prod(shape) * dtype.itemsize
-            self.templates.append((at, template))
+            templates.append((at, template))
             at += len(template)
-            self.arrays.append((at, shape, view, nbytes, dtype.alignment > 1))
-            self.wire.append((dtype, shape))
+            nbytes = math.prod(shape) * dtype.itemsize
+            arrays.append((shape, view, at, at + nbytes, dtype.alignment > 1))
+            self.shapes.append(shape)
             at += nbytes
         self.size = at
-        terminated_data, truncated = self.arrays[5][0], self.templates[6][1]
-        self.flags_at = terminated_data
+        self.templates = tuple(templates)
+        """(offset, the field's key and its extension and array headers), in wire order."""
+        self.parts = tuple(template for _, template in templates)
+        self.shapes = tuple(self.shapes)
+        self.plans = tuple(
+            tuple(
+                (shape, dtype, start, end if needs_alignment and (residue + start) % 8 else 0)
+                for shape, dtype, start, end, needs_alignment in arrays
+            )
+            for residue in range(8)
+        )
+        """By the section's start modulo 8: each array's (shape, dtype to view it with, start, end of the
+        bytes to copy, or 0 where a view of the message is aligned as it is)."""
+        self.flags_at = arrays[5][2]
         """Where the two boolean arrays and the truncated template between them start."""
-        self.flags_rest = truncated.translate(None, b"\x00\x01")
+        self.flags_rest = templates[6][1].translate(None, b"\x00\x01")
         """What deleting every 0 and 1 byte from there to the end must leave."""
 
     @staticmethod
@@ -207,14 +214,11 @@ def _decode(data: bytes, limits: Limits) -> TransitionBatch | None:
     # Arrays are read-only views of ``data`` where their data is 8-byte aligned (bytes objects' data is,
     # as the general decoder assumes of msgpack's extension payloads), else aligned copies: decoded
     # arrays are always aligned, whichever path decoded them.
-    arrays = []
     ndarray = np.ndarray
-    for offset, shape, dtype, nbytes, needs_alignment in layout.arrays:
-        start = at + offset
-        if needs_alignment and start & 7:
-            arrays.append(ndarray(shape, dtype, data[start : start + nbytes]))
-        else:
-            arrays.append(ndarray(shape, dtype, data, start))
+    arrays = [
+        ndarray(shape, dtype, data[at + start : at + end]) if end else ndarray(shape, dtype, data, at + start)
+        for shape, dtype, start, end in layout.plans[at & 7]
+    ]
     env_ids, obs, actions, reward, next_obs, terminated, truncated = arrays
     # Finite floats: a dot product is finite only if every term is (inf * 0 and inf - inf are NaN, NaN
     # propagates); an overflowing sum of finite values returns None and the general path decides.
@@ -245,41 +249,67 @@ def _decode(data: bytes, limits: Limits) -> TransitionBatch | None:
 
 def encode_transitions(batch: TransitionBatch, pack: Callable[[object], bytes]) -> bytes | None:
     """The general encoder's bytes for ``batch`` (``pack`` packs one value, as it does there), written
-    from cached templates; None if an array is not of its wire dtype, shape and C order (the general
-    encoder then handles it, or raises)."""
+    from cached templates; None if an array is not a numpy array of its wire dtype, shape and C order
+    (the general encoder then handles it, or raises)."""
     obs = batch.obs
     if type(obs) is not np.ndarray or obs.ndim != 2:
         return None
-    arrays = (
-        batch.env_ids,
-        obs,
-        batch.action,
-        batch.reward,
-        batch.next_obs,
-        batch.terminated,
-        batch.truncated,
-    )
+    env_ids, action, reward, next_obs = batch.env_ids, batch.action, batch.reward, batch.next_obs
+    terminated, truncated = batch.terminated, batch.truncated
+    arrays = (env_ids, obs, action, reward, next_obs, terminated, truncated)
+    if tuple(map(type, arrays)) != _NDARRAYS:
+        return None
     try:
         layout = _layout(*obs.shape)
     except ProtocolError:  # a shape the array header cannot hold
         return None
-    parts = [
-        _HEAD,
-        pack(batch.sender),
-        _SEQ_KEY,
-        pack(batch.seq),
-        _BODY_START,
-        pack(batch.actor),
-        _MODEL_KEY,
-        pack(batch.model),
-        _VERSION_KEY,
-        pack(batch.policy_version),
-    ]
-    for array, (dtype, shape), (_, template) in zip(arrays, layout.wire, layout.templates, strict=True):
-        if type(array) is not np.ndarray or array.dtype is not dtype or array.shape != shape:
-            return None
-        parts += (template, array)
+    if (
+        env_ids.dtype,
+        obs.dtype,
+        action.dtype,
+        reward.dtype,
+        next_obs.dtype,
+        terminated.dtype,
+        truncated.dtype,
+    ) != _WIRE_DTYPES or (
+        env_ids.shape,
+        obs.shape,
+        action.shape,
+        reward.shape,
+        next_obs.shape,
+        terminated.shape,
+        truncated.shape,
+    ) != layout.shapes:
+        return None
+    t0, t1, t2, t3, t4, t5, t6 = layout.parts
     try:  # join takes an array's bytes only through a simple buffer, which numpy grants C-ordered arrays
-        return b"".join(parts)
+        return b"".join(
+            (
+                _HEAD,
+                pack(batch.sender),
+                _SEQ_KEY,
+                pack(batch.seq),
+                _BODY_START,
+                pack(batch.actor),
+                _MODEL_KEY,
+                pack(batch.model),
+                _VERSION_KEY,
+                pack(batch.policy_version),
+                t0,
+                env_ids,
+                t1,
+                obs,
+                t2,
+                action,
+                t3,
+                reward,
+                t4,
+                next_obs,
+                t5,
+                terminated,
+                t6,
+                truncated,
+            )
+        )
     except TypeError:
         return None
