@@ -178,7 +178,7 @@ def chaos(args, root: Path) -> dict:
     status = query_status(watcher, run, timeout=5.0)
     peak = max(peak, peak_rss_mb(learner.pid))
     stop_process(learner)
-    stored = stored_ids(CheckpointDir(ckpt).latest())
+    stored = stored_ids(CheckpointDir(ckpt).latest(), REPLAY_CAPACITY)
     if stored.size >= REPLAY_CAPACITY:
         raise RuntimeError(f"the replay ring filled up ({REPLAY_CAPACITY}): evictions would read as losses")
     unique, counts = np.unique(stored, return_counts=True)

@@ -7,6 +7,7 @@ test can compare them with what the learner's replay buffer holds.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import subprocess
@@ -122,14 +123,17 @@ def stop_process(process: subprocess.Popen, timeout: float = 60.0) -> None:
             process.wait()
 
 
-def stored_ids(checkpoint: Path) -> np.ndarray:
-    """The reward ids in the replay buffer of a learner checkpoint (``ckpt-*`` directory)."""
+def stored_ids(checkpoint: Path, replay_capacity: int | None = None) -> np.ndarray:
+    """The reward ids in the replay buffer of a learner checkpoint (``ckpt-*`` directory) written by a
+    learner with ``replay_capacity`` (default: NNQLConfig's; TorchRL loads a storage only into one of
+    the same size)."""
     from agents.nnql.config import NNQLConfig
     from agents.nnql.learner import NNQLLearner
 
-    learner = NNQLLearner(
-        NNQLConfig(hidden_sizes=(16,), batch_size=16, learning_starts=64), OBS_DIM, N_ACTIONS
-    )
+    config = NNQLConfig(hidden_sizes=(16,), batch_size=16, learning_starts=64)
+    if replay_capacity is not None:
+        config = dataclasses.replace(config, replay_capacity=replay_capacity)
+    learner = NNQLLearner(config, OBS_DIM, N_ACTIONS)
     learner.load_checkpoint(checkpoint / "nnql")
     n = len(learner.replay)
     if n == 0:
