@@ -20,13 +20,21 @@ per (N, D), reads the three strings and two integers itself, makes the arrays, a
 of ``TransitionBatch.read_body`` and of the envelope. :func:`encode_transitions` writes the same bytes
 as the general encoder from the cached templates, without building the body map.
 
+Arrays are read-only views of the received bytes where their data is 8-byte aligned, and aligned
+copies of their bytes where it is not, so decoded arrays are aligned whichever path decoded them (the
+general path views msgpack's copy of each extension payload). Where an array falls depends on the
+lengths of the strings and integers before it, and the arrays' offsets differ modulo 8, so most
+messages copy most of their float and integer data (about 3 us of the ~20 us a decode costs here).
+
 How it stays safe: the fast decoder only ever *accepts* a message or returns None; it never rejects.
-Anything that is not exactly the canonical layout (another kind, a non-minimal or unusual msgpack type,
-a non-zero padding byte, trailing bytes, a bytearray, limits too small for the layout) or that fails
-any check returns None, and the general path then decides and gives the reason code. Accepting is
-sound because a canonical message is a msgpack document whose unpacked value is exactly what was
-parsed here, and the value checks are read_body's. tests/test_protocols_fastpath.py holds the two paths
-equal on random batches and on mutated bytes.
+Anything that is not exactly the canonical layout (another kind, a string or integer in another msgpack
+type than str or unsigned int, a non-zero padding byte, trailing bytes, a bytearray or memoryview, limits
+so small that msgpack itself would refuse the layout) or that fails any check returns None, and the
+general path then decides and gives the reason code. Accepting is sound because a canonical message is
+a msgpack document whose unpacked value is exactly what was parsed here, and the value checks are
+read_body's. tests/test_protocols_canonical.py holds the two paths equal on random batches and on
+mutated bytes (every value of every structural byte, truncations, bit flips, bad values, limits at
+their bounds) and the encoder byte-equal to the general one.
 """
 
 from __future__ import annotations
