@@ -35,7 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from protocols.codec import decode, encode
+from protocols.codec import _decode, _encode, decode, encode
 from protocols.limits import Limits
 from protocols.messages import TransitionBatch, WeightsUpdate
 
@@ -128,6 +128,39 @@ def bench_codec(args: Args, batch: TransitionBatch) -> dict:
         out["ours"]["transitions_per_s"] / out["msgpack_lists"]["transitions_per_s"]
     )
     out["ratio_vs_pickle"] = out["ours"]["transitions_per_s"] / out["pickle"]["transitions_per_s"]
+    out["per_call_us"] = per_call(args)
+    return out
+
+
+def per_call(args: Args) -> dict:
+    """Encode and decode alone, (min, median) us per call over 20 rounds, on 8 different batches in
+    turn; the general path (msgpack + schema checks, no protocols.fastpath) is the same-run baseline."""
+    rng = np.random.default_rng(1)
+    batches = [make_batch(args.batch, args.obs_dim, rng, seq=i) for i in range(8)]
+    wires = [encode(b) for b in batches]
+    calls = {
+        "encode": (lambda i: encode(batches[i % 8]), lambda i: _encode(batches[i % 8], fast=False)),
+        "decode": (
+            lambda i: decode(wires[i % 8], LIMITS),
+            lambda i: _decode(wires[i % 8], LIMITS, fast=False),
+        ),
+    }
+    rounds, per_round = 20, 200
+    out = {}
+    for op, (fast, general) in calls.items():
+        times: dict[str, list[float]] = {"fast": [], "general": []}
+        for _ in range(rounds):  # interleaved, so both see the same machine
+            for name, fn in (("fast", fast), ("general", general)):
+                start = time.perf_counter()
+                for i in range(per_round):
+                    fn(i)
+                times[name].append((time.perf_counter() - start) / per_round * 1e6)
+        out[op] = {name: [min(t), float(np.median(t))] for name, t in times.items()}
+        (fast_min, fast_median), (general_min, general_median) = out[op]["fast"], out[op]["general"]
+        print(
+            f"codec {op} alone (min / median us per call): fast path {fast_min:.1f} / {fast_median:.1f}, "
+            f"general path {general_min:.1f} / {general_median:.1f}"
+        )
     return out
 
 
