@@ -42,6 +42,12 @@ class FairQueue(Generic[T]):
         with self._ready:
             return {s: len(q) for s, q in self._queues.items()}
 
+    def sender_full(self, sender: str) -> bool:
+        """Has ``sender`` its ``per_sender`` items waiting (so ``put_nowait`` would raise SenderFull)?"""
+        with self._ready:
+            waiting = self._queues.get(sender)
+            return waiting is not None and len(waiting) >= self.per_sender
+
     def put_nowait(self, sender: str, item: T) -> None:
         with self._ready:
             waiting = self._queues.get(sender)

@@ -8,7 +8,9 @@ nor grows memory). Nothing here touches the replay buffer or the
 network weights. A message that fails is counted under ``rejected/<reason>``
 (the ProtocolError reason); one that finds its queue full under
 ``dropped/inbox_full``, or ``dropped/sender_full`` when only its actor's share
-is full (``dropped/sender_full/<actor>`` says who). Neither ever raises into
+is full (``dropped/sender_full/<actor>`` says who). A batch whose actor's share
+is already full is dropped before it is decoded: a flooding actor then costs the
+learner a key parse per message, not a decode. Neither ever raises into
 Zenoh. Oversized messages are refused by the codec (``rejected/size``).
 """
 
@@ -68,6 +70,9 @@ class Inbox:
         arrived = time.time()
         try:
             parsed = keys.parse(sample.key_expr)
+            if parsed.channel == "transitions" and self.transitions.sender_full(parsed.name):
+                self._sender_full(parsed.name)
+                return
             message = decode(sample.payload.to_bytes(), self.limits)
             expected = EXPECTED.get(parsed.channel)
             if expected is None or not isinstance(message, expected):
@@ -85,12 +90,15 @@ class Inbox:
             else:
                 self.other.put_nowait(item)
         except SenderFull:
-            self.count("dropped/sender_full")
-            self.count(f"dropped/sender_full/{parsed.name}")
-            self._warn("sender_full", f"{parsed.name} sends faster than its share; dropped a batch")
+            self._sender_full(parsed.name)
         except queue.Full:
             self.count("dropped/inbox_full")
             self._warn("inbox_full", f"inbox full, dropped a {parsed.channel} message from {parsed.name}")
+
+    def _sender_full(self, name: str) -> None:
+        self.count("dropped/sender_full")
+        self.count(f"dropped/sender_full/{name}")
+        self._warn("sender_full", f"{name} sends faster than its share; dropped a batch")
 
     def reject(self, reason: str, what: str) -> None:
         """Count a message the main thread found unusable after decoding (e.g. wrong obs_dim)."""

@@ -7,14 +7,26 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from protocols import keys
 from protocols.codec import encode
+from protocols.limits import Limits
+from protocols.messages import TransitionBatch
 from services.fairqueue import FairQueue, SenderFull
+from services.inbox import Inbox
 from services.status import query_status
 from services.transport import ZenohSettings, open_session
 from tests.conftest import free_port
-from tests.reliability_helpers import TracedActor, learner_argv, start_learner, stop_process
+from tests.reliability_helpers import (
+    N_ACTIONS,
+    OBS_DIM,
+    TracedActor,
+    learner_argv,
+    start_learner,
+    stop_process,
+)
 
 
 def test_fair_queue_bounds_each_sender_and_serves_round_robin():
@@ -32,6 +44,41 @@ def test_fair_queue_bounds_each_sender_and_serves_round_robin():
     assert taken == ["f0", "c0", "o0", "f1", "c1", "f2"]
     with pytest.raises(queue.Empty):
         q.get(timeout=0.05)
+
+
+class _Sample:
+    """What the inbox's Zenoh callback reads of a sample: its key and its payload bytes."""
+
+    def __init__(self, key: str, data: bytes) -> None:
+        self.key_expr, self.payload, self._data = key, self, data
+
+    def to_bytes(self) -> bytes:
+        return self._data
+
+
+def test_a_full_share_drops_before_decoding():
+    inbox = Inbox(Limits(n_actions=N_ACTIONS), capacity=16, run="r", per_sender=2)
+    batch = TransitionBatch(
+        actor="flood",
+        model="nnql",
+        policy_version=0,
+        env_ids=np.arange(4, dtype=np.int32),
+        obs=np.zeros((4, OBS_DIM), np.float32),
+        action=np.zeros(4, np.int64),
+        reward=np.zeros(4, np.float32),
+        next_obs=np.zeros((4, OBS_DIM), np.float32),
+        terminated=np.zeros(4, bool),
+        truncated=np.zeros(4, bool),
+    )
+    for seq in (1, 2):
+        batch.seq = seq
+        inbox.on_sample(_Sample(keys.transitions("r", "flood"), encode(batch)))
+    assert inbox.transitions.sender_full("flood") and not inbox.transitions.sender_full("calm")
+    inbox.on_sample(_Sample(keys.transitions("r", "flood"), b"not a message"))  # dropped, never decoded
+    inbox.on_sample(_Sample(keys.transitions("r", "calm"), b"not a message"))  # decoded, rejected
+    counts = inbox.counts()
+    assert counts["dropped/sender_full/flood"] == 1 and counts["rejected/malformed"] == 1, counts
+    assert inbox.transitions.qsize() == 2
 
 
 def rss_mb(pid: int) -> float:
