@@ -65,7 +65,7 @@ class Cluster:
         self.env = env
         (home / "logs").mkdir(parents=True)
         self.supervisord = subprocess.Popen(
-            ["supervisord", "-n", "-c", str(CONF)],
+            [sys.executable, "-m", "supervisor.supervisord", "-n", "-c", str(CONF)],
             env=env,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.STDOUT,
@@ -78,7 +78,7 @@ class Cluster:
 
     def ctl(self, *args: str, check: bool = True) -> str:
         result = subprocess.run(
-            ["supervisorctl", "-c", str(CONF), *args],
+            [sys.executable, "-m", "supervisor.supervisorctl", "-c", str(CONF), *args],
             env=self.env,
             capture_output=True,
             text=True,
