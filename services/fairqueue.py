@@ -45,13 +45,15 @@ class FairQueue(Generic[T]):
     def sender_full(self, sender: str) -> bool:
         """Has ``sender`` its ``per_sender`` items waiting (so ``put_nowait`` would raise SenderFull)?"""
         with self._ready:
-            waiting = self._queues.get(sender)
-            return waiting is not None and len(waiting) >= self.per_sender
+            return self._full(self._queues.get(sender))
+
+    def _full(self, waiting: deque[T] | None) -> bool:
+        return waiting is not None and len(waiting) >= self.per_sender
 
     def put_nowait(self, sender: str, item: T) -> None:
         with self._ready:
             waiting = self._queues.get(sender)
-            if waiting is not None and len(waiting) >= self.per_sender:
+            if self._full(waiting):
                 raise SenderFull(sender)
             if self._size >= self.capacity:
                 raise queue.Full
