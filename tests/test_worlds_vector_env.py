@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
 
-from worlds.config import NavConfig, ObstacleConfig, RobotConfig, SensorConfig
+from worlds.config import (
+    NavConfig,
+    ObservationConfig,
+    ObstacleConfig,
+    RewardConfig,
+    RobotConfig,
+    SensorConfig,
+)
 from worlds.env import NavigationEnv
 from worlds.maps import Task, parse_ascii
 from worlds.obstacles import DiscObstacles
@@ -25,11 +32,20 @@ NOISY = NavConfig(
     pool_size=16,
 )
 
+PERCEIVING = NavConfig(
+    sensors=SensorConfig(n_beams=12, n_rays=48, dropout_prob=0.1),
+    observation=ObservationConfig(previous_action=True, frame_stack=3, subgoal="own_map", patch_size=6),
+    rewards=RewardConfig(geodesic_progress=0.1),
+    obstacles=ObstacleConfig(count=2),
+    pool_size=16,
+)
+KNOWN_MAP = NavConfig(observation=ObservationConfig(subgoal="known_map"), pool_size=16)
+
 
 @pytest.mark.parametrize(
     ("config", "threads"),
-    [(ZERO_NOISE, 1), (NOISY, 1), (NOISY, 2)],
-    ids=["zero-noise", "noisy", "noisy-2-threads"],
+    [(ZERO_NOISE, 1), (NOISY, 1), (NOISY, 2), (PERCEIVING, 1), (PERCEIVING, 2), (KNOWN_MAP, 1)],
+    ids=["zero-noise", "noisy", "noisy-2-threads", "perceiving", "perceiving-2-threads", "known-map"],
 )
 def test_vector_env_equals_single_envs(config, threads):
     n, seed = 5, 11

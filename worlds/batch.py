@@ -11,7 +11,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from worlds import kernel
+from worlds import kernel, perception
 from worlds.bank import merged_bank, private_copy
 from worlds.config import NavConfig
 from worlds.maps import Task
@@ -33,10 +33,11 @@ class NavBatch:
         self.bank, pool_lo, pool_n = merged_bank(samplers, config.pool_size, config.pool_seed)
         self._bank_is_shared = True
         self.turns = np.asarray(config.robot.turns, dtype=np.float64)
-        angles = config.sensors.beam_angles
+        angles = config.sensors.ray_angles
         self.beam_c, self.beam_s = np.cos(angles), np.sin(angles)
         self.params = kernel.make_params(config)
-        self.obs_dim = config.sensors.n_beams + 3
+        self.obs_dim = perception.observation_dim(config)
+        base_dim = config.sensors.n_beams + 3
         f8, i8 = np.float64, np.int64
         self.x, self.y, self.theta, self.gx, self.gy = (np.zeros(n, f8) for _ in range(5))
         self.steps, self.ent, self.outcome = np.zeros(n, i8), np.zeros(n, i8), np.zeros(n, i8)
@@ -50,6 +51,15 @@ class NavBatch:
         self.reward = np.zeros(n, f8)
         self.terminated, self.truncated = np.zeros(n, bool), np.zeros(n, bool)
         self.final_obs = np.zeros((n, self.obs_dim), np.float32)
+        self.rays, self.final_rays = np.zeros((n, len(angles)), f8), np.zeros((n, len(angles)), f8)
+        # the kernel writes the base observation (readings + goal); worlds.perception builds the
+        # observation from it when the config asks for more, else the two are the same arrays
+        self.perception = perception.Perception(n, config) if perception.needed(config) else None
+        if self.perception is None:
+            self.base_obs, self.base_final = self.obs, self.final_obs
+        else:
+            self.base_obs = np.zeros((n, base_dim), np.float32)
+            self.base_final = np.zeros((n, base_dim), np.float32)
         self.final_outcome, self.final_steps, self.final_entry = (
             np.zeros(n, i8),
             np.zeros(n, i8),
@@ -87,8 +97,9 @@ class NavBatch:
         return (*motion, *episode, self.map_index)
 
     def _finals(self) -> tuple:
-        return (self.final_obs, self.final_outcome, self.final_path_length, self.final_steps, self.final_pose,
-                self.final_entry, self.final_start, self.final_goal, self.done)  # fmt: skip
+        return (self.base_final, self.final_rays, self.final_outcome, self.final_path_length,
+                self.final_steps, self.final_pose, self.final_entry, self.final_start, self.final_goal,
+                self.done)  # fmt: skip
 
     # ----------------------------------------------------------------- operations
     def seed(self, indices: np.ndarray, states: np.ndarray) -> None:
@@ -136,8 +147,11 @@ class NavBatch:
         drivable = np.ones(len(indices), dtype=np.bool_)
         kernel.reset_some(
             indices, forced, keep, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
-            self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.obs, drivable,
+            self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.base_obs, self.rays,
+            drivable,
         )  # fmt: skip
+        if self.perception is not None:
+            self._perceive_fresh(indices)
         stuck = [k for k in np.flatnonzero(~drivable) if forced[k] >= 0]
         if stuck:
             task = self.task(int(indices[stuck[0]]))
@@ -153,12 +167,59 @@ class NavBatch:
         if actions.min() < 0 or actions.max() >= len(self.turns):
             raise ValueError(f"actions must be integers in [0, {len(self.turns)})")
         if self.threads > 1:
-            return self._step_threaded(actions, autoreset)
-        return kernel.step_all(
-            actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
-            self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.obs, self.reward,
-            self.terminated, self.truncated, self._finals(),
+            n_done = self._step_threaded(actions, autoreset)
+        else:
+            n_done = kernel.step_all(
+                actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
+                self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.base_obs, self.rays,
+                self.reward, self.terminated, self.truncated, self._finals(),
+            )  # fmt: skip
+        if self.perception is not None:
+            self._perceive_step(actions, n_done if autoreset else 0)
+        return n_done
+
+    # ----------------------------------------------------------------- observation beyond the kernel's
+    def _goal_xy(self, goal_cell: np.ndarray, map_index: np.ndarray) -> np.ndarray:
+        cell = self.bank.mcell[map_index]
+        return np.stack([(goal_cell[:, 1] + 0.5) * cell, (goal_cell[:, 0] + 0.5) * cell], axis=1)
+
+    def _perceive_fresh(self, indices: np.ndarray) -> None:
+        """First frames of the episodes robots ``indices`` just started."""
+        k = len(indices)
+        out = np.zeros((k, self.obs_dim), np.float32)
+        self.perception.observe(
+            indices, np.ones(k, bool), np.full(k, -1), self.bank.kernel_maps(), self.map_index[indices],
+            self.pose()[indices], np.stack([self.gx, self.gy], axis=1)[indices], self.goal_cell[indices],
+            self.base_obs[indices], self.rays[indices], out, np.zeros(k),
         )  # fmt: skip
+        self.obs[indices] = out
+
+    def _perceive_step(self, actions: np.ndarray, n_reset: int) -> None:
+        """The frames after a step (adding the geodesic reward); for robots that ended and were reset,
+        the terminal frame (into final_obs) from the ended episode's memory, then a fresh one."""
+        everyone = np.arange(self.n)
+        maps = self.bank.kernel_maps()
+        if not n_reset:
+            self.perception.observe(
+                everyone, np.zeros(self.n, bool), actions, maps, self.map_index, self.pose(),
+                np.stack([self.gx, self.gy], axis=1), self.goal_cell, self.base_obs, self.rays, self.obs,
+                self.reward,
+            )  # fmt: skip
+            return
+        d = self.done
+        col = d[:, None]
+        final_map = self.bank.emap[self.final_entry]
+        out = np.zeros_like(self.obs)
+        self.perception.observe(
+            everyone, np.zeros(self.n, bool), actions, maps, np.where(d, final_map, self.map_index),
+            np.where(col, self.final_pose, self.pose()),
+            np.where(col, self._goal_xy(self.final_goal, final_map), np.stack([self.gx, self.gy], axis=1)),
+            np.where(col, self.final_goal, self.goal_cell), np.where(col, self.base_final, self.base_obs),
+            np.where(col, self.final_rays, self.rays), out, self.reward,
+        )  # fmt: skip
+        self.obs[~d] = out[~d]
+        self.final_obs[d] = out[d]
+        self._perceive_fresh(np.flatnonzero(d))
 
     def _step_threaded(self, actions: np.ndarray, autoreset: bool) -> int:
         """Step ``self.threads`` ranges of robots at once: the calling thread and a pool of
@@ -169,8 +230,8 @@ class NavBatch:
             self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="navlearn-env")
         arrays = (
             actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
-            self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.obs, self.reward,
-            self.terminated, self.truncated, self._finals(),
+            self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.base_obs, self.rays,
+            self.reward, self.terminated, self.truncated, self._finals(),
         )  # fmt: skip
         bounds = [self.n * k // self.threads for k in range(self.threads + 1)]
         others = [

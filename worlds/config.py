@@ -8,7 +8,7 @@ cells of 1 m, a 0.5 m step, a 0.25 m robot radius, 8 beams reaching 6 m and a
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -52,7 +52,11 @@ class SensorConfig:
     """Range beams spread evenly over ``fov``, centred on the heading."""
 
     n_beams: int = 8
-    """number of range beams"""
+    """number of range readings in the observation: beams, or sectors when ``n_rays`` > ``n_beams``"""
+    n_rays: int = 0
+    """rays cast per step (0: one per reading). With more, reading k is the minimum of the
+    ``n_rays / n_beams`` exactly cast rays spread evenly across sector k (centred on
+    ``beam_angles[k]``), so no corner hides between readings; must be a multiple of ``n_beams``"""
     fov: float = 2 * math.pi
     """field of view (rad); 2*pi spreads the beams all around"""
     max_range: float = 6.0
@@ -64,6 +68,11 @@ class SensorConfig:
 
     def __post_init__(self) -> None:
         _check(self.n_beams >= 1, f"n_beams must be >= 1, got {self.n_beams}")
+        _check(
+            self.n_rays == 0 or (self.n_rays >= self.n_beams and self.n_rays % self.n_beams == 0),
+            f"sensors.n_rays={self.n_rays}: must be 0 or a multiple of n_beams={self.n_beams} "
+            "(sectors > rays is not allowed); e.g. n_beams=24, n_rays=96",
+        )
         _check(0 < self.fov <= 2 * math.pi, f"fov must be in (0, 2*pi], got {self.fov}")
         _check(self.max_range > 0 and self.noise_std >= 0, "max_range must be positive, noise_std >= 0")
         _check(0 <= self.dropout_prob <= 1, f"dropout_prob must be in [0, 1], got {self.dropout_prob}")
@@ -76,6 +85,20 @@ class SensorConfig:
         if math.isclose(self.fov, 2 * math.pi):
             return -math.pi + np.arange(self.n_beams) * (2 * math.pi / self.n_beams)
         return np.linspace(-self.fov / 2, self.fov / 2, self.n_beams)
+
+    @property
+    def rays_per_beam(self) -> int:
+        """Rays whose minimum makes one reading (1 without sectors)."""
+        return max(self.n_rays // self.n_beams, 1)
+
+    @property
+    def ray_angles(self) -> np.ndarray:
+        """Directions of the cast rays relative to the heading (rad), shape ``(n_beams * rays_per_beam,)``,
+        sector by sector: sector k spans ``fov / n_beams`` centred on ``beam_angles[k]``, its rays
+        evenly inside it (one ray: the centre itself, the plain beam)."""
+        per = self.rays_per_beam
+        offsets = ((np.arange(per) + 0.5) / per - 0.5) * (self.fov / self.n_beams)
+        return (self.beam_angles[:, None] + offsets[None, :]).ravel()
 
 
 @dataclass(frozen=True)
@@ -92,7 +115,15 @@ class RewardConfig:
     step: float = -0.01
     """reward of every step (a cost, so negative)"""
     progress: float = 0.1
-    """reward per metre of progress towards the goal (0 switches shaping off)"""
+    """reward per metre of progress towards the goal in a straight line (0 switches it off)"""
+    geodesic_progress: float = 0.0
+    """reward per metre of progress along the shortest grid path to the goal on the true map
+    (walls included; a training signal only, never observed; 0 switches it off)"""
+
+    def __post_init__(self) -> None:
+        _check(
+            self.geodesic_progress >= 0, f"rewards.geodesic_progress={self.geodesic_progress}: must be >= 0"
+        )
 
 
 @dataclass(frozen=True)
@@ -123,6 +154,53 @@ class ObstacleConfig:
         )
 
 
+SUBGOALS = ("none", "own_map", "known_map")
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    """What the policy observes beyond the range readings and the goal (each option off by default;
+    see :mod:`worlds.perception`). Everything comes from the robot's own sensing and poses, except
+    the ``known_map`` subgoal, which is for users who have a map."""
+
+    previous_action: bool = False
+    """append the previous action, one-hot (zeros at the first step)"""
+    frame_stack: int = 1
+    """observe the last k frames, newest first (the first frame repeated after a reset)"""
+    subgoal: str = "none"
+    """"none"; "own_map": distance and bearing to a waypoint ``subgoal_distance`` along the shortest
+    path to the goal on the map the robot built from its own beams (unknown cells free), replanned
+    every step; "known_map": the same path on the true map (a user-supplied map, not learning alone)"""
+    subgoal_distance: float = 2.5
+    """path length from the robot to the subgoal waypoint (m); the goal itself when closer"""
+    patch_size: int = 0
+    """side of the egocentric, heading-aligned patch of the robot's own map (cells; 0: off), two
+    channels: occupancy (1 seen blocked, 0 seen free, 0.5 unknown) and visits (1 - 1/(1+n))"""
+
+    def __post_init__(self) -> None:
+        _check(self.frame_stack >= 1, f"observation.frame_stack={self.frame_stack}: must be >= 1")
+        _check(self.subgoal in SUBGOALS, f"observation.subgoal={self.subgoal!r}: expected one of {SUBGOALS}")
+        _check(
+            self.subgoal_distance > 0, f"observation.subgoal_distance={self.subgoal_distance}: must be > 0"
+        )
+        _check(self.patch_size >= 0, f"observation.patch_size={self.patch_size}: must be >= 0 (0: off)")
+
+    @property
+    def needs_map(self) -> bool:
+        """Does the observation read the robot's own map?"""
+        return self.subgoal == "own_map" or self.patch_size > 0
+
+    @property
+    def plain(self) -> bool:
+        """Nothing beyond the readings and the goal (the kernel's observation as it is)."""
+        return (
+            not self.previous_action
+            and self.frame_stack == 1
+            and self.subgoal == "none"
+            and not self.patch_size
+        )
+
+
 @dataclass(frozen=True)
 class NavConfig:
     """Everything that defines the navigation task apart from the maps."""
@@ -131,6 +209,7 @@ class NavConfig:
     sensors: SensorConfig = field(default_factory=SensorConfig)
     rewards: RewardConfig = field(default_factory=RewardConfig)
     obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
+    observation: ObservationConfig = field(default_factory=ObservationConfig)
     max_steps: int = 200
     """episode step limit; reaching it truncates the episode (outcome TIMEOUT)"""
     goal_tolerance: float = 0.5
@@ -148,3 +227,78 @@ class NavConfig:
 def _check(ok: bool, message: str) -> None:
     if not ok:
         raise ValueError(message)
+
+
+OBSERVATION_FIELDS = (
+    "sensors.n_beams",
+    "sensors.n_rays",
+    "sensors.fov",
+    "sensors.max_range",
+    "robot.n_actions",
+    "observation.previous_action",
+    "observation.frame_stack",
+    "observation.subgoal",
+    "observation.subgoal_distance",
+    "observation.patch_size",
+)
+"""the settings that fix what a policy observes (and its action count); saved policies record them"""
+
+LEGACY_OBSERVATION = {
+    "sensors.n_beams": 8,
+    "sensors.n_rays": 0,
+    "sensors.fov": 2 * math.pi,
+    "sensors.max_range": 6.0,
+    "robot.n_actions": 5,
+    "observation.previous_action": False,
+    "observation.frame_stack": 1,
+    "observation.subgoal": "none",
+    "observation.subgoal_distance": 2.5,
+    "observation.patch_size": 0,
+}
+"""what a policy saved without an ``observation`` record observes: 8 beams, goal, one frame
+(every navlearn policy saved before these settings existed, e.g. the first ``pretrained/nnql``)"""
+
+
+def observation_settings(config: NavConfig) -> dict:
+    """The :data:`OBSERVATION_FIELDS` of ``config``, as a flat JSON-able dict."""
+    settings = {}
+    for name in OBSERVATION_FIELDS:
+        part, attr = name.split(".")
+        settings[name] = getattr(getattr(config, part), attr)
+    return settings
+
+
+def check_observation(saved: dict, config: NavConfig, what: str = "the policy") -> None:
+    """Raise a ValueError naming every field where ``config``'s observation differs from ``saved``."""
+    unknown = sorted(set(saved) - set(OBSERVATION_FIELDS))
+    if unknown:
+        raise ValueError(f"{what} records unknown observation settings {unknown}; known {OBSERVATION_FIELDS}")
+    given = observation_settings(config)
+    wrong = [
+        f"{name}={saved[name]!r} (the env has {given[name]!r})"
+        for name in OBSERVATION_FIELDS
+        if name in saved and not _same(saved[name], given[name])
+    ]
+    if wrong:
+        raise ValueError(
+            f"{what} was trained to observe " + ", ".join(wrong) + ": evaluate it in an env with its "
+            "settings (worlds.config.with_observation) or retrain it"
+        )
+
+
+def with_observation(config: NavConfig, saved: dict) -> NavConfig:
+    """``config`` with the observation settings ``saved`` (missing fields keep ``config``'s)."""
+    parts: dict[str, dict] = {}
+    for name, value in saved.items():
+        if name not in OBSERVATION_FIELDS:
+            raise ValueError(f"unknown observation setting {name!r}; known: {OBSERVATION_FIELDS}")
+        part, attr = name.split(".")
+        parts.setdefault(part, {})[attr] = value
+    updated = {part: replace(getattr(config, part), **values) for part, values in parts.items()}
+    return replace(config, **updated)
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, float) or isinstance(b, float):
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
+    return a == b

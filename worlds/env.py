@@ -13,14 +13,13 @@ from worlds.config import NavConfig
 from worlds.maps import Task
 from worlds.obstacles import DiscObstacles
 from worlds.outcomes import Outcome
+from worlds.perception import observation_bounds
 from worlds.rng import seed_state
 from worlds.tasks import DEFAULT_MAPS, TaskSampler, as_sampler
 
 
 def observation_space(config: NavConfig) -> spaces.Box:
-    n = config.sensors.n_beams
-    low = np.array([0.0] * n + [0.0, -1.0, -1.0], dtype=np.float32)
-    high = np.ones(n + 3, dtype=np.float32)
+    low, high = observation_bounds(config)
     return spaces.Box(low, high, dtype=np.float32)
 
 

@@ -42,6 +42,7 @@ from worlds.sensors import cast_from, ray_disc, ray_origin
 def _drop_stale_cache() -> None:
     here = Path(__file__).parent
     sources = ("kernel.py", "obstacles.py", "rng.py", "robot.py", "sensors.py")
+    sources += ("perception.py", "gridsearch.py", "fields.py")
     digest = hashlib.sha256(b"".join((here / name).read_bytes() for name in sources)).hexdigest()
     stamp = here / "__pycache__" / "kernel_sources.sha256"
     try:
@@ -61,6 +62,7 @@ _drop_stale_cache()
 P_STEP, P_RADIUS, P_TNOISE, P_RNOISE, P_HEADINGS, P_MAXR, P_SNOISE = range(7)
 P_DROP, P_RGOAL, P_RCOLL, P_RSTEP, P_RPROG, P_MAXSTEPS, P_GOALTOL = range(7, 14)
 P_OCOUNT, P_ORAD, P_OSPEED, P_OPATROL, P_OLENGTH, P_OSPAWN = range(14, 20)
+P_PER = 20  # rays per range reading (sector)
 
 RUNNING, GOAL = int(Outcome.RUNNING), int(Outcome.GOAL)
 HIT_STATIC, HIT_DYNAMIC, TIMEOUT = (
@@ -84,6 +86,7 @@ def make_params(config: NavConfig) -> np.ndarray:
         config.goal_tolerance,
     ]
     values += [o.count, o.radius, o.speed, float(o.mode == "patrol"), o.patrol_length, o.spawn_clearance]
+    values += [s.rays_per_beam]
     return np.asarray(values, dtype=np.float64)
 
 
@@ -98,30 +101,37 @@ def _wrap(angle: float) -> float:
 
 @njit(cache=True, inline="always")
 def _observe(i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
-             beam_s, obs):  # fmt: skip
-    """Write robot ``i``'s observation: ranges / max_range, squashed goal distance, sin and cos
-    of the goal bearing relative to the heading (``c``, ``s``: cosine and sine of the heading,
-    already known to the caller)."""
+             beam_s, obs, rays):  # fmt: skip
+    """Write robot ``i``'s observation: range readings / max_range (each the minimum of its sector's
+    rays, ``beam_c``/``beam_s`` holding every ray's direction sector by sector), squashed goal
+    distance, sin and cos of the goal bearing relative to the heading (``c``, ``s``: cosine and
+    sine of the heading, already known to the caller). The noise-free range of every ray goes to
+    ``rays[i]`` (metres) for the robot's own map (worlds.perception)."""
     m = mp[i]
     off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
     max_range, noise, drop = params[P_MAXR], params[P_SNOISE], params[P_DROP]
+    per = int(params[P_PER])
     xi, yi = x[i], y[i]
-    n_beams = beam_c.shape[0]
+    n_beams = beam_c.shape[0] // per
     idx, col, row, px, py = ray_origin(field, off, height, width, cell, xi, yi)
     limit = max_range / cell
-    for k in range(n_beams):
-        dx = c * beam_c[k] - s * beam_s[k]
-        dy = s * beam_c[k] + c * beam_s[k]
-        d = 0.0
-        if idx >= 0:
-            d = min(cast_from(field, off, width, idx, col, row, px, py, dx, dy, limit) * cell, max_range)
-        for j in range(ocount[i]):
-            d = min(d, ray_disc(xi, yi, dx, dy, ox[i, j], oy[i, j], orad[i, j]))
+    for b in range(n_beams):
+        d = max_range
+        for k in range(b * per, (b + 1) * per):
+            dx = c * beam_c[k] - s * beam_s[k]
+            dy = s * beam_c[k] + c * beam_s[k]
+            r = 0.0
+            if idx >= 0:
+                r = min(cast_from(field, off, width, idx, col, row, px, py, dx, dy, limit) * cell, max_range)
+            for j in range(ocount[i]):
+                r = min(r, ray_disc(xi, yi, dx, dy, ox[i, j], oy[i, j], orad[i, j]))
+            rays[i, k] = r
+            d = min(d, r)
         if noise > 0.0:
             d = min(max(d + noise * gauss(rng, i), 0.0), max_range)
         if drop > 0.0 and uniform(rng, i) < drop:
             d = max_range
-        obs[i, k] = d / max_range
+        obs[i, b] = d / max_range
     ux, uy = gx[i] - xi, gy[i] - yi
     dist = math.sqrt(ux * ux + uy * uy)  # not hypot: nothing to overflow here, and cheaper
     obs[i, n_beams] = dist / (dist + max_range)
@@ -222,7 +232,7 @@ def start_heading(field, off, height, width, cell, x, y, sampled, params, turns)
 @njit(cache=True, inline="always")
 def _reset(
     i, forced, keep_discs, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent, scell,
-    gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs
+    gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs, rays
 ) -> bool:  # fmt: skip
     """Start a new episode for robot ``i``: entry ``forced`` (or a random pool entry when
     negative, with fresh random endpoints if the entry allows), a random initial heading made
@@ -275,25 +285,25 @@ def _reset(
         )
     _observe(
         i, field, moff, mh, mw, mcell, mp, x, y, math.cos(th[i]), math.sin(th[i]), gx, gy, rng, ox, oy, orad,
-        ocount, params, beam_c, beam_s, obs,
+        ocount, params, beam_c, beam_s, obs, rays,
     )  # fmt: skip
     return drivable
 
 
 @njit(cache=True, _nrt=False)
-def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs, reward,
-             terminated, truncated, finals):  # fmt: skip
+def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs, rays,
+             reward, terminated, truncated, finals):  # fmt: skip
     """Step every robot; with ``autoreset``, a finished robot's terminal observation and results
     go to ``finals`` and it starts its next episode in the same call. Returns the number done."""
     return step_range(
         0, actions.shape[0], actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s,
-        obs, reward, terminated, truncated, finals,
+        obs, rays, reward, terminated, truncated, finals,
     )  # fmt: skip
 
 
 @njit(cache=True, nogil=True, _nrt=False)
 def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs,
-               reward, terminated, truncated, finals):  # fmt: skip
+               rays, reward, terminated, truncated, finals):  # fmt: skip
     """The work of :func:`step_all` for robots ``lo .. hi - 1``. Releases the GIL: robots share
     nothing they write and each owns its random stream, so threads may step disjoint ranges at
     once with results equal to :func:`step_all`'s (see :class:`worlds.batch.NavBatch`)."""
@@ -301,7 +311,7 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
     x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp = robots
     ox, oy, orad, ocount = discs[0], discs[1], discs[4], discs[10]
     moving = discs[:10]
-    f_obs, f_outcome, f_plen, f_steps, f_pose, f_ent, f_scell, f_gcell, f_done = finals
+    f_obs, f_rays, f_outcome, f_plen, f_steps, f_pose, f_ent, f_scell, f_gcell, f_done = finals
     n_done = 0
     for i in range(lo, hi):
         reward[i], c, s = _step(
@@ -310,7 +320,7 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
         )  # fmt: skip
         _observe(
             i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
-            beam_s, obs
+            beam_s, obs, rays
         )  # fmt: skip
         result = outcome[i]
         terminated[i] = result in (GOAL, HIT_STATIC, HIT_DYNAMIC)
@@ -322,6 +332,8 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
             if autoreset:
                 for k in range(obs.shape[1]):  # no slice copy: it needs NRT
                     f_obs[i, k] = obs[i, k]
+                for k in range(rays.shape[1]):
+                    f_rays[i, k] = rays[i, k]
                 f_outcome[i], f_plen[i], f_steps[i] = result, plen[i], steps[i]
                 f_pose[i, 0], f_pose[i, 1], f_pose[i, 2] = x[i], y[i], th[i]
                 f_ent[i] = ent[i]
@@ -329,14 +341,14 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
                 f_gcell[i, 0], f_gcell[i, 1] = gcell[i, 0], gcell[i, 1]
                 _reset(
                     i, -1, False, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent,
-                    scell, gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs,
+                    scell, gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs, rays,
                 )  # fmt: skip
     return n_done
 
 
 @njit(cache=True, _nrt=False)
 def reset_some(indices, forced, keep_discs, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs,
-               drivable):  # fmt: skip
+               rays, drivable):  # fmt: skip
     """Start new episodes for robots ``indices`` (see :func:`_reset` for ``forced``/``keep_discs``);
     ``drivable[n]`` tells whether robot ``indices[n]`` got a start with a drivable heading."""
     x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp = robots
@@ -346,4 +358,5 @@ def reset_some(indices, forced, keep_discs, maps, entries, robots, discs, params
         drivable[n] = _reset(
             indices[n], forced[n], keep_discs[n], maps, entries, mp, x, y, th, gx, gy, rng, steps, plen,
             pdist, outcome, ent, scell, gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs,
+            rays,
         )  # fmt: skip
