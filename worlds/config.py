@@ -302,3 +302,8 @@ def _same(a, b) -> bool:
     if isinstance(a, float) or isinstance(b, float):
         return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
     return a == b
+
+
+LEARNING_NAV = NavConfig()
+"""the task as learned policies see it by default (``navlearn train --local``, the actors, the
+evaluator, ``navlearn up``): the winner of the observation ablation (``bench/perception.py``)"""

@@ -6,7 +6,10 @@ A policy directory holds two files (written atomically, temp + rename):
   ``MLP``): ``"0.weight"``, ``"0.bias"``, ``"2.weight"``, ... one linear layer at every
   even index, the activation between them; float32.
 * ``config.json`` - ``{"model": name, "kind": kind, "version": int, "architecture":
-  {"obs_dim", "n_actions", "hidden_sizes", "activation"}, ...}`` plus any metadata.
+  {"obs_dim", "n_actions", "hidden_sizes", "activation"}, "observation": {...}, ...}`` plus any
+  metadata. ``observation`` holds the settings that fix what the policy observes
+  (:data:`worlds.config.OBSERVATION_FIELDS`); a policy saved without it observes
+  :data:`worlds.config.LEGACY_OBSERVATION` (8 beams and the goal, one frame).
 
 ``kind`` says what the network outputs: ``"q_network"`` (Q-values, NNQL) or
 ``"policy_logits"`` (action logits, imitation and NIRL neural policies). Both are
@@ -25,6 +28,8 @@ from typing import Any
 import numpy as np
 
 from agents.nnql.policy import mlp_forward, q_layers
+from worlds.config import LEGACY_OBSERVATION, NavConfig, with_observation
+from worlds.perception import observation_dim
 
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
@@ -46,6 +51,16 @@ class GreedyMLPPolicy:
         self.model = str(config.get("model", ""))
         self.kind = str(config["kind"])
         self.version = int(config.get("version", 0))
+        self.observation = dict(config.get("observation") or LEGACY_OBSERVATION)
+        try:
+            nav = self.nav_config()
+        except (TypeError, ValueError) as exc:
+            raise PolicyFormatError(f"observation settings {self.observation}: {exc}") from None
+        if observation_dim(nav) != self.architecture["obs_dim"]:
+            raise PolicyFormatError(
+                f"observation settings {self.observation} give {observation_dim(nav)} inputs, the network "
+                f"takes obs_dim={self.architecture['obs_dim']}"
+            )
         self.layers = q_layers(weights)
         sizes = [
             self.architecture["obs_dim"],
@@ -62,6 +77,10 @@ class GreedyMLPPolicy:
     @property
     def obs_dim(self) -> int:
         return int(self.architecture["obs_dim"])
+
+    def nav_config(self, base: NavConfig | None = None) -> NavConfig:
+        """``base`` (default ``NavConfig()``) with this policy's observation settings."""
+        return with_observation(base or NavConfig(), self.observation)
 
     def outputs(self, obs: np.ndarray) -> np.ndarray:
         """The network's outputs (Q-values or logits), ``(N, n_actions)``."""

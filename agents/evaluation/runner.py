@@ -36,7 +36,7 @@ import numpy as np
 
 from agents.evaluation.metrics import FamilyMetrics, point_clearance, summarize
 from agents.planning.astar import astar
-from worlds.config import NavConfig, ObstacleConfig
+from worlds.config import NavConfig, ObstacleConfig, check_observation, with_observation
 from worlds.generators import generate_task
 from worlds.maps import Task, clearance, load_movingai, load_scenarios
 from worlds.outcomes import OUTCOME_NAMES
@@ -225,10 +225,17 @@ def evaluate(
     max_batch: int = 128,
 ) -> EvalResult:
     """Run ``policy`` on every episode of ``eval_sets`` and compute the metrics. ``config`` is
-    the robot/sensor/reward setting the policy was trained with (default ``NavConfig()``);
-    each set's moving-disc settings replace its ``obstacles``."""
+    the robot/sensor/reward setting the policy was trained with (default ``NavConfig()`` with the
+    policy's ``observation`` settings when it records them); each set's moving-disc settings
+    replace its ``obstacles``. A policy whose recorded observation differs from ``config``'s
+    is a ValueError naming the field."""
     sets = [eval_sets] if isinstance(eval_sets, EvalSet) else list(eval_sets)
+    saved = getattr(policy, "observation", None)
     base = config or NavConfig()
+    if saved is not None and config is None:
+        base = with_observation(base, saved)
+    elif saved is not None:
+        check_observation(saved, base)
     result = EvalResult()
     for es in sets:
         cfg = replace(base, obstacles=es.obstacles)

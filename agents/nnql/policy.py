@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from agents.nnql.config import NNQLConfig
+from worlds.config import LEGACY_OBSERVATION
 
 MODEL_NAME = "nnql"
 POLICY_KIND = "q_network"
@@ -102,10 +103,13 @@ class NNQLPolicy:
         epsilon: float = 0.0,
         version: int = 0,
         seed: int | None = None,
+        observation: dict[str, Any] | None = None,
     ):
         if mode not in MODES:
             raise ValueError(f"unknown policy mode {mode!r}; expected one of {MODES}")
         self.architecture = dict(architecture)
+        self.observation = None if observation is None else dict(observation)
+        """the observation settings (worlds.config.OBSERVATION_FIELDS) it was trained with, if known"""
         self.mode = mode
         self.temperature = float(temperature)
         self.epsilon = float(epsilon)
@@ -172,7 +176,9 @@ class NNQLPolicy:
         return weights
 
     def save(self, path: str | Path, **metadata: Any) -> Path:
-        """Write ``model.safetensors`` + ``config.json`` into directory ``path``."""
+        """Write ``model.safetensors`` + ``config.json`` (with the observation settings, when known)."""
+        if self.observation is not None:
+            metadata.setdefault("observation", self.observation)
         return save_policy_dir(path, self.get_weights(), self.architecture, self.version, **metadata)
 
     @classmethod
@@ -180,6 +186,7 @@ class NNQLPolicy:
         """Read a policy directory written by ``save``/``save_policy_dir`` (greedy unless told)."""
         weights, config = load_policy_dir(path)
         kwargs.setdefault("version", config.get("version", 0))
+        kwargs.setdefault("observation", config.get("observation") or LEGACY_OBSERVATION)
         return cls(weights, config["architecture"], **kwargs)
 
 

@@ -22,6 +22,7 @@ from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
+from worlds.config import LEARNING_NAV, NavConfig, observation_settings
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
 CURVE_EVERY = 2_000
@@ -95,17 +96,20 @@ def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None) -> A
 def train_local(
     run: LocalTrainConfig,
     nnql: NNQLConfig | None = None,
-    nav: Any = None,
+    nav: NavConfig | None = None,
 ) -> TrainResult:
-    """Train NNQL for ``run.steps`` robot-steps; writes the outputs to ``run.out`` if set."""
+    """Train NNQL for ``run.steps`` robot-steps in ``nav`` (default :data:`worlds.config.LEARNING_NAV`);
+    writes the outputs to ``run.out`` if set."""
     from worlds.vector_env import NavigationVectorEnv
 
     nnql = nnql or NNQLConfig(seed=run.seed)
+    nav = nav or LEARNING_NAV
     env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
     obs_dim = int(env.single_observation_space.shape[0])
     n_actions = int(env.single_action_space.n)
     learner = NNQLLearner(nnql, obs_dim, n_actions)
     policy = learner.policy(seed=run.seed)
+    policy.observation = observation_settings(nav)
     policy.explore_as(nnql, learner.version)
     rollout = VectorRollout(env, policy, with_next_action=nnql.sarsa)
     rollout.reset(seed=run.seed)
