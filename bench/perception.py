@@ -1,0 +1,278 @@
+"""The observation ablation (issue 14): what must the robot perceive for NNQL to navigate?
+
+Same NNQL (``navlearn train --local``'s code and default hyper-parameters), same budget of
+robot-steps, several seeds, one observation per variant:
+
+    A  today's: 8 beams, goal distance and bearing, one frame
+    B  sector minima: 24 sectors, each the minimum of 4 of 96 exactly cast rays
+    C  B + frame stack of 3 + previous action (one-hot)
+    D  B + subgoal from the robot's own map (A* on what its rays have seen, unknown free)
+    E  D + C
+    E+geo  E trained with the geodesic progress reward in place of the straight-line one
+
+Each run keeps its best weights on the validation set (seed 1, periodic evaluations of
+``--val-episodes``), then is evaluated on the validation set (seed 1) and on the test sets
+(seed 0: unseen static maps and the same with 4 moving discs), ``--episodes`` each. The
+hand-written goal-seeking heuristic runs on the same episodes. Reported per variant: success
+[Wilson 95%] per seed and pooled, McNemar's exact test (paired, same episodes) against A and
+against the heuristic for each seed, per map family (rects, discs, rooms), collisions
+(static/dynamic), timeouts, SPL, path ratio to A*, robot-steps and wall time to reach 90%
+validation success during training. The best variant by mean validation success is named.
+
+Each (variant, seed) run writes ``OUT/<variant>-s<seed>/result.json`` and is skipped when that
+file exists, so the runs can be split across processes and the report re-made from them:
+
+    python bench/perception.py --steps 200000 --seeds 0 1 2            # human lines, JSON last
+    python bench/perception.py --variants A B --seeds 0 --steps 20000   # a smoke run
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import binomtest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from agents.evaluation.metrics import wilson_interval
+from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
+from agents.nnql.policy import NNQLPolicy
+from agents.nnql.train_local import LocalTrainConfig, train_local
+from worlds.config import (
+    LEGACY_OBSERVATION,
+    NavConfig,
+    ObservationConfig,
+    RewardConfig,
+    SensorConfig,
+    with_observation,
+)
+from worlds.heuristics import goal_seeking_policy
+from worlds.outcomes import Outcome
+from worlds.tasks import MIXED_FAMILIES
+
+SECTORS = SensorConfig(n_beams=24, n_rays=96)
+HISTORY = {"previous_action": True, "frame_stack": 3}
+VARIANTS: dict[str, NavConfig] = {
+    "A": with_observation(NavConfig(), LEGACY_OBSERVATION),
+    "B": NavConfig(sensors=SECTORS),
+    "C": NavConfig(sensors=SECTORS, observation=ObservationConfig(**HISTORY)),
+    "D": NavConfig(sensors=SECTORS, observation=ObservationConfig(subgoal="own_map")),
+    "E": NavConfig(sensors=SECTORS, observation=ObservationConfig(subgoal="own_map", **HISTORY)),
+    "E+geo": NavConfig(
+        sensors=SECTORS,
+        observation=ObservationConfig(subgoal="own_map", **HISTORY),
+        rewards=RewardConfig(progress=0.0, geodesic_progress=0.1),
+    ),
+}
+SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dynamic", 0))
+
+
+def mcnemar(a: np.ndarray, b: np.ndarray) -> dict:
+    """McNemar's exact test on paired successes: discordant counts and the two-sided p-value."""
+    only_a, only_b = int((a & ~b).sum()), int((~a & b).sum())
+    p = binomtest(only_a, only_a + only_b, 0.5).pvalue if only_a + only_b else 1.0
+    return {"only_first": only_a, "only_second": only_b, "p": float(p)}
+
+
+def successes(result: EvalResult, family: str) -> np.ndarray:
+    return np.array([r.outcome == Outcome.GOAL for r in result.episodes[family]])
+
+
+def summary(result: EvalResult, family: str) -> dict:
+    """Success [Wilson], per map family, outcome rates, SPL and path ratio of one evaluated set."""
+    m, ok = result.metrics[family], successes(result, family)
+    kinds = np.arange(len(ok)) % len(MIXED_FAMILIES)
+    return {
+        "success": m.success.value,
+        "ci": [m.success.low, m.success.high],
+        "per_family": {f: float(ok[kinds == k].mean()) for k, f in enumerate(MIXED_FAMILIES)},
+        "collision_static": m.collision_static.value,
+        "collision_dynamic": m.collision_dynamic.value,
+        "timeout": m.timeout.value,
+        "spl": m.spl,
+        "path_ratio": m.path_ratio if math.isfinite(m.path_ratio) else None,
+    }
+
+
+def evaluate_sets(policy, nav: NavConfig, sets: dict) -> dict[str, EvalResult]:
+    return {name: evaluate(policy, es, config=nav) for name, es in sets.items()}
+
+
+def scored(results: dict[str, EvalResult], sets: dict) -> dict:
+    """Summaries and per-episode successes of each evaluated set."""
+    return {
+        "sets": {name: summary(results[name], es.family) for name, es in sets.items()},
+        "episodes": {name: successes(results[name], es.family).tolist() for name, es in sets.items()},
+    }
+
+
+def to_90(curve: list[dict]) -> dict:
+    """Robot-steps and wall time of the first periodic validation evaluation at >= 90% success."""
+    for point in curve:
+        if point.get("eval_success", 0.0) >= 0.9:
+            return {"steps": point["env_steps"], "wall_s": round(point["wall_time"], 1)}
+    return {"steps": None, "wall_s": None}
+
+
+def run_one(variant: str, seed: int, args, sets: dict) -> dict:
+    out = Path(args.out) / f"{variant}-s{seed}"
+    cached = out / "result.json"
+    if cached.is_file():
+        return json.loads(cached.read_text())
+    nav = VARIANTS[variant]
+    run = LocalTrainConfig(
+        steps=args.steps, envs=16, seed=seed, out=str(out), eval_every=args.steps // 4,
+        eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False,
+    )  # fmt: skip
+    start = time.perf_counter()
+    trained = train_local(run, nav=nav)
+    wall = time.perf_counter() - start
+    policy = NNQLPolicy.load(out).greedy()
+    results = evaluate_sets(policy, nav, sets)
+    record = {
+        "variant": variant,
+        "seed": seed,
+        "train_robot_steps": trained.env_steps,
+        "train_wall_s": round(wall, 1),
+        "selected_version": trained.selected_version,
+        "to_90_validation": to_90(trained.curve),
+        **scored(results, sets),
+    }
+    cached.write_text(json.dumps(record) + "\n")
+    return record
+
+
+def heuristic(sets: dict, out: Path) -> dict:
+    cached = out / "heuristic.json"
+    if cached.is_file():
+        return json.loads(cached.read_text())
+    nav = VARIANTS["A"]
+    results = evaluate_sets(goal_seeking_policy(nav), nav, sets)
+    record = scored(results, sets)
+    out.mkdir(parents=True, exist_ok=True)
+    cached.write_text(json.dumps(record) + "\n")
+    return record
+
+
+def pooled(records: list[dict], name: str) -> dict:
+    """Success over every seed's episodes of set ``name`` with its Wilson interval, and the mean."""
+    wins = sum(int(np.sum(r["episodes"][name])) for r in records)
+    n = sum(len(r["episodes"][name]) for r in records)
+    low, high = wilson_interval(wins, n)
+    return {
+        "success": wins / n,
+        "ci": [low, high],
+        "per_seed": [r["sets"][name]["success"] for r in records],
+        "per_family": {
+            f: float(np.mean([r["sets"][name]["per_family"][f] for r in records])) for f in MIXED_FAMILIES
+        },
+        "spl": float(np.mean([r["sets"][name]["spl"] for r in records])),
+    }
+
+
+def plot(report: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(report["variants"])
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
+    for ax, set_name in zip(axes, [s for s, _, _ in SETS], strict=True):
+        for x, v in enumerate(names):
+            p = report["variants"][v][set_name]
+            ax.bar(x, p["success"], color="tab:blue", alpha=0.6)
+            ax.errorbar(x, p["success"], yerr=[[p["success"] - p["ci"][0]], [p["ci"][1] - p["success"]]],
+                        color="k", capsize=3)  # fmt: skip
+            ax.plot([x] * len(p["per_seed"]), p["per_seed"], "o", color="tab:orange", ms=4)
+        h = report["heuristic"][set_name]["success"]
+        ax.axhline(h, color="tab:red", ls="--", label=f"heuristic {h:.0%}")
+        ax.axhline(0.98 if set_name != "test_dynamic" else 0.90, color="tab:green", ls=":", label="target")
+        ax.set_xticks(range(len(names)), names)
+        ax.set(title=set_name.replace("_", " "), ylim=(0.4, 1.0))
+        ax.grid(axis="y", alpha=0.3)
+        ax.legend(loc="lower right", fontsize=8)
+    axes[0].set_ylabel("success (bars: pooled, dots: seeds)")
+    fig.suptitle(
+        f"NNQL, {report['steps'] // 1000}k robot-steps per run, {report['episodes']} episodes per set"
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--steps", type=int, default=200_000, help="training budget per run (robot-steps)")
+    parser.add_argument("--episodes", type=int, default=500, help="episodes per evaluation set")
+    parser.add_argument("--val-episodes", type=int, default=100, help="episodes of the periodic validations")
+    parser.add_argument("--out", default="runs/perception", help="run directories and result files")
+    parser.add_argument("--png", default="bench/plots/perception.png")
+    args = parser.parse_args()
+
+    start = time.perf_counter()
+    sets = {name: make_eval_set(family, args.episodes, seed=seed) for name, family, seed in SETS}
+    base = heuristic(sets, Path(args.out))
+    runs = {v: [run_one(v, s, args, sets) for s in args.seeds] for v in args.variants}
+    report: dict = {"steps": args.steps, "seeds": args.seeds, "episodes": args.episodes, "variants": {}}
+    report["heuristic"] = base["sets"]
+    for v, records in runs.items():
+        entry = {name: pooled(records, name) for name, _, _ in SETS}
+        entry["train_wall_s"] = [r["train_wall_s"] for r in records]
+        entry["to_90_validation"] = [r["to_90_validation"] for r in records]
+        for name, _, _ in SETS:
+            for r in records:
+                r["sets"][name]["mcnemar_vs_heuristic"] = mcnemar(
+                    np.array(r["episodes"][name]), np.array(base["episodes"][name])
+                )
+                if "A" in runs and v != "A":
+                    a = next((x for x in runs["A"] if x["seed"] == r["seed"]), None)
+                    if a is not None:
+                        r["sets"][name]["mcnemar_vs_A"] = mcnemar(
+                            np.array(r["episodes"][name]), np.array(a["episodes"][name])
+                        )
+        entry["runs"] = [
+            {k: r[k] for k in ("seed", "train_wall_s", "to_90_validation", "sets")} for r in records
+        ]
+        report["variants"][v] = entry
+    best = max(report["variants"], key=lambda v: report["variants"][v]["validation"]["success"])
+    report["best_by_validation"] = best
+    report["wall_s"] = round(time.perf_counter() - start, 1)
+
+    print(f"NNQL, {args.steps} robot-steps per run, seeds {args.seeds}, {args.episodes} episodes per set")
+    print(
+        f"{'variant':<7} {'validation':<22} {'test unseen':<22} {'test dynamic':<22} rects/discs/rooms (test)"
+    )
+    for v, e in [*report["variants"].items(), ("heur.", None)]:
+        cells = []
+        for name, _, _ in SETS:
+            p = e[name] if e else {**base["sets"][name]}
+            cells.append(f"{p['success']:6.1%} [{p['ci'][0]:.1%},{p['ci'][1]:.1%}]")
+        fam = (e or base["sets"])["test"]["per_family"]
+        print(f"{v:<7} " + " ".join(f"{c:<22}" for c in cells) + " " + "/".join(f"{fam[f]:.0%}" for f in fam))
+    for v, e in report["variants"].items():
+        for r in e["runs"]:
+            t = r["sets"]["test"]
+            vs = t.get("mcnemar_vs_A", {}).get("p")
+            print(f"  {v} seed {r['seed']}: test {t['success']:.1%}, SPL {t['spl']:.2f}, collisions "
+                  f"{t['collision_static']:.1%}, timeouts {t['timeout']:.1%}, McNemar p vs heuristic "
+                  f"{t['mcnemar_vs_heuristic']['p']:.3g}" + (f", vs A {vs:.3g}" if vs is not None else "")
+                  + f"; train {r['train_wall_s']:.0f} s, to 90% val {r['to_90_validation']}")  # fmt: skip
+    print(f"best by validation success: {best}")
+    Path(args.png).parent.mkdir(parents=True, exist_ok=True)
+    plot(report, Path(args.png))
+    print(json.dumps(report))
+
+
+if __name__ == "__main__":
+    main()
