@@ -4,12 +4,25 @@ from __future__ import annotations
 
 import itertools
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from agents.evaluation.policies import PolicyFormatError, load_policy, save_policy
+from agents.evaluation.runner import evaluate, make_eval_set
 from agents.nnql.policy import NNQLPolicy
+from worlds.config import (
+    LEGACY_OBSERVATION,
+    NavConfig,
+    ObservationConfig,
+    SensorConfig,
+    observation_settings,
+    with_observation,
+)
+from worlds.perception import observation_dim
+
+PRETRAINED = Path(__file__).resolve().parents[1] / "pretrained" / "nnql"
 
 ARCH = {"obs_dim": 11, "n_actions": 5, "hidden_sizes": [16, 8], "activation": "tanh"}
 
@@ -77,3 +90,67 @@ def test_bad_directories_give_clear_errors(tmp_path):
         load_policy(good)
     with pytest.raises(ValueError, match="kind"):
         save_policy(tmp_path / "x", {}, ARCH, "m", "value_function")
+
+
+OBSERVATIONS = {
+    "legacy": NavConfig(),
+    "sectors": NavConfig(sensors=SensorConfig(n_beams=24, n_rays=96)),
+    "history": NavConfig(
+        sensors=SensorConfig(n_beams=12, n_rays=24),
+        observation=ObservationConfig(previous_action=True, frame_stack=3),
+    ),
+    "own-map-subgoal": NavConfig(observation=ObservationConfig(subgoal="own_map")),
+    "known-map-subgoal": NavConfig(observation=ObservationConfig(subgoal="known_map")),
+    "patch": NavConfig(observation=ObservationConfig(patch_size=5, frame_stack=2)),
+}
+
+
+def _random_policy(nav: NavConfig, seed: int = 0) -> NNQLPolicy:
+    arch = {"obs_dim": observation_dim(nav), "n_actions": 5, "hidden_sizes": [32], "activation": "relu"}
+    rng = np.random.default_rng(seed)
+    weights = {
+        "0.weight": rng.normal(size=(32, arch["obs_dim"])).astype(np.float32),
+        "0.bias": rng.normal(size=32).astype(np.float32),
+        "2.weight": rng.normal(size=(5, 32)).astype(np.float32),
+        "2.bias": rng.normal(size=5).astype(np.float32),
+    }
+    return NNQLPolicy(weights, arch, observation=observation_settings(nav))
+
+
+@pytest.mark.parametrize("name", list(OBSERVATIONS))
+def test_saved_policy_with_each_observation_evaluates_identically_after_reload(tmp_path, name):
+    nav = OBSERVATIONS[name]
+    policy = _random_policy(nav)
+    policy.save(tmp_path / name)
+    assert json.loads((tmp_path / name / "config.json").read_text())["observation"] == observation_settings(
+        nav
+    )
+    episodes = make_eval_set("unseen", 6, seed=5)
+    before = evaluate(policy.greedy(), episodes, config=nav).episodes["unseen"]
+    for reloaded in (load_policy(tmp_path / name), NNQLPolicy.load(tmp_path / name)):
+        after = evaluate(reloaded, episodes).episodes["unseen"]  # the recorded settings make the env
+        assert [(e.outcome, e.path_length, e.steps) for e in after] == [
+            (e.outcome, e.path_length, e.steps) for e in before
+        ]
+
+
+def test_mismatched_observation_settings_fail_naming_the_field(tmp_path):
+    _random_policy(OBSERVATIONS["history"]).save(tmp_path / "p")
+    policy = load_policy(tmp_path / "p")
+    episodes = make_eval_set("unseen", 2, seed=5)
+    other = with_observation(OBSERVATIONS["history"], {"observation.frame_stack": 2})
+    with pytest.raises(ValueError, match=r"observation\.frame_stack=3 \(the env has 2\)"):
+        evaluate(policy, episodes, config=other)
+    with pytest.raises(ValueError, match=r"sensors\.n_rays=24"):
+        evaluate(policy, episodes, config=NavConfig(sensors=SensorConfig(n_beams=12)))
+    config = json.loads((tmp_path / "p" / "config.json").read_text())
+    config["observation"]["observation.frame_stack"] = 1  # no longer fits the network's inputs
+    (tmp_path / "p" / "config.json").write_text(json.dumps(config))
+    with pytest.raises(PolicyFormatError, match="give 20 inputs, the network takes obs_dim=60"):
+        load_policy(tmp_path / "p")
+
+
+def test_shipped_pretrained_policy_loads_with_the_legacy_observation():
+    policy = load_policy(PRETRAINED)
+    assert policy.observation == LEGACY_OBSERVATION
+    assert observation_dim(policy.nav_config()) == policy.obs_dim == 11
