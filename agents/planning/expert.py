@@ -100,7 +100,8 @@ class Expert:
         n = sensors.n_beams
         measured = np.asarray(obs[:n], dtype=np.float64) * sensors.max_range
         angles = sensors.beam_angles
-        expected = cast_rays(self._task.grid, pose[0], pose[1], pose[2], angles, sensors.max_range)[0]
+        rays = cast_rays(self._task.grid, pose[0], pose[1], pose[2], sensors.ray_angles, sensors.max_range)[0]
+        expected = rays.reshape(n, sensors.rays_per_beam).min(axis=1)  # what each reading (sector) shows
         hit = measured < expected - self.config.detection_margin
         self._detections = [(d, age + 1) for d, age in self._detections if age + 1 < self.config.memory]
         if not hit.any():

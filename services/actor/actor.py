@@ -242,13 +242,14 @@ class Actor:
 
 def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
     """Process set-up: env (from the config), Zenoh session (retried until a router answers), loop."""
+    from worlds.config import LEARNING_NAV
     from worlds.vector_env import NavigationVectorEnv
 
     if not config.id:
         config.id = default_actor_id()
     keys.check_name(config.id, "actor id")
     seed = config.seed if config.seed is not None else seed_for(config.id)
-    env = NavigationVectorEnv(config.envs, maps=config.maps, seed=seed)
+    env = NavigationVectorEnv(config.envs, config=LEARNING_NAV, maps=config.maps, seed=seed)
     limits = Limits(n_actions=int(env.single_action_space.n))
     session = connect(settings, stop)
     if session is None:

@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
 
     from agents.evaluation import evaluate, make_eval_set, plot_paths
     from agents.evaluation.policies import PolicyFormatError, load_policy
-    from worlds.config import NavConfig, ObstacleConfig
+    from worlds.config import ObstacleConfig
 
     if args.episodes < 1:
         print("navlearn evaluate: --episodes must be positive", file=sys.stderr)
@@ -51,16 +51,7 @@ def run(args: argparse.Namespace) -> int:
     except PolicyFormatError as exc:
         print(f"navlearn evaluate: {exc}", file=sys.stderr)
         return 2
-    config = NavConfig()
-    obs_dim = config.sensors.n_beams + 3
-    if policy.obs_dim != obs_dim or policy.architecture["n_actions"] != config.robot.n_actions:
-        print(
-            f"navlearn evaluate: the policy takes {policy.obs_dim} observations and "
-            f"{policy.architecture['n_actions']} actions; the environment has {obs_dim} and "
-            f"{config.robot.n_actions}",
-            file=sys.stderr,
-        )
-        return 2
+    config = policy.nav_config()  # the env observes what the policy was trained to (its config.json)
     try:
         sets = [
             make_eval_set(

@@ -73,9 +73,9 @@ def demo_batch(demos: list[Demo], source: str, sender: str, seq: int) -> DemoBat
 def nav_config(config: DemonstratorConfig):
     from dataclasses import replace
 
-    from worlds.config import NavConfig, ObstacleConfig
+    from worlds.config import LEARNING_NAV, ObstacleConfig
 
-    return replace(NavConfig(), obstacles=ObstacleConfig(count=config.obstacles))
+    return replace(LEARNING_NAV, obstacles=ObstacleConfig(count=config.obstacles))
 
 
 def expert_episodes(config: DemonstratorConfig, stop: threading.Event) -> Iterator[Demo]:

@@ -145,11 +145,12 @@ class Evaluator:
     def evaluate(self, weights: dict, architecture: dict, version: int) -> dict[str, Any]:
         from agents.evaluation import evaluate
         from agents.nnql.policy import NNQLPolicy
+        from worlds.config import LEARNING_NAV
 
         network, _exploration = split_architecture(architecture)
         policy = NNQLPolicy(weights, network, mode="greedy", version=version)
         start = time.perf_counter()
-        result = evaluate(policy, self.eval_sets)
+        result = evaluate(policy, self.eval_sets, config=LEARNING_NAV)  # what the actors observe
         metrics = result.to_dict(with_episodes=False)["metrics"]
         log.info("version %d evaluated in %.1f s\n%s", version, time.perf_counter() - start, result.table())
         return metrics

@@ -361,10 +361,10 @@ def run_learner(
     ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
     from agents.nnql.learner import NNQLLearner
     from services.learner.demo_buffer import DemoBuffer
-    from worlds.config import NavConfig
+    from worlds.config import LEARNING_NAV
     from worlds.env import observation_space
 
-    nav = NavConfig()
+    nav = LEARNING_NAV
     obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
     learner = NNQLLearner(nnql, obs_dim, n_actions)
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
