@@ -13,6 +13,11 @@ CPU second of this process (all its threads), with the load average; the threade
 wall-clock ratio (what threads buy is wall-clock time).
 
     python bench/env_throughput.py     # human lines, then one JSON object on the last line
+    python bench/env_throughput.py --nav learning --robots 256   # the observation policies learn with
+
+``--nav learning`` measures :data:`worlds.config.LEARNING_NAV` (sector minima, own-map subgoal
+..., issue 14) instead of ``NavConfig()``; its target is 200k robot-steps per CPU-second, far
+above what a learner consumes (a few thousand per second).
 """
 
 from __future__ import annotations
@@ -32,11 +37,13 @@ import gymnasium as gym
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import worlds  # noqa: F401  (registers navlearn/Navigation-v0)
-from worlds.config import NavConfig
+from worlds.config import LEARNING_NAV, NavConfig
 from worlds.vector_env import NavigationVectorEnv
 
 TARGET_STEPS_PER_S = 1_000_000
 TARGET_RATIO = 200.0
+TARGET_LEARNING_STEPS_PER_CPU_S = 200_000
+NAVS = {"default": NavConfig(), "learning": LEARNING_NAV}
 
 
 def measure(env, n: int, seconds: float, max_steps: int, seed: int) -> dict:
@@ -78,8 +85,9 @@ def main() -> int:
         default=os.cpu_count() or 1,
         help="threads of the threaded measurement (default: the core count)",
     )
+    parser.add_argument("--nav", choices=list(NAVS), default="default", help="NavConfig() or LEARNING_NAV")
     args = parser.parse_args()
-    config = NavConfig()
+    config = NAVS[args.nav]
     load_before = os.getloadavg()[0]
     results = []
     for n in args.robots:
@@ -123,8 +131,10 @@ def main() -> int:
     threaded_ratio = largest["ratio_threaded_wall"]
     summary = {
         "bench": "env_throughput",
-        "config": "NavConfig() defaults, maps mixed:16, random actions; ours with threads=1 and "
-        f"threads={args.threads} ({os.cpu_count()} cores)",
+        "config": f"{'NavConfig() defaults' if args.nav == 'default' else 'LEARNING_NAV'}, maps mixed:16, "
+        f"random actions; ours with threads=1 and threads={args.threads} ({os.cpu_count()} cores)",
+        "nav": args.nav,
+        "observation_dim": NavigationVectorEnv(1, config).batch.obs_dim,
         "load_average_before": load_before,
         "load_average_after": os.getloadavg()[0],
         "results": results,
@@ -136,6 +146,10 @@ def main() -> int:
         "ratio_met_cpu": largest["ratio_cpu"] >= TARGET_RATIO,
         "ratio_met_threaded_wall": threaded_ratio is not None and threaded_ratio >= TARGET_RATIO,
     }
+    if args.nav == "learning":
+        cpu = largest["ours"]["robot_steps_per_cpu_s"]
+        summary["learning_target_steps_per_cpu_s"] = TARGET_LEARNING_STEPS_PER_CPU_S
+        summary["learning_target_met_cpu"] = cpu >= TARGET_LEARNING_STEPS_PER_CPU_S
     print(json.dumps(summary))
     return 0
 
