@@ -55,10 +55,20 @@ class NavigationEnv(gym.Env):
 
     Beam k points at ``beam_angles[k]`` from the heading (with a 360-degree fov: -180 +
     k * 360 / n_beams degrees); the bearing grows towards +y (clockwise on a picture).
+    With ``sensors.n_rays`` > ``n_beams`` reading k is the minimum over the rays of its sector
+    (e.g. 24 sectors of 4 rays each), so no corner hides between readings.
+
+    ``config.observation`` (:class:`worlds.config.ObservationConfig`) appends to this frame a
+    subgoal from the robot's own map (distance and bearing, 3 values), the previous action
+    (one-hot) and a patch of the robot's own map, and stacks the last ``frame_stack`` frames,
+    newest first (:mod:`worlds.perception`; ``worlds.perception.frame_layout`` says where each
+    part sits). The default is the table above. Policies learn with
+    :data:`worlds.config.LEARNING_NAV`.
 
     ## Rewards
     Every step ``rewards.step`` (-0.01) plus ``rewards.progress`` (0.1) per metre gained
-    towards the goal; ``rewards.goal`` (+1) on reaching it; ``rewards.collision`` (-1) on a
+    towards the goal (plus ``rewards.geodesic_progress`` per metre gained along the shortest
+    path round the walls, 0 by default); ``rewards.goal`` (+1) on reaching it; ``rewards.collision`` (-1) on a
     collision (no progress term then). See :class:`worlds.config.RewardConfig`.
 
     ## Episode End
