@@ -9,6 +9,7 @@ robot-steps, several seeds, one observation per variant:
     D  B + subgoal from the robot's own map (A* on what its rays have seen, unknown free)
     E  D + C
     E+geo  E trained with the geodesic progress reward in place of the straight-line one
+    B+geo, D+geo  B and D with that reward (which part of E+geo helps: the reward, the subgoal?)
 
 Each run keeps its best weights on the validation set (seed 1, periodic evaluations of
 ``--val-episodes``), then is evaluated on the validation set (seed 1) and on the test sets
@@ -70,6 +71,9 @@ VARIANTS: dict[str, NavConfig] = {
         rewards=RewardConfig(progress=0.0, geodesic_progress=0.1),
     ),
 }
+GEODESIC = RewardConfig(progress=0.0, geodesic_progress=0.1)
+VARIANTS["B+geo"] = NavConfig(sensors=SECTORS, rewards=GEODESIC)
+VARIANTS["D+geo"] = NavConfig(sensors=SECTORS, observation=ObservationConfig(subgoal="own_map"), rewards=GEODESIC)
 SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dynamic", 0))
 
 
