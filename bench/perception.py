@@ -34,6 +34,7 @@ import json
 import math
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -73,7 +74,7 @@ VARIANTS: dict[str, NavConfig] = {
 }
 GEODESIC = RewardConfig(progress=0.0, geodesic_progress=0.1)
 VARIANTS["B+geo"] = NavConfig(sensors=SECTORS, rewards=GEODESIC)
-VARIANTS["D+geo"] = NavConfig(sensors=SECTORS, observation=ObservationConfig(subgoal="own_map"), rewards=GEODESIC)
+VARIANTS["D+geo"] = replace(VARIANTS["D"], rewards=GEODESIC)
 SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dynamic", 0))
 
 
