@@ -47,6 +47,7 @@ from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from worlds.config import (
+    LEARNING_NAV,
     LEGACY_OBSERVATION,
     NavConfig,
     ObservationConfig,
@@ -252,6 +253,7 @@ def main() -> None:
         report["variants"][v] = entry
     best = max(report["variants"], key=lambda v: report["variants"][v]["validation"]["success"])
     report["best_by_validation"] = best
+    report["learning_nav_is"] = next((v for v, nav in VARIANTS.items() if nav == LEARNING_NAV), None)
     report["wall_s"] = round(time.perf_counter() - start, 1)
 
     print(f"NNQL, {args.steps} robot-steps per run, seeds {args.seeds}, {args.episodes} episodes per set")
@@ -273,7 +275,7 @@ def main() -> None:
                   f"{t['collision_static']:.1%}, timeouts {t['timeout']:.1%}, McNemar p vs heuristic "
                   f"{t['mcnemar_vs_heuristic']['p']:.3g}" + (f", vs A {vs:.3g}" if vs is not None else "")
                   + f"; train {r['train_wall_s']:.0f} s, to 90% val {r['to_90_validation']}")  # fmt: skip
-    print(f"best by validation success: {best}")
+    print(f"best by validation success: {best}; worlds.config.LEARNING_NAV is {report['learning_nav_is']}")
     Path(args.png).parent.mkdir(parents=True, exist_ok=True)
     plot(report, Path(args.png))
     print(json.dumps(report))

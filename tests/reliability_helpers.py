@@ -23,8 +23,10 @@ from protocols.codec import decode, encode
 from protocols.flow import Ack
 from protocols.messages import TransitionBatch
 from services.common.outbox import Outbox
+from worlds.config import LEARNING_NAV
+from worlds.perception import observation_dim
 
-OBS_DIM, N_ACTIONS = 11, 5  # worlds' default robot: 8 beams + 3 goal features, 5 turns
+OBS_DIM, N_ACTIONS = observation_dim(LEARNING_NAV), 5  # what the learner service takes, 5 turns
 
 
 class TracedActor:

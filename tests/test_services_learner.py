@@ -24,9 +24,11 @@ from protocols.flow import Ack
 from protocols.messages import DemoBatch, EpisodeMeta, EvalReport, TransitionBatch, WeightsUpdate
 from services.common.transport import ZenohSettings, open_session
 from services.ops.status import query_status
+from worlds.config import LEARNING_NAV
+from worlds.perception import observation_dim
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(300)]
-OBS_DIM, N_ACTIONS = 11, 5  # worlds' default robot: 8 beams + 3 goal features, 5 turns
+OBS_DIM, N_ACTIONS = observation_dim(LEARNING_NAV), 5  # what the learner service takes, 5 turns
 
 
 def batch(actor: str, seq: int, n: int = 32, **override) -> TransitionBatch:

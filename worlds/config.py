@@ -304,6 +304,12 @@ def _same(a, b) -> bool:
     return a == b
 
 
-LEARNING_NAV = NavConfig()
-"""the task as learned policies see it by default (``navlearn train --local``, the actors, the
-evaluator, ``navlearn up``): the winner of the observation ablation (``bench/perception.py``)"""
+LEARNING_NAV = NavConfig(
+    sensors=SensorConfig(n_beams=24, n_rays=96),
+    observation=ObservationConfig(subgoal="own_map"),
+    rewards=RewardConfig(progress=0.0, geodesic_progress=0.1),
+)
+"""the task as learned policies see it by default (``navlearn train --local``, the actors, learner,
+evaluator and demonstrator of ``navlearn up``): 24 sector minima of 96 rays, the goal, the subgoal
+from the robot's own map, trained with the geodesic progress reward - the winner on validation
+success of the observation ablation (``bench/perception.py``, variant "D+geo"; bench/RESULTS.md)"""
