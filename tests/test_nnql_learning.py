@@ -8,6 +8,7 @@ import pytest
 from agents.nnql.config import NNQLConfig
 from agents.nnql.rollout import VectorRollout
 from agents.nnql.train_local import LocalTrainConfig, train_local
+from worlds.config import NavConfig
 
 CORRIDOR = """\
 ############
@@ -65,7 +66,7 @@ def test_nnql_learns_a_corridor(tmp_path, variant):
         final_eval_episodes=0,
         progress=False,
     )
-    result = train_local(run, nnql)
+    result = train_local(run, nnql, nav=NavConfig())  # the plain observation greedy_success steps
     assert result.updates == pytest.approx(0.125 * (4000 - 496), abs=20)
     assert greedy_success(result.learner.policy(), str(corridor)) >= 0.9
     # the outputs: a policy directory that loads back, the curve
