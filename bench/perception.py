@@ -224,16 +224,25 @@ def main() -> None:
     parser.add_argument("--val-episodes", type=int, default=100, help="episodes of the periodic validations")
     parser.add_argument("--out", default="runs/perception", help="run directories and result files")
     parser.add_argument("--png", default="bench/plots/perception.png")
+    parser.add_argument(
+        "--cached-only", action="store_true", help="report the runs already in --out, train nothing"
+    )
     args = parser.parse_args()
 
     start = time.perf_counter()
     sets = {name: make_eval_set(family, args.episodes, seed=seed) for name, family, seed in SETS}
     base = heuristic(sets, Path(args.out))
-    runs = {v: [run_one(v, s, args, sets) for s in args.seeds] for v in args.variants}
+    if args.cached_only:
+        done = {v: [s for s in args.seeds if (Path(args.out) / f"{v}-s{s}" / "result.json").is_file()]
+                for v in args.variants}  # fmt: skip
+        runs = {v: [run_one(v, s, args, sets) for s in seeds] for v, seeds in done.items() if seeds}
+    else:
+        runs = {v: [run_one(v, s, args, sets) for s in args.seeds] for v in args.variants}
     report: dict = {"steps": args.steps, "seeds": args.seeds, "episodes": args.episodes, "variants": {}}
     report["heuristic"] = base["sets"]
     for v, records in runs.items():
         entry = {name: pooled(records, name) for name, _, _ in SETS}
+        entry["seeds"] = [r["seed"] for r in records]
         entry["train_wall_s"] = [r["train_wall_s"] for r in records]
         entry["to_90_validation"] = [r["to_90_validation"] for r in records]
         for name, _, _ in SETS:
@@ -258,15 +267,18 @@ def main() -> None:
 
     print(f"NNQL, {args.steps} robot-steps per run, seeds {args.seeds}, {args.episodes} episodes per set")
     print(
-        f"{'variant':<7} {'validation':<22} {'test unseen':<22} {'test dynamic':<22} rects/discs/rooms (test)"
+        f"{'variant':<11} {'validation':<22} {'test unseen':<22} {'test dynamic':<22} "
+        "rects/discs/rooms (test)"
     )
     for v, e in [*report["variants"].items(), ("heur.", None)]:
+        v = v if e is None else f"{v} ({len(e['seeds'])})"
         cells = []
         for name, _, _ in SETS:
             p = e[name] if e else {**base["sets"][name]}
             cells.append(f"{p['success']:6.1%} [{p['ci'][0]:.1%},{p['ci'][1]:.1%}]")
         fam = (e or base["sets"])["test"]["per_family"]
-        print(f"{v:<7} " + " ".join(f"{c:<22}" for c in cells) + " " + "/".join(f"{fam[f]:.0%}" for f in fam))
+        families = "/".join(f"{fam[f]:.0%}" for f in fam)
+        print(f"{v:<11} " + " ".join(f"{c:<22}" for c in cells) + " " + families)
     for v, e in report["variants"].items():
         for r in e["runs"]:
             t = r["sets"]["test"]
