@@ -2,8 +2,13 @@
 
 Transport-free (Acme's learner role): the learner service feeds it transitions it
 received over the wire and ships ``get_weights()`` to actors; ``train --local`` feeds
-it from an in-process vector env. One update (``train_step``) is sample -> loss ->
-backward -> clip -> Adam step -> target update -> priority update.
+it from an in-process vector env. One update is sample -> loss -> backward -> clip -> Adam
+step -> target update -> priority update: ``update(n)`` runs n of them on plain tensors
+(agents/nnql/lean.py, the hot loop), ``train_step(td)`` runs one through TorchRL's loss module
+and updater on a sampled TensorDict (the reference the lean path is tested against).
+
+Networks, loss and sampled batches live on ``device`` (``agents.device.resolve_device``); the
+replay stays in host memory, where inserting is cheapest.
 
 Transitions come as a TensorDict in TorchRL's layout (``observation``, ``action``,
 ``("next", "observation"|"reward"|"done"|"terminated"|"truncated")``), as a flat
@@ -25,7 +30,9 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import LazyTensorStorage, PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
 from torchrl.objectives import HardUpdate, SoftUpdate
 
+from agents.device import resolve_device
 from agents.nnql.config import NNQLConfig
+from agents.nnql.lean import Batch, LeanUpdate, Step
 from agents.nnql.losses import PRIORITY_KEY, make_loss
 from agents.nnql.networks import QNetwork, make_q_actor
 from agents.nnql.policy import NNQLPolicy, save_policy_dir
@@ -98,20 +105,23 @@ class NNQLLearner:
     """Q-learning (or SARSA) over a TorchRL replay buffer.
 
     ``add(batch)`` inserts transitions; ``updates_due()`` says how many updates the
-    update-to-data ratio allows; ``update()`` runs one; ``version`` counts updates.
+    update-to-data ratio allows; ``update(n)`` runs n; ``version`` counts updates. ``device``:
+    cpu, cuda or auto (see ``agents.device``).
     """
 
-    def __init__(self, config: NNQLConfig, obs_dim: int, n_actions: int):
+    def __init__(self, config: NNQLConfig, obs_dim: int, n_actions: int, *, device: str = "cpu"):
         self.config = config
+        self.device = resolve_device(device)
         torch.set_num_threads(config.torch_threads)
         torch.manual_seed(config.seed)
-        self.network = QNetwork.from_config(config, obs_dim, n_actions)
+        self.network = QNetwork.from_config(config, obs_dim, n_actions).to(self.device)
         self.loss = make_loss(config, make_q_actor(self.network))
         if config.target_update == "soft":
             self.target_updater = SoftUpdate(self.loss, tau=config.target_tau)
         else:
             self.target_updater = HardUpdate(self.loss, value_network_update_interval=config.target_period)
-        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=config.lr)
+        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=config.lr, **self._optimizer_options())
+        self.lean = LeanUpdate(config, self.network, self.loss, self.optimizer, self.target_updater)
         self.replay = self._make_replay()
         self.updates = 0
         self.transitions_added = 0
@@ -132,6 +142,11 @@ class NNQLLearner:
             priority_key=PRIORITY_KEY,
             generator=torch.Generator().manual_seed(cfg.seed),
         )
+
+    def _optimizer_options(self) -> dict[str, bool]:
+        """Adam's multi-tensor kernels: fused on CUDA, foreach elsewhere (not the per-tensor loop)."""
+        fused = self.device.type == "cuda"
+        return {"fused": fused, "foreach": not fused}
 
     # ------------------------------------------------------------ data in
 
@@ -167,25 +182,60 @@ class NNQLLearner:
 
     # ------------------------------------------------------------ learning
 
-    def update(self) -> dict[str, float]:
-        """Sample a batch and run one update; returns its metrics."""
+    def update(self, n: int = 1) -> dict[str, float]:
+        """Run ``n`` updates on freshly sampled batches (the lean path); metrics of the last one.
+
+        Uniform replay draws the indices of all ``n`` batches in one sampler call and gathers
+        them in one storage read; prioritized replay samples each batch after the previous
+        one's priorities were written back, as one update at a time would.
+        """
         if not self.ready():
             raise RuntimeError(
                 f"replay holds {len(self.replay)} transitions; need {self.config.learning_starts}"
             )
-        metrics = self.train_step(self.replay.sample())
-        self.update_credit = max(self.update_credit - 1.0, 0.0)
-        return metrics
+        if n < 1:
+            raise ValueError(f"update(n={n}): n must be >= 1")
+        size = self.config.batch_size
+        if self.config.prioritized:
+            for _ in range(n):
+                index, batch = self._sample(size)
+                step = self.lean(batch)
+                self.replay.update_priority(index, step.priority.to(index.device))
+        else:
+            _, batches = self._sample(n * size)
+            for i in range(n):
+                step = self.lean(batches.slice(i * size, (i + 1) * size))
+        self.updates += n
+        self.update_credit = max(self.update_credit - n, 0.0)
+        return self._metrics(step)
+
+    def _sample(self, size: int) -> tuple[torch.Tensor, Batch]:
+        """Indices drawn by the replay's sampler and their transitions, on the learner's device."""
+        index, info = self.replay.sampler.sample(self.replay.storage, size)
+        weight = info.get("priority_weight")
+        batch = Batch.from_tensordict(self.replay.storage.get(index), weight)
+        return index, batch.to(self.device)
+
+    def _metrics(self, step: Step) -> dict[str, float]:
+        return {
+            "losses/td_loss": float(step.loss),
+            "losses/td_error": float(step.priority.sqrt().mean()),
+            "losses/grad_norm": float(step.grad_norm),
+            "charts/version": float(self.updates),
+        }
 
     def train_due(self) -> dict[str, float] | None:
         """Run every update that is due; metrics of the last one (None if none ran)."""
-        metrics = None
-        for _ in range(self.updates_due()):
-            metrics = self.update()
-        return metrics
+        due = self.updates_due()
+        return self.update(due) if due else None
 
     def train_step(self, batch: TensorDictBase) -> dict[str, float]:
-        """One gradient update on a sampled batch (the step the overhead benchmark times)."""
+        """One update on a sampled TensorDict through TorchRL's loss module and target updater.
+
+        The reference path: ``update`` runs the same arithmetic on plain tensors, and
+        tests/test_nnql_lean.py holds the two to the same parameters on the same batches.
+        """
+        batch = batch.to(self.device)
         loss = self.loss(batch)["loss"]
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
@@ -207,7 +257,8 @@ class NNQLLearner:
     def q_values(self, obs: np.ndarray) -> np.ndarray:
         """Online-network Q-values of a batch of observations."""
         with torch.no_grad():
-            return self.network(torch.as_tensor(np.asarray(obs, dtype=np.float32))).numpy()
+            obs = torch.as_tensor(np.asarray(obs, dtype=np.float32), device=self.device)
+            return self.network(obs).cpu().numpy()
 
     # ------------------------------------------------------------ weights
 
@@ -217,7 +268,7 @@ class NNQLLearner:
 
     def set_weights(self, weights: Mapping[str, np.ndarray], sync_target: bool = True) -> None:
         """Load online weights (e.g. a warm start); by default the target network copies them too."""
-        state = {name: torch.as_tensor(np.asarray(value)) for name, value in weights.items()}
+        state = {name: torch.as_tensor(np.asarray(value), device=self.device) for name, value in weights.items()}
         self.network.load_state_dict(state)
         if sync_target:
             self.loss.target_value_network_params.data.update_(self.loss.value_network_params.data)
@@ -254,6 +305,8 @@ class NNQLLearner:
             raise ValueError(f"checkpoint architecture {state['architecture']} != {self.architecture}")
         self.loss.load_state_dict(state["loss"])
         self.optimizer.load_state_dict(state["optimizer"])
+        for group in self.optimizer.param_groups:  # this device's kernels, not the saving one's
+            group.update(self._optimizer_options())
         self.target_updater.load_state_dict(state["target_updater"])
         counters = state["counters"]
         self.updates = int(counters["updates"])
@@ -289,14 +342,14 @@ class NNQLLearner:
 
     def load_checkpoint(self, path: str | Path) -> None:
         path = Path(path)
-        self.load_state_dict(torch.load(path / CHECKPOINT_STATE, weights_only=True))
+        self.load_state_dict(torch.load(path / CHECKPOINT_STATE, map_location=self.device, weights_only=True))
         self.load_replay(path / CHECKPOINT_REPLAY)
 
     @classmethod
-    def from_checkpoint(cls, path: str | Path) -> NNQLLearner:
+    def from_checkpoint(cls, path: str | Path, device: str = "cpu") -> NNQLLearner:
         """A learner rebuilt from a checkpoint directory (its config and architecture included)."""
-        state = torch.load(Path(path) / CHECKPOINT_STATE, weights_only=True)
+        state = torch.load(Path(path) / CHECKPOINT_STATE, map_location="cpu", weights_only=True)
         arch = state["architecture"]
-        learner = cls(NNQLConfig.from_dict(state["config"]), arch["obs_dim"], arch["n_actions"])
+        learner = cls(NNQLConfig.from_dict(state["config"]), arch["obs_dim"], arch["n_actions"], device=device)
         learner.load_checkpoint(path)
         return learner
