@@ -79,23 +79,28 @@ def test_lean_update_matches_torchrl_path(variant):
         plain_updates(plain, n)
         assert metrics["charts/version"] == lean.version
         assert all(np.isfinite(list(metrics.values())))
-        assert any(not torch.equal(p, q) for p, q in zip(before, lean.network.parameters()))
+        assert any(not torch.equal(p, q) for p, q in zip(before, lean.network.parameters(), strict=True))
         assert_same_state(lean, plain)
     if lean.config.prioritized:
         tree_a, tree_b = lean.replay.sampler._sum_tree, plain.replay.sampler._sum_tree
         np.testing.assert_allclose(
-            [tree_a[i] for i in range(len(lean.replay))], [tree_b[i] for i in range(len(plain.replay))],
+            [tree_a[i] for i in range(len(lean.replay))],
+            [tree_b[i] for i in range(len(plain.replay))],
             rtol=1e-4,
         )
     # the TorchRL path continues from the lean one: its loss module sees the same target network
     td = lean.replay.storage.get(torch.arange(64))
-    torch.testing.assert_close(lean.loss(td.clone())["loss"], plain.loss(td.clone())["loss"], rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(
+        lean.loss(td.clone())["loss"], plain.loss(td.clone())["loss"], rtol=1e-5, atol=1e-6
+    )
 
 
 def test_target_network_shares_the_loss_modules_storage():
     lean, _ = twins({})
     target = lean.lean.target
-    for param, shared in zip(target.parameters(), lean.loss.target_value_network_params.values(True, True)):
+    for param, shared in zip(
+        target.parameters(), lean.loss.target_value_network_params.values(True, True), strict=True
+    ):
         assert param.data_ptr() == shared.data_ptr()
         assert not param.requires_grad
     lean.set_weights({k: v + 1.0 for k, v in lean.get_weights().items()})  # sync_target copies in place

@@ -106,11 +106,13 @@ class LeanUpdate:
         self.updater = updater
         self.params = list(network.parameters())
         online = list(loss.value_network_params.values(True, True))
-        if len(online) != len(self.params) or any(a is not b for a, b in zip(online, self.params)):
+        if len(online) != len(self.params) or any(
+            a is not b for a, b in zip(online, self.params, strict=True)
+        ):
             raise ValueError("the loss module does not train the network's own parameters")
         self.target_params = list(loss.target_value_network_params.values(True, True))
         self.target = copy.deepcopy(network).requires_grad_(False)
-        for param, shared in zip(self.target.parameters(), self.target_params):
+        for param, shared in zip(self.target.parameters(), self.target_params, strict=True):
             param.data = shared  # same storage: the updater and the loss see what this one writes
         self.max_norm = config.grad_clip if config.grad_clip > 0 else float("inf")
 

@@ -268,7 +268,9 @@ class NNQLLearner:
 
     def set_weights(self, weights: Mapping[str, np.ndarray], sync_target: bool = True) -> None:
         """Load online weights (e.g. a warm start); by default the target network copies them too."""
-        state = {name: torch.as_tensor(np.asarray(value), device=self.device) for name, value in weights.items()}
+        state = {
+            name: torch.as_tensor(np.asarray(value), device=self.device) for name, value in weights.items()
+        }
         self.network.load_state_dict(state)
         if sync_target:
             self.loss.target_value_network_params.data.update_(self.loss.value_network_params.data)
@@ -350,6 +352,8 @@ class NNQLLearner:
         """A learner rebuilt from a checkpoint directory (its config and architecture included)."""
         state = torch.load(Path(path) / CHECKPOINT_STATE, map_location="cpu", weights_only=True)
         arch = state["architecture"]
-        learner = cls(NNQLConfig.from_dict(state["config"]), arch["obs_dim"], arch["n_actions"], device=device)
+        learner = cls(
+            NNQLConfig.from_dict(state["config"]), arch["obs_dim"], arch["n_actions"], device=device
+        )
         learner.load_checkpoint(path)
         return learner
