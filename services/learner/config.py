@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from agents.device import DEVICES
+
 EXPLORATION_FIELDS = (
     "exploration",
     "temperature_start",
@@ -51,3 +53,9 @@ class LearnerConfig:
     """also train NIRL (thesis ch. 5) on the demonstrations and the actors' experience; weights/nirl"""
     nirl_updates: int = 1
     """NIRL updates per NNQL update once NIRL's warm start on the demonstrations is done"""
+    device: str = "cpu"
+    """where networks, losses and sampled batches live: cpu, cuda (cuda:N) or auto (a GPU if torch has one)"""
+
+    def __post_init__(self) -> None:
+        if self.device not in DEVICES and not self.device.startswith("cuda:"):
+            raise ValueError(f"LearnerConfig.device={self.device!r}: expected one of {DEVICES} or cuda:N")

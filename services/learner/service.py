@@ -237,14 +237,18 @@ class LearnerService:
         self._unacked.clear()
 
     def _train(self, max_updates: int) -> bool:
+        """The updates the limiter allows (at most ``max_updates``), several per ``update`` call:
+        each call runs up to the next version a broadcast is due at."""
+        allowed = min(max_updates, self.limiter.updates_allowed(len(self.learner.replay)))
+        every = self.config.broadcast_every
         ran = 0
-        replay_size = len(self.learner.replay)
-        while ran < max_updates and self.limiter.can_update(replay_size):
-            self.metrics = self.learner.update()
-            self.limiter.updated()
-            self.update_rate.add()
-            ran += 1
-            if self.learner.version % self.config.broadcast_every == 0:
+        while ran < allowed:
+            count = min(allowed - ran, every - self.learner.version % every)
+            self.metrics = self.learner.update(count)
+            self.limiter.updated(count)
+            self.update_rate.add(count)
+            ran += count
+            if self.learner.version % every == 0:
                 self.broadcast()
         self.nnql_ran = ran
         return ran > 0
@@ -366,7 +370,7 @@ def run_learner(
 
     nav = NavConfig()
     obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
-    learner = NNQLLearner(nnql, obs_dim, n_actions)
+    learner = NNQLLearner(nnql, obs_dim, n_actions, device=config.device)
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
     inbox = Inbox(limits, config.inbox_size, settings.run, log_every=config.log_every)
