@@ -8,7 +8,9 @@ step -> target update -> priority update: ``update(n)`` runs n of them on plain 
 and updater on a sampled TensorDict (the reference the lean path is tested against).
 
 Networks, loss and sampled batches live on ``device`` (``agents.device.resolve_device``); the
-replay stays in host memory, where inserting is cheapest.
+replay stays in host memory, where inserting is cheapest: in RAM, or in memory-mapped files
+under ``replay_dir`` (agents/nnql/replay_storage.py: capacities beyond RAM, checkpoints that
+do not copy the buffer).
 
 Transitions come as a TensorDict in TorchRL's layout (``observation``, ``action``,
 ``("next", "observation"|"reward"|"done"|"terminated"|"truncated")``), as a flat
@@ -27,7 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data import LazyTensorStorage, PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
+from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
 from torchrl.objectives import HardUpdate, SoftUpdate
 
 from agents.device import resolve_device
@@ -36,6 +38,14 @@ from agents.nnql.lean import Batch, LeanUpdate, Step
 from agents.nnql.losses import PRIORITY_KEY, make_loss
 from agents.nnql.networks import QNetwork, make_q_actor
 from agents.nnql.policy import NNQLPolicy, save_policy_dir
+from agents.nnql.replay_storage import (
+    columns,
+    has_memmap_state,
+    is_memmap,
+    load_memmap,
+    make_storage,
+    save_memmap,
+)
 
 TRANSITION_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "truncated")
 """Flat transition batch (the field names of protocols' TransitionBatch): float32 (N, obs_dim), int (N,),
@@ -106,10 +116,24 @@ class NNQLLearner:
 
     ``add(batch)`` inserts transitions; ``updates_due()`` says how many updates the
     update-to-data ratio allows; ``update(n)`` runs n; ``version`` counts updates. ``device``:
-    cpu, cuda or auto (see ``agents.device``).
+    cpu, cuda or auto (see ``agents.device``); ``replay_dir``: keep the replay in memory-mapped
+    files there instead of RAM (uniform sampling only).
     """
 
-    def __init__(self, config: NNQLConfig, obs_dim: int, n_actions: int, *, device: str = "cpu"):
+    def __init__(
+        self,
+        config: NNQLConfig,
+        obs_dim: int,
+        n_actions: int,
+        *,
+        device: str = "cpu",
+        replay_dir: str | Path | None = None,
+    ):
+        if replay_dir is not None and config.prioritized:
+            raise ValueError(
+                "a memory-mapped replay samples uniformly: prioritized replay keeps its trees in RAM and "
+                "would write them whole at every checkpoint; drop --prioritized or keep the replay in memory"
+            )
         self.config = config
         self.device = resolve_device(device)
         torch.set_num_threads(config.torch_threads)
@@ -122,12 +146,13 @@ class NNQLLearner:
             self.target_updater = HardUpdate(self.loss, value_network_update_interval=config.target_period)
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=config.lr, **self._optimizer_options())
         self.lean = LeanUpdate(config, self.network, self.loss, self.optimizer, self.target_updater)
-        self.replay = self._make_replay()
+        self.replay_rng = torch.Generator().manual_seed(config.seed)
+        self.replay = self._make_replay(replay_dir)
         self.updates = 0
         self.transitions_added = 0
         self.update_credit = 0.0
 
-    def _make_replay(self) -> TensorDictReplayBuffer:
+    def _make_replay(self, replay_dir: str | Path | None) -> TensorDictReplayBuffer:
         cfg = self.config
         if cfg.prioritized:
             sampler = PrioritizedSampler(
@@ -136,11 +161,11 @@ class NNQLLearner:
         else:
             sampler = RandomSampler()
         return TensorDictReplayBuffer(
-            storage=LazyTensorStorage(cfg.replay_capacity),
+            storage=make_storage(cfg.replay_capacity, replay_dir),
             sampler=sampler,
             batch_size=cfg.batch_size,
             priority_key=PRIORITY_KEY,
-            generator=torch.Generator().manual_seed(cfg.seed),
+            generator=self.replay_rng,
         )
 
     @staticmethod
@@ -212,14 +237,13 @@ class NNQLLearner:
     def _sample(self, size: int) -> tuple[torch.Tensor, Batch]:
         """Indices drawn by the replay's sampler and their transitions, on the learner's device.
 
-        The transitions are read from the storage's own TensorDict (TorchRL's tensor and memmap
-        storages keep their columns in ``_storage``), one column at a time: ``storage.get``
+        The transitions are read from the storage's columns one at a time: ``storage.get``
         would slice and index the whole nested TensorDict, 0.18 ms of the ~1.4 ms an update
         takes here. The indices come from the sampler, so they are always below ``len``.
         """
         index, info = self.replay.sampler.sample(self.replay.storage, size)
-        columns = Batch.from_tensordict(self.replay.storage._storage)  # weight: None
-        batch = Batch(*(None if column is None else column[index] for column in columns))
+        stored = Batch.from_tensordict(columns(self.replay))  # weight: None
+        batch = Batch(*(None if column is None else column[index] for column in stored))
         return index, batch._replace(weight=info.get("priority_weight")).to(self.device)
 
     def _metrics(self, step: Step) -> dict[str, float]:
@@ -323,13 +347,24 @@ class NNQLLearner:
         torch.set_rng_state(state["torch_rng"])
 
     def save_replay(self, path: str | Path) -> None:
-        """The replay buffer (storage, sampler priorities, writer, rng) via TorchRL's dumps."""
-        if len(self.replay):
+        """The replay buffer: in RAM, TorchRL's dumps (storage, sampler priorities, writer, rng);
+        memory-mapped, its files flushed in place and their state (see replay_storage)."""
+        if is_memmap(self.replay):
+            save_memmap(self.replay, self.replay_rng, Path(path))
+        elif len(self.replay):
             self.replay.dumps(path)
 
     def load_replay(self, path: str | Path) -> None:
-        """Inverse of save_replay (TorchRL's loads); a missing directory means an empty buffer."""
-        if Path(path).exists():
+        """Inverse of save_replay; a missing directory means an empty buffer."""
+        path = Path(path)
+        if is_memmap(self.replay):
+            if has_memmap_state(path):
+                load_memmap(self.replay, self.replay_rng, path)
+        elif has_memmap_state(path):
+            raise ValueError(
+                f"{path} holds a memory-mapped replay's state; build the learner with replay_dir"
+            )
+        elif path.exists():
             self.replay.loads(path)
 
     def save_checkpoint(self, path: str | Path) -> Path:
@@ -354,12 +389,14 @@ class NNQLLearner:
         self.load_replay(path / CHECKPOINT_REPLAY)
 
     @classmethod
-    def from_checkpoint(cls, path: str | Path, device: str = "cpu") -> NNQLLearner:
-        """A learner rebuilt from a checkpoint directory (its config and architecture included)."""
+    def from_checkpoint(
+        cls, path: str | Path, device: str = "cpu", replay_dir: str | Path | None = None
+    ) -> NNQLLearner:
+        """A learner rebuilt from a checkpoint directory (its config and architecture included);
+        ``replay_dir``: where its memory-mapped replay is, if it has one."""
         state = torch.load(Path(path) / CHECKPOINT_STATE, map_location="cpu", weights_only=True)
         arch = state["architecture"]
-        learner = cls(
-            NNQLConfig.from_dict(state["config"]), arch["obs_dim"], arch["n_actions"], device=device
-        )
+        config = NNQLConfig.from_dict(state["config"])
+        learner = cls(config, arch["obs_dim"], arch["n_actions"], device=device, replay_dir=replay_dir)
         learner.load_checkpoint(path)
         return learner

@@ -370,7 +370,7 @@ def run_learner(
 
     nav = NavConfig()
     obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
-    learner = NNQLLearner(nnql, obs_dim, n_actions, device=config.device)
+    learner = NNQLLearner(nnql, obs_dim, n_actions, device=config.device, replay_dir=config.replay_dir)
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
     inbox = Inbox(limits, config.inbox_size, settings.run, log_every=config.log_every)
