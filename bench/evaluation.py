@@ -70,7 +70,8 @@ def main() -> None:
     with threadpool_limits(limits=1, user_api="blas"):
         one_ms = call_ms(nnql, obs, args.calls)
     print(
-        f"policy call, batch {args.batch}: {default_ms:.3f} ms with BLAS {blas}, {one_ms:.3f} ms on one thread"
+        f"policy call, batch {args.batch}: {default_ms:.3f} ms with BLAS {blas}, "
+        f"{one_ms:.3f} ms on one thread"
     )
 
     report: dict = {
@@ -89,7 +90,8 @@ def main() -> None:
             "success": {k: m.success.to_dict() for k, m in result.metrics.items()},
         }
         print(
-            f"{name}: {n_episodes} episodes in {wall:.2f} s ({n_episodes / wall:.0f}/s, {n_episodes / cpu:.0f}/CPU-s)"
+            f"{name}: {n_episodes} episodes in {wall:.2f} s "
+            f"({n_episodes / wall:.0f}/s, {n_episodes / cpu:.0f}/CPU-s)"
         )
     comparison = compare(results["nnql"], results["heuristic"], names=("nnql (pretrained)", "heuristic"))
     print(comparison.table())
