@@ -363,6 +363,7 @@ def run_learner(
 ) -> int:
     """Process set-up: learner, Zenoh session (hosting the router unless told to connect), the loop.
     ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
+    import agents.evaluation.policies  # noqa: F401 - save_policy_dir's lazy import, ~2.5 s here: not in a checkpoint
     from agents.nnql.learner import NNQLLearner
     from services.learner.demo_buffer import DemoBuffer
     from worlds.config import NavConfig

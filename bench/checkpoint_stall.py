@@ -1,0 +1,151 @@
+"""Ingest stalls caused by checkpoints: a RAM replay (written whole) against a memory-mapped one (flushed).
+
+For each replay storage and capacity, a `navlearn learner` subprocess (default NNQL settings,
+write-ahead log with fsync always, a checkpoint every ``--every`` seconds) takes transition
+batches from 4 actors publishing as fast as its acknowledgements let them (the real Outbox,
+batches of 128 transitions). Measured:
+
+* the longest ingest stall: the longest time any actor waited between two acknowledgements,
+  after the first second of acknowledgements (the learner's checkpoints, fsyncs, updates and
+  the machine's other load all show up in it); beside it the same figure's median, so a
+  stall stands out from the ordinary pace;
+* each checkpoint's duration as the learner logs it (writing networks, optimiser, replay
+  or its state, demonstrations, service state; fsync; rename), the final one at shutdown
+  excluded.
+
+The replay is not pre-filled: a RAM replay's checkpoint writes its storage at full capacity
+however full it is (TorchRL's ``dumps`` memory-maps the whole preallocated TensorDict), a
+memory-mapped one flushes what changed since the last flush.
+
+    python -m bench.checkpoint_stall                      # memory 100k, 1M; memmap 100k, 1M, 10M
+    python -m bench.checkpoint_stall --cases memmap:10000000 --seconds 20
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import shutil
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench._common import free_port, machine_load, settings, spawn, stop
+from services.common.transport import open_session
+from tests.reliability_helpers import TracedActor
+
+CASES = ("memory:100000", "memory:1000000", "memmap:100000", "memmap:1000000", "memmap:10000000")
+CHECKPOINT_LINE = re.compile(r"checkpoint \S+ \(version \d+, replay (\d+)\) in ([0-9.]+) s")
+
+
+class TimedActor(TracedActor):
+    """A traced actor that also records when each acknowledgement arrived."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.ack_times: list[float] = []
+
+    def _on_ack(self, sample) -> None:
+        self.ack_times.append(time.monotonic())
+        super()._on_ack(sample)
+
+
+def run_case(storage: str, capacity: int, args: argparse.Namespace, root: Path) -> dict:
+    port = free_port()
+    endpoint, run = f"tcp/127.0.0.1:{port}", f"stall{port}"
+    ckpt = root / f"{storage}-{capacity}"
+    argv = [
+        "-m",
+        "services.cli",
+        "learner",
+        "--listen",
+        endpoint,
+        "--run",
+        run,
+        "--checkpoint-dir",
+        str(ckpt),
+    ]
+    argv += ["--checkpoint-every", str(args.every), "--replay-storage", storage]
+    argv += ["--replay-capacity", str(capacity), "--log-every", "1000"]
+    learner = spawn(*argv)
+    session = open_session(settings(endpoint, run))
+    actors = [TimedActor(session, run, f"a{i}", per_batch=args.batch) for i in range(args.actors)]
+    done = threading.Event()
+
+    def publish(actor: TimedActor) -> None:
+        while not done.is_set():
+            actor.send_one(done)
+
+    threads = [threading.Thread(target=publish, args=(a,), daemon=True) for a in actors]
+    try:
+        for thread in threads:
+            thread.start()
+        deadline = time.monotonic() + 120
+        while not all(a.ack_times for a in actors) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        start = time.monotonic() + 1.0
+        time.sleep(1.0 + args.seconds)
+        end = time.monotonic()
+    finally:
+        done.set()
+        for thread in threads:
+            thread.join(10)
+        for actor in actors:
+            actor.close()
+        session.close()
+        out = stop(learner, timeout=300)
+    gaps = []
+    for actor in actors:
+        times = np.array([t for t in actor.ack_times if start <= t <= end])
+        gaps.extend(np.diff(times).tolist() if len(times) > 1 else [end - start])
+    checkpoints = [(int(m[1]), float(m[2])) for m in CHECKPOINT_LINE.finditer(out)][:-1]  # not the final
+    acked = sum(len([t for t in a.ack_times if start <= t <= end]) for a in actors) * args.batch
+    shutil.rmtree(ckpt, ignore_errors=True)
+    result = {
+        "storage": storage,
+        "capacity": capacity,
+        "longest_stall_s": round(max(gaps), 3),
+        "median_gap_s": round(float(np.median(gaps)), 4),
+        "checkpoints": len(checkpoints),
+        "checkpoint_s": [c[1] for c in checkpoints],
+        "checkpoint_max_s": max((c[1] for c in checkpoints), default=None),
+        "replay_at_last_checkpoint": checkpoints[-1][0] if checkpoints else 0,
+        "acked_transitions_per_s": round(acked / (end - start), 1),
+    }
+    print(
+        f"{storage:6s} {capacity:>10,d}: longest stall {result['longest_stall_s']:.3f} s (median gap "
+        f"{result['median_gap_s'] * 1000:.1f} ms), {len(checkpoints)} checkpoints, longest "
+        f"{result['checkpoint_max_s']} s, {result['acked_transitions_per_s']:.0f} transitions/s acked"
+    )
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--cases", nargs="+", default=list(CASES), help="STORAGE:CAPACITY ...")
+    parser.add_argument("--seconds", type=float, default=12.0, help="measured seconds per case")
+    parser.add_argument("--every", type=float, default=3.0, help="seconds between checkpoints")
+    parser.add_argument("--actors", type=int, default=4)
+    parser.add_argument("--batch", type=int, default=128, help="transitions per batch")
+    parser.add_argument("--dir", default=None, help="where checkpoints go (default: a temporary directory)")
+    args = parser.parse_args()
+    print(f"bench/checkpoint_stall.py {vars(args)} load {machine_load()}")
+    root = Path(tempfile.mkdtemp(prefix="stall-", dir=args.dir))
+    try:
+        results = []
+        for case in args.cases:
+            storage, capacity = case.split(":")
+            results.append(run_case(storage, int(capacity), args, root))
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    print(json.dumps({"cases": results, "load_after": machine_load()}))
+
+
+if __name__ == "__main__":
+    main()
