@@ -1,7 +1,8 @@
 """The helper processes of bench/learner.py, each started as ``python -m bench._learner_roles ROLE``.
 
 feeder: sends pre-built TransitionBatches to a learner as fast as it acknowledges them;
-sink: a router that acknowledges every transition batch at once (an actor's ideal learner);
+sink: a router that acknowledges every transition batch at once (an actor's ideal learner), addressed
+to the batch's incarnation (its envelope sender) as the learner addresses them;
 receiver: applies weights as they arrive (as an actor does) and prints version and time applied.
 """
 
@@ -67,7 +68,7 @@ def sink_main(endpoint: str) -> None:
     def on_batch(sample) -> None:
         batch = decode(sample.payload.to_bytes())
         count[0] += len(batch)
-        ack = Ack(sender="sink", seq=batch.seq, actor=batch.actor, accepted_seq=batch.seq, policy_version=0)
+        ack = Ack(sender="sink", seq=batch.seq, actor=batch.sender, accepted_seq=batch.seq, policy_version=0)
         session.put(keys.acks(RUN, batch.actor), encode(ack))
 
     session.declare_subscriber(keys.everything(RUN, "transitions"), on_batch)
