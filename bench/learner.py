@@ -398,8 +398,9 @@ if __name__ == "__main__":
     parser.add_argument(
         "--quick", action="store_true", help="short windows (a smoke run, not for RESULTS.md)"
     )
+    parser.add_argument("--rounds", type=int, default=Args.rounds, help="interleaved rounds of each window")
     cli = parser.parse_args()
     quick = Args(rounds=1, step_seconds=1.5, measure_seconds=6, baseline_seconds=3, broadcasts=40)
-    result = main(quick if cli.quick else Args(), cli.only)
+    result = main(quick if cli.quick else Args(rounds=cli.rounds), cli.only)
     result["load_after"] = machine_load()
     print(json.dumps(result))
