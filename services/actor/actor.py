@@ -35,7 +35,6 @@ from services.common.outbox import Outbox, decode_ack
 from services.common.process import connect
 from services.common.transport import ZenohSettings, declare_alive
 from services.common.weights import WeightsReceiver, split_architecture
-from services.ops.acl import actor_status_key
 
 log = logging.getLogger("navlearn.actor")
 SUCCESS = 1  # worlds.outcomes.Outcome.GOAL
@@ -91,7 +90,7 @@ class Actor:
         self.blocked = BlockedShare()
         """share of time waiting for the learner (back-pressure), for the status and the log"""
         self.status_seq = 0
-        self.status_key = actor_status_key(run, config.id)
+        self.status_key = keys.actor_status(run, config.id)
         self._status = session.declare_queryable(self.status_key, self._on_status, complete=True)
         self._steps_window: deque[tuple[float, int]] = deque(maxlen=64)
         self.learner_version = 0

@@ -13,8 +13,9 @@ import time
 from collections import deque
 from typing import Any
 
+from protocols import keys
+from protocols.keys import ACTOR_STATUS_PREFIX
 from protocols.messages import LearnerStatus
-from services.ops.acl import ACTOR_STATUS_PREFIX, all_status_keys
 from services.ops.status import status_replies
 
 BACKPRESSURE_SHARE = 0.5
@@ -83,7 +84,7 @@ def query_actor_statuses(session, run: str, timeout: float = 2.0) -> dict[str, L
     """Every actor's answer on ``status/actor:<id>``, by actor id."""
     return {
         name.removeprefix(ACTOR_STATUS_PREFIX): message
-        for name, message in status_replies(session, all_status_keys(run), timeout)
+        for name, message in status_replies(session, keys.everything(run, "status"), timeout)
         if name.startswith(ACTOR_STATUS_PREFIX)
     }
 
