@@ -1,36 +1,33 @@
-"""Saved policies: one on-disk format for every learner, and ``load_policy`` to evaluate any of them.
+"""Saved policies: ``load_policy`` evaluates the policy directory of any navlearn learner.
 
-A policy directory holds two files (written atomically, temp + rename):
-
-* ``model.safetensors`` - the weights of an MLP in ``nn.Sequential`` layout (TorchRL's
-  ``MLP``): ``"0.weight"``, ``"0.bias"``, ``"2.weight"``, ... one linear layer at every
-  even index, the activation between them; float32.
-* ``config.json`` - ``{"model": name, "kind": kind, "version": int, "architecture":
-  {"obs_dim", "n_actions", "hidden_sizes", "activation"}, ...}`` plus any metadata.
-
-``kind`` says what the network outputs: ``"q_network"`` (Q-values, NNQL) or
-``"policy_logits"`` (action logits, imitation and NIRL neural policies). Both are
-evaluated greedily (argmax over actions), with numpy only, so loading a policy
-needs no torch.
+The format (``model.safetensors`` + ``config.json``) and its one writer, ``save_policy``, are in
+:mod:`agents.mlp`. Every kind (``"q_network"``: Q-values; ``"policy_logits"``: action logits) is
+evaluated greedily (argmax over actions), with numpy only, so loading a policy needs no torch.
 """
 
 from __future__ import annotations
 
-import itertools
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from safetensors import SafetensorError
+from safetensors.numpy import load_file
 
-from agents.nnql.policy import mlp_forward, q_layers
+from agents.mlp import (
+    ACTIVATIONS,
+    ARCHITECTURE_KEYS,
+    CONFIG_FILE,
+    KINDS,
+    WEIGHTS_FILE,
+    check_layers,
+    mlp_forward,
+    mlp_layers,
+    save_policy,
+)
 
-WEIGHTS_FILE = "model.safetensors"
-CONFIG_FILE = "config.json"
-KINDS = ("q_network", "policy_logits")
-ACTIVATIONS = ("relu", "tanh", "elu")
-ARCHITECTURE_KEYS = ("obs_dim", "n_actions", "hidden_sizes", "activation")
+__all__ = ["GreedyMLPPolicy", "PolicyFormatError", "load_policy", "save_policy"]
 
 
 class PolicyFormatError(ValueError):
@@ -46,18 +43,10 @@ class GreedyMLPPolicy:
         self.model = str(config.get("model", ""))
         self.kind = str(config["kind"])
         self.version = int(config.get("version", 0))
-        self.layers = q_layers(weights)
-        sizes = [
-            self.architecture["obs_dim"],
-            *self.architecture["hidden_sizes"],
-            self.architecture["n_actions"],
-        ]
-        expected = list(itertools.pairwise(sizes))
-        got = [w.shape for w, _ in self.layers]
-        if got != expected or any(b.shape != (w.shape[1],) for w, b in self.layers):
-            raise PolicyFormatError(
-                f"weights do not fit the architecture: layer shapes {got}, expected {expected}"
-            )
+        try:
+            self.layers = check_layers(mlp_layers(weights), self.architecture)
+        except ValueError as exc:
+            raise PolicyFormatError(str(exc)) from None
 
     @property
     def obs_dim(self) -> int:
@@ -77,45 +66,8 @@ class GreedyMLPPolicy:
         return f"GreedyMLPPolicy(model={self.model!r}, kind={self.kind!r}, version={self.version})"
 
 
-def save_policy(
-    path: str | Path,
-    weights: dict[str, np.ndarray],
-    architecture: dict[str, Any],
-    model: str,
-    kind: str,
-    version: int = 0,
-    **metadata: Any,
-) -> Path:
-    """Write a policy directory (see the module docstring); returns its path."""
-    from safetensors.numpy import save_file
-
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    missing = [k for k in ARCHITECTURE_KEYS if k not in architecture]
-    if missing:
-        raise ValueError(f"architecture lacks {missing}")
-    path = Path(path)
-    path.mkdir(parents=True, exist_ok=True)
-    config = {
-        "model": model,
-        "kind": kind,
-        "version": int(version),
-        "architecture": dict(architecture),
-        **metadata,
-    }
-    tensors = {name: np.ascontiguousarray(value, dtype=np.float32) for name, value in weights.items()}
-    save_file(tensors, str(path / (WEIGHTS_FILE + ".tmp")))
-    os.replace(path / (WEIGHTS_FILE + ".tmp"), path / WEIGHTS_FILE)
-    (path / (CONFIG_FILE + ".tmp")).write_text(json.dumps(config, indent=2, sort_keys=True) + "\n")
-    os.replace(path / (CONFIG_FILE + ".tmp"), path / CONFIG_FILE)
-    return path
-
-
 def load_policy(path: str | Path) -> GreedyMLPPolicy:
     """The greedy policy saved in directory ``path`` by any navlearn learner."""
-    from safetensors import SafetensorError
-    from safetensors.numpy import load_file
-
     path = Path(path)
     config_path, weights_path = path / CONFIG_FILE, path / WEIGHTS_FILE
     if not config_path.is_file() or not weights_path.is_file():
