@@ -11,7 +11,7 @@ adding a kind is one dataclass with ``KIND`` and ``VERSION``, decorated with :fu
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
@@ -21,6 +21,7 @@ from protocols.checks import (
     TENSOR_DTYPES,
     BodyReader,
     check_array,
+    check_float,
     check_int,
     check_rows,
     check_size,
@@ -28,7 +29,7 @@ from protocols.checks import (
 )
 from protocols.errors import ProtocolError
 from protocols.limits import Limits
-from protocols.schema import Schema, column, count, custom, json_map, number_map, text
+from protocols.schema import Schema, column, count, custom, inside, json_map, number_map, text
 
 DEMO_SOURCES = ("astar", "human", "file")
 KINDS: dict[str, type[Message]] = {}
@@ -65,6 +66,10 @@ class Message:
         body = {name: getattr(self, name) for name, _ in self.SCHEMA.fields}
         for name, write in self.SCHEMA.writers.items():
             body[name] = write(body[name])
+        for name, spec in self.SCHEMA.nested:
+            value = getattr(self, name)
+            if value is not None:
+                body[spec.container] = {**body[spec.container], spec.key: spec.writer(value)}
         return body
 
     @classmethod
@@ -237,6 +242,58 @@ def _read_tensors(body: BodyReader, name: str) -> dict[str, np.ndarray]:
     return tensors
 
 
+EXPLORATIONS = ("boltzmann", "epsilon")
+
+
+@dataclass(kw_only=True, frozen=True)
+class ExplorationSchedule:
+    """How actors explore with the weights they receive, as a function of the weights' version.
+
+    Field names are NNQLConfig's (``agents.nnql.policy.NNQLPolicy.explore_as`` takes either). On the
+    wire it is the map ``architecture["exploration"]`` of a WeightsUpdate (None fields left out).
+    """
+
+    exploration: str
+    """``boltzmann`` (softmax of Q / temperature) or ``epsilon`` (epsilon-greedy)."""
+    temperature_start: float | None = None
+    temperature_end: float | None = None
+    temperature_decay_updates: int | None = None
+    """Boltzmann temperature: geometric decay from start to end over this many updates."""
+    epsilon_start: float | None = None
+    epsilon_end: float | None = None
+    epsilon_decay_updates: int | None = None
+    """epsilon: linear decay from start to end over this many updates."""
+
+    @classmethod
+    def of(cls, config: object) -> ExplorationSchedule:
+        """The schedule of a learner config with these fields (``NNQLConfig``): the one place it is built."""
+        return cls(**{f.name: getattr(config, f.name) for f in fields(cls)})
+
+    def to_wire(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self) if getattr(self, f.name) is not None}
+
+    @classmethod
+    def from_wire(cls, value: object, what: str, limits: Limits) -> ExplorationSchedule:
+        """The schedule in a decoded map; unknown keys are ignored (a newer learner may send more)."""
+        if not isinstance(value, dict):
+            raise ProtocolError("type", f"{what} must be a map, got {type(value).__name__}")
+        mode = value.get("exploration")
+        if mode not in EXPLORATIONS:
+            raise ProtocolError(
+                "field", f"{what}.exploration = {str(mode)[:40]!r} is not one of {EXPLORATIONS}"
+            )
+        read: dict[str, Any] = {"exploration": mode}
+        for name in ("temperature", "epsilon"):
+            start, end, steps = f"{name}_start", f"{name}_end", f"{name}_decay_updates"
+            if (mode == "boltzmann") == (name == "temperature") or start in value:
+                for key in (start, end):
+                    read[key] = check_float(value.get(key), f"{what}.{key}")
+                read[steps] = check_int(value.get(steps), f"{what}.{steps}", 0)
+        if mode == "boltzmann" and min(read["temperature_start"], read["temperature_end"]) <= 0:
+            raise ProtocolError("range", f"{what}: Boltzmann temperatures must be > 0")
+        return cls(**read)
+
+
 @register
 @dataclass(kw_only=True, eq=False)
 class WeightsUpdate(Message):
@@ -250,6 +307,14 @@ class WeightsUpdate(Message):
     """Parameter name -> array (float, integer or bool dtypes; floats must be finite)."""
     architecture: dict[str, Any] = json_map(default_factory=dict)
     """JSON-like description needed to rebuild the network (layer sizes, activation, ...)."""
+    exploration: ExplorationSchedule | None = inside(
+        "architecture",
+        "exploration",
+        ExplorationSchedule.from_wire,
+        ExplorationSchedule.to_wire,
+        default=None,
+    )
+    """How actors explore with these weights (on the wire: ``architecture["exploration"]``)."""
 
     def __post_init__(self) -> None:
         self.tensors = {name: np.asarray(value) for name, value in self.tensors.items()}
@@ -304,6 +369,7 @@ __all__ = [
     "DemoBatch",
     "EpisodeMeta",
     "EvalReport",
+    "ExplorationSchedule",
     "LearnerStatus",
     "Message",
     "TransitionBatch",

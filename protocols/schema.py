@@ -129,7 +129,19 @@ class Custom:
         return self.reader(body, name)
 
 
-Spec = Text | Count | Array | JsonMap | NumberMap | Custom
+@dataclass(frozen=True)
+class Inside:
+    """A field carried on the wire as the entry ``key`` of the map field ``container`` (None: absent),
+    so that a typed field can join a message without changing its bytes."""
+
+    container: str
+    key: str
+    reader: Callable[[object, str, Limits], Any]
+    """(the entry, its name for errors, limits) -> the field's value; raises ProtocolError."""
+    writer: Callable[[Any], Any]
+
+
+Spec = Text | Count | Array | JsonMap | NumberMap | Custom | Inside
 
 
 def _declare(spec: Spec, **options: Any) -> Any:
@@ -162,6 +174,10 @@ def number_map(number: type, *, finite: bool = True, **options: Any) -> Any:
     return _declare(NumberMap(number, finite), **options)
 
 
+def inside(container: str, key: str, reader: Callable, writer: Callable, **options: Any) -> Any:
+    return _declare(Inside(container, key, reader, writer), **options)
+
+
 def custom(reader: Callable[[BodyReader, str], Any], writer: Callable | None = None, **options: Any) -> Any:
     return _declare(Custom(reader, writer), **options)
 
@@ -173,6 +189,8 @@ class Schema:
     kind: str
     fields: tuple[tuple[str, Spec], ...]
     """(name, declaration) of every body field, in wire order."""
+    nested: tuple[tuple[str, Inside], ...]
+    """Fields carried inside a map field (:class:`Inside`)."""
     arrays: dict[str, tuple[frozenset[np.dtype], int]]
     """Array fields: name -> (allowed dtypes, ndim), as :meth:`BodyReader.arrays` takes them."""
     dtypes: dict[str, np.dtype]
@@ -208,6 +226,8 @@ def schema_of(cls: type, kind: str) -> Schema:
                 f"{cls.__name__}.{f.name} has no wire declaration (use protocols.schema.text(), ...)"
             )
         declared.append((f.name, f.metadata[SPEC]))
+    nested = tuple((name, s) for name, s in declared if isinstance(s, Inside))
+    declared = [(name, s) for name, s in declared if not isinstance(s, Inside)]
     arrays = {name: s for name, s in declared if isinstance(s, Array)}
     columns = tuple((name, s) for name, s in arrays.items() if s.column)
     widths: dict[str, list[str]] = {}
@@ -228,6 +248,7 @@ def schema_of(cls: type, kind: str) -> Schema:
     return Schema(
         kind=kind,
         fields=tuple(declared),
+        nested=nested,
         arrays={name: (frozenset({s.dtype}), s.ndim) for name, s in arrays.items()},
         dtypes={name: s.dtype for name, s in arrays.items()},
         others=tuple((name, s) for name, s in declared if not isinstance(s, Array)),
@@ -253,6 +274,11 @@ def read(
     out: dict[str, Any] = body.arrays(schema.arrays, finite_later=later) if schema.arrays else {}
     for name, spec in schema.others:
         out[name] = spec.read(body, name)
+    for name, spec in schema.nested:
+        container = out[spec.container]
+        value = None if container is None else container.pop(spec.key, None)
+        what = f"{schema.kind}.{spec.container}.{spec.key}"
+        out[name] = None if value is None else spec.reader(value, what, body.limits)
     if schema.columns:
         check_columns(schema, out, body.limits)
     if check is not None:

@@ -1,5 +1,6 @@
 """A field declared once in a message dataclass flows through every path derived from the schema:
-construction, the general encoder and decoder, the checks (read_body, accept_body) and the fast path."""
+construction, the general encoder and decoder, the checks (read_body, accept_body) and the fast path;
+a typed field carried inside another (the exploration schedule) keeps the bytes."""
 
 from __future__ import annotations
 
@@ -11,12 +12,13 @@ import numpy as np
 import pytest
 from wire_helpers import N_ACTIONS, same, small_transitions
 
+from agents.nnql.config import NNQLConfig
 from protocols import fastpath
 from protocols.arrays import ext_hook
-from protocols.codec import _decode, _encode, _packer
+from protocols.codec import _decode, _encode, _packer, decode, encode
 from protocols.errors import ProtocolError
 from protocols.limits import Limits
-from protocols.messages import KINDS, TransitionBatch, register
+from protocols.messages import KINDS, ExplorationSchedule, TransitionBatch, WeightsUpdate, register
 from protocols.schema import column, schema_of, text
 
 LIMITS = Limits(n_actions=N_ACTIONS)
@@ -117,3 +119,58 @@ def test_the_fast_path_refuses_a_layout_it_cannot_parse() -> None:
 
 def _raw_body(wire: bytes) -> dict:
     return msgpack.unpackb(wire, ext_hook=ext_hook, raw=False)["b"]
+
+
+NNQL_SCHEDULE = {
+    "exploration": "boltzmann",
+    "temperature_start": 0.2,
+    "temperature_end": 0.01,
+    "temperature_decay_updates": 12_000,
+    "epsilon_start": 1.0,
+    "epsilon_end": 0.05,
+    "epsilon_decay_updates": 10_000,
+}
+NIRL_SCHEDULE = {
+    "exploration": "boltzmann",
+    "temperature_start": 0.5,
+    "temperature_end": 0.05,
+    "temperature_decay_updates": 900,
+}
+
+
+@pytest.mark.parametrize("schedule", [NNQL_SCHEDULE, NIRL_SCHEDULE])
+def test_a_typed_exploration_schedule_keeps_the_weights_bytes(schedule: dict) -> None:
+    """The schedule rode inside architecture["exploration"]; typed, it writes the same bytes."""
+    tensors = {"0.weight": np.ones((4, 3), np.float32), "0.bias": np.zeros(4, np.float32)}
+    architecture = {"obs_dim": 3, "n_actions": 4, "hidden_sizes": [], "activation": "relu"}
+    old = WeightsUpdate(
+        model="nnql", version=7, tensors=tensors, architecture={**architecture, "exploration": schedule}
+    )
+    typed = WeightsUpdate(
+        model="nnql",
+        version=7,
+        tensors=tensors,
+        architecture=architecture,
+        exploration=ExplorationSchedule(**schedule),
+    )
+    assert encode(typed) == encode(old)
+    decoded = decode(encode(old))
+    assert decoded.exploration == ExplorationSchedule(**schedule)
+    assert decoded.architecture == architecture
+    assert decode(encode(WeightsUpdate(model="m", version=1, tensors={}))).exploration is None
+    assert ExplorationSchedule.of(NNQLConfig()) == ExplorationSchedule(**NNQL_SCHEDULE)
+
+
+@pytest.mark.parametrize(
+    ("schedule", "text"),
+    [
+        ({"exploration": "softmax"}, "weights.architecture.exploration.exploration = 'softmax'"),
+        ({**NIRL_SCHEDULE, "temperature_end": "low"}, "temperature_end must be a number"),
+        ({"exploration": "epsilon", "epsilon_start": 1.0}, "epsilon_end must be a number"),
+        ({**NIRL_SCHEDULE, "temperature_start": 0.0}, "temperatures must be > 0"),
+    ],
+)
+def test_a_malformed_exploration_schedule_is_rejected(schedule: dict, text: str) -> None:
+    wire = encode(WeightsUpdate(model="m", version=1, tensors={}, architecture={"exploration": schedule}))
+    with pytest.raises(ProtocolError, match=text):
+        decode(wire)

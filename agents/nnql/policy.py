@@ -89,11 +89,15 @@ class NNQLPolicy:
         if version is not None:
             self.version = int(version)
 
-    def explore_as(self, config: NNQLConfig, version: int) -> None:
-        """Behaviour-policy exploration for policy version ``version`` (actors, local training)."""
-        self.mode = config.exploration
-        self.temperature = temperature_at(config, version)
-        self.epsilon = epsilon_at(config, version)
+    def explore_as(self, schedule: NNQLConfig, version: int) -> None:
+        """Behaviour-policy exploration for policy version ``version``: ``schedule`` is the NNQLConfig
+        (local training) or the ``protocols.messages.ExplorationSchedule`` a WeightsUpdate carries
+        (actors; same field names, and a schedule may leave the unused mode's fields None)."""
+        self.mode = schedule.exploration
+        if schedule.temperature_start is not None:
+            self.temperature = temperature_at(schedule, version)
+        if schedule.epsilon_start is not None:
+            self.epsilon = epsilon_at(schedule, version)
 
     def q_values(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float32)

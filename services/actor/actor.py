@@ -13,7 +13,6 @@ back-pressure, robot-steps and weights version.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import os
 import re
@@ -28,13 +27,13 @@ import numpy as np
 from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
-from protocols.messages import TransitionBatch
+from protocols.messages import ExplorationSchedule, TransitionBatch
 from services.actor.config import ActorConfig
 from services.actor.status import BACKPRESSURE_SHARE, BlockedShare, actor_status
 from services.common.outbox import Outbox, decode_ack
 from services.common.process import connect
 from services.common.transport import ZenohSettings, declare_alive
-from services.common.weights import WeightsReceiver, split_architecture
+from services.common.weights import WeightsReceiver
 
 log = logging.getLogger("navlearn.actor")
 SUCCESS = 1  # worlds.outcomes.Outcome.GOAL
@@ -133,17 +132,16 @@ class Actor:
         if received is None:
             return False
         message = received.message
-        network, exploration = split_architecture(message.architecture)
+        network = message.architecture
         try:
             if self.policy is None or self.policy.architecture != network:
                 self.policy = NNQLPolicy(message.tensors, network, version=message.version, seed=self.seed)
             else:
                 self.policy.set_weights(message.tensors, message.version)
-            known = {f.name for f in dataclasses.fields(NNQLConfig)}  # a newer learner may send more
-            self.exploration = NNQLConfig(**{k: v for k, v in exploration.items() if k in known})
         except (ValueError, TypeError, KeyError) as exc:
             log.warning("ignoring weights version %d: %s", message.version, exc)
             return False
+        self.exploration = message.exploration or ExplorationSchedule.of(NNQLConfig())  # none sent: defaults
         self.policy.explore_as(self.exploration, message.version)
         self.version = message.version
         self.weights_applied += 1

@@ -24,7 +24,7 @@ from protocols.limits import Limits
 from protocols.messages import EvalReport
 from services.common.process import Scalars, connect
 from services.common.transport import ZenohSettings, declare_alive
-from services.common.weights import WeightsReceiver, split_architecture
+from services.common.weights import WeightsReceiver
 from services.evaluator.config import EvaluatorConfig
 
 log = logging.getLogger("navlearn.evaluator")
@@ -146,8 +146,7 @@ class Evaluator:
         from agents.evaluation import evaluate
         from agents.nnql.policy import NNQLPolicy
 
-        network, _exploration = split_architecture(architecture)
-        policy = NNQLPolicy(weights, network, mode="greedy", version=version)
+        policy = NNQLPolicy(weights, architecture, mode="greedy", version=version)
         start = time.perf_counter()
         result = evaluate(policy, self.eval_sets)
         metrics = result.to_dict(with_episodes=False)["metrics"]

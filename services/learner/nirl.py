@@ -14,6 +14,8 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from protocols.messages import ExplorationSchedule
+
 log = logging.getLogger("navlearn.learner.nirl")
 MODEL = "nirl"
 HISTORY_EVERY = 1
@@ -60,9 +62,10 @@ class NIRLTrainer:
     def broadcast(self) -> None:
         if not self.learner.ready():
             return  # no demonstrations yet: nothing learned worth sending
-        architecture = dict(self.learner.q.architecture)
-        architecture["exploration"] = self.learner.exploration_schedule()
-        self.weights.publish(self.learner.get_weights(), self.learner.version, architecture)
+        exploration = ExplorationSchedule(**self.learner.exploration_schedule())
+        self.weights.publish(
+            self.learner.get_weights(), self.learner.version, self.learner.q.architecture, exploration
+        )
 
     def status_fields(self) -> tuple[dict[str, int], dict[str, float]]:
         """(counters, losses) to merge into the LearnerStatus, prefixed ``nirl/``."""

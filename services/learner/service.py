@@ -25,11 +25,11 @@ from protocols import keys
 from protocols.codec import encode
 from protocols.flow import Ack
 from protocols.limits import Limits
-from protocols.messages import DemoBatch, EvalReport, LearnerStatus, TransitionBatch
+from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, LearnerStatus, TransitionBatch
 from services.common.process import Scalars, connect
 from services.common.transport import ZenohSettings, declare_alive
 from services.learner.checkpoint import CheckpointDir
-from services.learner.config import EXPLORATION_FIELDS, LearnerConfig
+from services.learner.config import LearnerConfig
 from services.learner.durable import DurableIngest
 from services.learner.inbox import Inbox, Received
 from services.learner.ratelimit import RateLimiter
@@ -296,10 +296,10 @@ class LearnerService:
         )
 
     def broadcast(self) -> None:
-        nnql: NNQLConfig = self.learner.config
-        architecture = dict(self.learner.architecture)
-        architecture["exploration"] = {name: getattr(nnql, name) for name in EXPLORATION_FIELDS}
-        self.weights.publish(self.learner.get_weights(), self.learner.version, architecture)
+        exploration = ExplorationSchedule.of(self.learner.config)
+        self.weights.publish(
+            self.learner.get_weights(), self.learner.version, self.learner.architecture, exploration
+        )
         self._count("weights_broadcast")
         if self.nirl is not None:
             self.nirl.broadcast()
