@@ -29,7 +29,7 @@ from protocols.codec import encode
 from protocols.limits import Limits
 from protocols.messages import ExplorationSchedule, TransitionBatch
 from services.actor.config import ActorConfig
-from services.actor.status import BACKPRESSURE_SHARE, BlockedShare, actor_status
+from services.actor.status import BACKPRESSURE_SHARE, ActorView, BlockedShare, actor_status
 from services.common.outbox import Outbox, decode_ack
 from services.common.process import connect
 from services.common.transport import ZenohSettings, declare_alive
@@ -103,7 +103,19 @@ class Actor:
 
     def _on_status(self, query) -> None:
         self.status_seq += 1
-        query.reply(self.status_key, encode(actor_status(self, self.status_seq)))
+        view = ActorView(
+            sender=self.sender,
+            model=self.config.model,
+            version=self.version,
+            learner_version=self.learner_version,
+            reachable=self.reachable,
+            robot_steps=self.rollout.steps,
+            episodes=self.episodes_done,
+            weights_applied=self.weights_applied,
+            recent_successes=tuple(self.episodes),
+            steps_per_s=self.steps_rate(),
+        )
+        query.reply(self.status_key, encode(actor_status(view, self.outbox, self.blocked, self.status_seq)))
 
     def steps_rate(self) -> float:
         """Robot-steps per second over the last ticks."""

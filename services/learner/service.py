@@ -18,7 +18,6 @@ import queue
 import threading
 import time
 from pathlib import Path
-from typing import Any
 
 from agents.nnql.config import NNQLConfig
 from protocols import keys
@@ -33,8 +32,8 @@ from services.learner.config import LearnerConfig
 from services.learner.durable import DurableIngest
 from services.learner.inbox import Inbox, Received
 from services.learner.ratelimit import RateLimiter
-from services.learner.state import load_service_state, write_service_state
-from services.learner.stats import ActorStats, LagWindow, RateWindow
+from services.learner.state import LearnerParts
+from services.learner.stats import LearnerTally
 from services.learner.status import build_status
 from services.ops.status import eval_summary
 
@@ -68,13 +67,7 @@ class LearnerService:
         if self.checkpoints is not None:
             self.checkpoints.remove_unfinished()
         self.scalars = Scalars(config.tensorboard)
-        self.actors: dict[str, ActorStats] = {}
-        self.lags = LagWindow()
-        self.update_rate = RateWindow()
-        self.insert_rate = RateWindow()
-        self.metrics: dict[str, float] = {}
-        self.last_eval: dict[str, Any] | None = None
-        self.counters: dict[str, int] = {}
+        self.tally = LearnerTally()
         self.status_bytes: bytes = b""
         self.status_seq = 0
         self.ack_seq = 0
@@ -85,6 +78,8 @@ class LearnerService:
             else None
         )  # write-ahead log + duplicate filter: acknowledged means durably stored
         self._replaying = False
+        self.parts = LearnerParts(learner, demos, self.limiter, inbox, self.tally, self.durable, nirl)
+        """the typed view that checkpoints and the status snapshot are made from"""
         self.weights = WeightsBroadcaster(session, run, config.model, sender)
         self._status_queryable = session.declare_queryable(keys.status(run), self._on_status, complete=True)
 
@@ -95,10 +90,10 @@ class LearnerService:
             return None
         start = time.perf_counter()
 
-        path = self.checkpoints.save(lambda tmp: write_service_state(self, tmp))
+        path = self.checkpoints.save(self.parts.write)
         if self.durable is not None:
             self.durable.checkpointed()
-        self._count("checkpoints")
+        self.tally.count("checkpoints")
         log.info(
             "checkpoint %s (version %d, replay %d) in %.2f s",
             path,
@@ -109,7 +104,7 @@ class LearnerService:
         return path
 
     def resume(self, path: Path) -> None:
-        load_service_state(self, path)
+        self.parts.load(path)
         log.info(
             "resumed from %s: version %d, replay %d, demos %d",
             path,
@@ -204,11 +199,9 @@ class LearnerService:
             return
         n = self.learner.add(batch)
         self.limiter.inserted(n)
-        self.insert_rate.add(n)
-        self.lags.add(self.learner.version - batch.policy_version)
-        self.actors.setdefault(item.name, ActorStats()).add(n, batch.seq, item.arrived)
-        self._count("transitions_received", n)
-        self._count("batches_received")
+        self.tally.inserted(
+            item.name, n, batch.seq, item.arrived, self.learner.version - batch.policy_version
+        )
         self._ack(item.name, batch.seq, batch.sender)
 
     def _ack(self, actor: str, seq: int, incarnation: str) -> None:
@@ -240,9 +233,9 @@ class LearnerService:
         ran = 0
         replay_size = len(self.learner.replay)
         while ran < max_updates and self.limiter.can_update(replay_size):
-            self.metrics = self.learner.update()
+            self.tally.metrics = self.learner.update()
             self.limiter.updated()
-            self.update_rate.add()
+            self.tally.update_rate.add()
             ran += 1
             if self.learner.version % self.config.broadcast_every == 0:
                 self.broadcast()
@@ -277,17 +270,17 @@ class LearnerService:
                     continue
                 steps = self.demos.add(item.message)
                 self._ack(item.name, item.message.seq, item.message.sender)
-                self._count("demo_steps", steps)
-                self._count("demo_batches")
-                self._count(f"demo_steps/{item.message.source}", steps)
-                self._count(f"demo_episodes/{item.message.source}", len(item.message.episode_lengths))
+                self.tally.count("demo_steps", steps)
+                self.tally.count("demo_batches")
+                self.tally.count(f"demo_steps/{item.message.source}", steps)
+                self.tally.count(f"demo_episodes/{item.message.source}", len(item.message.episode_lengths))
             elif isinstance(item.message, EvalReport):
                 self._on_eval(item)
 
     def _on_eval(self, item: Received) -> None:
-        self._count("eval_reports")
-        self.last_eval = eval_summary(item.name, item.message, item.arrived)
-        families = self.last_eval["families"]
+        self.tally.count("eval_reports")
+        self.tally.last_eval = eval_summary(item.name, item.message, item.arrived)
+        families = self.tally.last_eval["families"]
         log.info(
             "eval report from %s for version %d: %s",
             item.name,
@@ -300,18 +293,15 @@ class LearnerService:
         self.weights.publish(
             self.learner.get_weights(), self.learner.version, self.learner.architecture, exploration
         )
-        self._count("weights_broadcast")
+        self.tally.count("weights_broadcast")
         if self.nirl is not None:
             self.nirl.broadcast()
-
-    def _count(self, name: str, n: int = 1) -> None:
-        self.counters[name] = self.counters.get(name, 0) + int(n)
 
     # ---------------------------------------------------------------- status
 
     def status(self) -> LearnerStatus:
         self.status_seq += 1
-        return build_status(self, self.status_seq)
+        return build_status(self.parts, self.config.model, self.sender, self.status_seq)
 
     def refresh_status(self) -> None:
         status = self.status()
@@ -323,7 +313,7 @@ class LearnerService:
             "charts/replay_size": status.replay_sizes["transitions"],
             "charts/update_to_data": status.rates["update_to_data"],
         }
-        charts.update({k: v for k, v in self.metrics.items() if k.startswith("losses/")})
+        charts.update({k: v for k, v in self.tally.metrics.items() if k.startswith("losses/")})
         self.scalars.add(charts, self.learner.version)
 
     def _on_status(self, query) -> None:
@@ -339,9 +329,9 @@ class LearnerService:
             s.rates["updates_per_s"],
             s.rates["transitions_per_s"],
             s.rates["policy_lag"],
-            len(self.actors),
+            len(self.tally.actors),
             s.counters["transitions_rejected"],
-            self.metrics.get("losses/td_loss", float("nan")),
+            self.tally.metrics.get("losses/td_loss", float("nan")),
         )
 
     def close(self) -> None:
