@@ -93,7 +93,7 @@ class LearnerService:
         path = self.checkpoints.save(self.parts.write)
         if self.durable is not None:
             self.durable.checkpointed()
-        self.tally.count("checkpoints")
+        self._count("checkpoints")
         log.info(
             "checkpoint %s (version %d, replay %d) in %.2f s",
             path,
@@ -270,15 +270,15 @@ class LearnerService:
                     continue
                 steps = self.demos.add(item.message)
                 self._ack(item.name, item.message.seq, item.message.sender)
-                self.tally.count("demo_steps", steps)
-                self.tally.count("demo_batches")
-                self.tally.count(f"demo_steps/{item.message.source}", steps)
-                self.tally.count(f"demo_episodes/{item.message.source}", len(item.message.episode_lengths))
+                self._count("demo_steps", steps)
+                self._count("demo_batches")
+                self._count(f"demo_steps/{item.message.source}", steps)
+                self._count(f"demo_episodes/{item.message.source}", len(item.message.episode_lengths))
             elif isinstance(item.message, EvalReport):
                 self._on_eval(item)
 
     def _on_eval(self, item: Received) -> None:
-        self.tally.count("eval_reports")
+        self._count("eval_reports")
         self.tally.last_eval = eval_summary(item.name, item.message, item.arrived)
         families = self.tally.last_eval["families"]
         log.info(
@@ -293,9 +293,12 @@ class LearnerService:
         self.weights.publish(
             self.learner.get_weights(), self.learner.version, self.learner.architecture, exploration
         )
-        self.tally.count("weights_broadcast")
+        self._count("weights_broadcast")
         if self.nirl is not None:
             self.nirl.broadcast()
+
+    def _count(self, name: str, n: int = 1) -> None:
+        self.tally.count(name, n)
 
     # ---------------------------------------------------------------- status
 
