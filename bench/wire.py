@@ -12,7 +12,7 @@
 (c) WeightsUpdate of a 2x256 MLP: publish, the peer decodes and echoes it re-encoded,
     we decode the echo; p50/p99 against a raw echo of the same bytes.
 
-    python bench/wire.py            # prints human lines, then one JSON object on the last line
+    python -m bench.wire            # prints human lines, then one JSON object on the last line
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ import itertools
 import json
 import os
 import pickle
-import socket
 import subprocess
 import sys
 import threading
@@ -32,12 +31,12 @@ from pathlib import Path
 
 import msgpack
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import zenoh
 
 from protocols.codec import _decode, _encode, decode, encode
 from protocols.limits import Limits
 from protocols.messages import TransitionBatch, WeightsUpdate
+from services.common.transport import ZenohSettings, free_port, open_session
 
 RAW, MSG, END, ECHO, ECHO_BACK = "bench/raw", "bench/msg", "bench/end", "bench/echo", "bench/echo_back"
 LIMITS = Limits(n_actions=5)
@@ -169,10 +168,6 @@ def per_call(args: Args) -> dict:
 
 def peer_main(endpoint: str) -> None:
     """Subscriber and echo side; one JSON line per finished round on stdout."""
-    import zenoh
-
-    from services.common.transport import ZenohSettings, open_session
-
     session = open_session(ZenohSettings(connect=[endpoint]))
     lock = threading.Lock()
     state = {"count": 0, "transitions": 0, "bytes": 0, "first": 0.0, "last": 0.0, "rejected": 0}
@@ -240,12 +235,6 @@ def peer_main(endpoint: str) -> None:
 # ----------------------------------------------------------------------------- publisher side
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def wait_line(proc: subprocess.Popen, timeout: float) -> str:
     result: list[str] = []
     reader = threading.Thread(target=lambda: result.append(proc.stdout.readline()), daemon=True)
@@ -266,8 +255,6 @@ def cpu_seconds(pid: int | None = None) -> float:
 
 
 def run_round(session, peer, router, key: str, payloads, args: Args) -> dict:
-    import zenoh
-
     pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
     pids = {"publisher": None, "router": router.pid, "subscriber": peer.pid}
     cpu_start = {name: cpu_seconds(pid) for name, pid in pids.items()}
@@ -342,8 +329,6 @@ def bench_end_to_end(args: Args, session, peer, router, rng: np.random.Generator
 
 
 def bench_latency(args: Args, session, rng: np.random.Generator) -> dict:
-    import zenoh
-
     weights = make_weights(rng, args.obs_dim)
     wire = encode(weights)
     raw = b"R" + bytes(len(wire) - 1)
@@ -383,8 +368,6 @@ def bench_latency(args: Args, session, rng: np.random.Generator) -> dict:
 
 
 def main(args: Args) -> dict:
-    from services.common.transport import ZenohSettings, open_session
-
     rng = np.random.default_rng(0)
     result: dict = {"bench": "wire", "config": args.__dict__}
     result["codec"] = bench_codec(args, make_batch(args.batch, args.obs_dim, rng))
@@ -395,7 +378,7 @@ def main(args: Args) -> dict:
     peer = None
     try:
         peer = subprocess.Popen(
-            [sys.executable, __file__, "--peer", endpoint],
+            [sys.executable, "-m", "bench.wire", "--peer", endpoint],
             cwd=root,
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,

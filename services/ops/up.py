@@ -28,6 +28,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from services.common.transport import free_port
+
 log = logging.getLogger("navlearn.up")
 PR_SET_PDEATHSIG = 1
 MODEL = "nnql"
@@ -64,14 +66,6 @@ class UpConfig:
     listen_all: bool = False
     """the learner's router listens on 0.0.0.0 (all interfaces), so actors on other hosts can join
     with --connect tcp/<this host>:<port> (give --port); default: 127.0.0.1 only"""
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def _die_with_parent() -> None:
