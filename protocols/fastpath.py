@@ -15,10 +15,16 @@ changes the wire)::
         (protocols.arrays: dtype code, ndim, two zero bytes, u32 shape, zero padding to 8, raw data)
 
 Given the batch size N and the observation size D, everything after ``policy_version`` except the array
-data is constant. :func:`decode_transitions` compares those constant parts with byte templates cached
-per (N, D), reads the three strings and two integers itself, makes the arrays, and applies every check
-of ``TransitionBatch.read_body`` and of the envelope. :func:`encode_transitions` writes the same bytes
-as the general encoder from the cached templates, without building the body map.
+data is constant. The decoder compares those constant parts with byte templates cached per (N, D), reads
+the strings and integers itself, makes the arrays, and applies every check of the schema's
+``read_body`` and of the envelope; the encoder writes the same bytes as the general encoder from the
+cached templates, without building the body map.
+
+Both are derived from TransitionBatch's field declarations (protocols.schema): the layout above is
+what the declarations say (texts and counts, then columns, each 1-d or 2-d with a named width), so
+a field added there is read and written here too (tests/test_protocols_schema.py adds three). They
+are generated as straight-line code once at import (``_TRANSITIONS.source`` shows it), as
+``dataclasses`` generates ``__init__``: a loop over the fields costs about a fifth of a decode.
 
 Arrays are read-only views of the received bytes where their data is 8-byte aligned, and aligned
 copies of their bytes where it is not, so decoded arrays are aligned whichever path decoded them (the
@@ -43,7 +49,6 @@ import math
 import struct
 from collections.abc import Callable
 from math import isfinite
-from operator import attrgetter
 
 import msgpack
 import numpy as np
@@ -102,15 +107,13 @@ class _Format:
             "SEQ_KEY": _packed("n"),
             "BODY_START": _packed("b") + packer.bytes(),
             **{f"KEY_{name}": _packed(name) for name, _ in self.scalars},
-            "GET_COLUMNS": attrgetter(*columns) if len(columns) > 1 else lambda m: (getattr(m, columns[0]),),
             "NDARRAYS": (np.ndarray,) * len(columns),
             "DTYPES": tuple(spec.dtype for spec in self.specs),
             "LONGEST_KEY": max(map(len, (cls.KIND, *names))),
             "_layout": self.layout,
+            "LAYOUTS": self.layouts,
             "INT64_MAX": INT64_MAX,
             "ProtocolError": ProtocolError,
-            "_DTYPE": attrgetter("dtype"),
-            "_SHAPE": attrgetter("shape"),
             "_U32": _U32,
             "_str": _str,
             "_uint": _uint,
@@ -184,7 +187,7 @@ class _Format:
         lines += [
             f"    if {' or '.join(tests)}:",
             "        return None",
-            f"    layout = _layout(n{widths})",
+            f"    layout = LAYOUTS.get((n{widths},)) or _layout(n{widths})",
             "    for offset, template in layout.templates:",
             "        if not data.startswith(template, at + offset):",
             "            return None",
@@ -221,34 +224,36 @@ class _Format:
 
     def _encode_source(self) -> str:
         c = [f"c_{name}" for name in self.columns]
-        first_of = [f"c_{names[0]}.shape[1]" for names in self.schema.widths.values()]
+        key = ", ".join(
+            [f"{c[0]}.shape[0]", *(f"c_{names[0]}.shape[1]" for names in self.schema.widths.values())]
+        )
+        t = [f"t{i}" for i in range(len(c))]
         parts = ["HEAD", "pack(batch.sender)", "SEQ_KEY", "pack(batch.seq)", "BODY_START"]
         for name, _ in self.scalars:
             parts += [f"KEY_{name}", f"pack(batch.{name})"]
-        for i, name in enumerate(c):
-            parts += [f"t[{i}]", name]
-        return (
-            "\n".join(
-                [
-                    "def encode(batch, pack):",
-                    f"    {', '.join(c)}, = arrays = GET_COLUMNS(batch)",
-                    "    if tuple(map(type, arrays)) != NDARRAYS or tuple(map(_DTYPE, arrays)) != DTYPES:",
-                    "        return None",
-                    "    try:",
-                    f"        layout = _layout({', '.join([f'{c[0]}.shape[0]', *first_of])})",
-                    "    except (IndexError, ProtocolError):  # a 0-d array, or a shape no header can hold",
-                    "        return None",
-                    "    if tuple(map(_SHAPE, arrays)) != layout.shapes:",
-                    "        return None",
-                    "    t = layout.parts",
-                    "    try:  # join takes an array's bytes only through a simple buffer (C-ordered arrays)",
-                    f"        return b''.join(({', '.join(parts)}))",
-                    "    except TypeError:",
-                    "        return None",
-                ]
-            )
-            + "\n"
-        )
+        for template, name in zip(t, c, strict=True):
+            parts += [template, name]
+        lines = [
+            "def encode(batch, pack):",
+            f"    {', '.join(c)}, = {', '.join(f'batch.{name}' for name in self.columns)},",
+            f"    arrays = ({', '.join(c)},)",
+            "    if tuple(map(type, arrays)) != NDARRAYS:",
+            "        return None",
+            "    try:",
+            f"        key = ({key},)",
+            "        layout = LAYOUTS.get(key) or _layout(*key)",
+            "    except (IndexError, ProtocolError):  # a 0-d array, or a shape no header can hold",
+            "        return None",
+            f"    if ({', '.join(f'{x}.dtype' for x in c)},) != DTYPES"
+            f" or ({', '.join(f'{x}.shape' for x in c)},) != layout.shapes:",
+            "        return None",
+            f"    {', '.join(t)}, = layout.parts",
+            "    try:  # join takes an array's bytes only through a simple buffer (C-ordered arrays)",
+            f"        return b''.join(({', '.join(parts)}))",
+            "    except TypeError:",
+            "        return None",
+        ]
+        return "\n".join(lines) + "\n"
 
 
 class _Layout:

@@ -24,6 +24,9 @@ from collections import deque
 
 import numpy as np
 
+from agents.nnql.config import NNQLConfig
+from agents.nnql.policy import NNQLPolicy
+from agents.nnql.rollout import VectorRollout
 from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
@@ -34,6 +37,7 @@ from services.common.outbox import Outbox, decode_ack
 from services.common.process import connect
 from services.common.transport import ZenohSettings, declare_alive
 from services.common.weights import WeightsReceiver
+from worlds.vector_env import NavigationVectorEnv
 
 log = logging.getLogger("navlearn.actor")
 SUCCESS = 1  # worlds.outcomes.Outcome.GOAL
@@ -62,8 +66,6 @@ class Actor:
 
     def __init__(self, config: ActorConfig, env, session, run: str, seed: int, limits: Limits) -> None:
         import zenoh
-
-        from agents.nnql.rollout import VectorRollout
 
         self.config = config
         self.run_name = run
@@ -137,9 +139,6 @@ class Actor:
 
     def apply_weights(self) -> bool:
         """Swap in the newest weights if any arrived; True if the policy changed."""
-        from agents.nnql.config import NNQLConfig
-        from agents.nnql.policy import NNQLPolicy
-
         received = self.receiver.take()
         if received is None:
             return False
@@ -251,8 +250,6 @@ class Actor:
 
 def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
     """Process set-up: env (from the config), Zenoh session (retried until a router answers), loop."""
-    from worlds.vector_env import NavigationVectorEnv
-
     if not config.id:
         config.id = default_actor_id()
     keys.check_name(config.id, "actor id")

@@ -19,7 +19,9 @@ import threading
 import time
 from pathlib import Path
 
+from agents.nirl.config import NIRLConfig
 from agents.nnql.config import NNQLConfig
+from agents.nnql.learner import NNQLLearner
 from protocols import keys
 from protocols.codec import encode
 from protocols.flow import Ack
@@ -27,15 +29,20 @@ from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, LearnerStatus, TransitionBatch
 from services.common.process import Scalars, connect
 from services.common.transport import ZenohSettings, declare_alive
+from services.common.weights import WeightsBroadcaster
 from services.learner.checkpoint import CheckpointDir
 from services.learner.config import LearnerConfig
+from services.learner.demo_buffer import DemoBuffer
 from services.learner.durable import DurableIngest
 from services.learner.inbox import Inbox, Received
+from services.learner.nirl import NIRLTrainer
 from services.learner.ratelimit import RateLimiter
 from services.learner.state import LearnerParts
 from services.learner.stats import LearnerTally
-from services.learner.status import build_status
+from services.learner.status import build_status, progress_line, status_charts
 from services.ops.status import eval_summary
+from worlds.config import NavConfig
+from worlds.env import observation_space
 
 log = logging.getLogger("navlearn.learner")
 
@@ -44,9 +51,16 @@ class LearnerService:
     """One NNQL learner behind Zenoh. Built by ``run_learner``; ``run(stop)`` is the main loop."""
 
     def __init__(
-        self, config: LearnerConfig, learner, session, run: str, inbox: Inbox, demos, sender: str, nirl=None
+        self,
+        config: LearnerConfig,
+        learner: NNQLLearner,
+        session,
+        run: str,
+        inbox: Inbox,
+        demos: DemoBuffer,
+        sender: str,
+        nirl: NIRLTrainer | None = None,
     ):
-        from services.common.weights import WeightsBroadcaster
 
         self.config = config
         self.learner = learner
@@ -55,7 +69,7 @@ class LearnerService:
         self.inbox = inbox
         self.demos = demos
         self.sender = sender
-        self.nirl = nirl  # services.learner.nirl.NIRLTrainer, or None
+        self.nirl = nirl
         self.nnql_ran = 0  # NNQL updates in the last loop (NIRL's pace once warm)
         nnql = learner.config
         self.limiter = RateLimiter(
@@ -309,33 +323,14 @@ class LearnerService:
     def refresh_status(self) -> None:
         status = self.status()
         self.status_bytes = encode(status)
-        charts = {
-            "charts/updates_per_s": status.rates["updates_per_s"],
-            "charts/transitions_per_s": status.rates["transitions_per_s"],
-            "charts/policy_lag": status.rates["policy_lag"],
-            "charts/replay_size": status.replay_sizes["transitions"],
-            "charts/update_to_data": status.rates["update_to_data"],
-        }
-        charts.update({k: v for k, v in self.tally.metrics.items() if k.startswith("losses/")})
+        charts = status_charts(status, self.tally.metrics)
         self.scalars.add(charts, self.learner.version)
 
     def _on_status(self, query) -> None:
         query.reply(keys.status(self.run_name), self.status_bytes)
 
     def _log_progress(self) -> None:
-        s = self.status()
-        log.info(
-            "version %d | replay %d | %.0f upd/s | %.0f transitions/s | lag %.1f | actors %d | rejected %d"
-            " | td %.4g",
-            self.learner.version,
-            s.replay_sizes["transitions"],
-            s.rates["updates_per_s"],
-            s.rates["transitions_per_s"],
-            s.rates["policy_lag"],
-            len(self.tally.actors),
-            s.counters["transitions_rejected"],
-            self.tally.metrics.get("losses/td_loss", float("nan")),
-        )
+        log.info("%s", progress_line(self.status(), self.tally))
 
     def close(self) -> None:
         self._status_queryable.undeclare()
@@ -352,10 +347,6 @@ def run_learner(
 ) -> int:
     """Process set-up: learner, Zenoh session (hosting the router unless told to connect), the loop.
     ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
-    from agents.nnql.learner import NNQLLearner
-    from services.learner.demo_buffer import DemoBuffer
-    from worlds.config import NavConfig
-    from worlds.env import observation_space
 
     nav = NavConfig()
     obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
@@ -369,9 +360,6 @@ def run_learner(
     sender = f"{config.id}#{int(time.time())}"
     trainer = None
     if config.nirl:
-        from agents.nirl.config import NIRLConfig
-        from services.learner.nirl import NIRLTrainer
-
         nirl = nirl or NIRLConfig(seed=nnql.seed)
         trainer = NIRLTrainer(
             nirl, learner.replay, demos.replay, session, settings.run, sender, config.broadcast_every

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from protocols.messages import LearnerStatus
 from services.learner.state import LearnerParts
+from services.learner.stats import LearnerTally
 
 
 def build_status(parts: LearnerParts, model: str, sender: str, seq: int) -> LearnerStatus:
@@ -40,4 +41,29 @@ def build_status(parts: LearnerParts, model: str, sender: str, seq: int) -> Lear
         actors_last_seen={a: s.last_seen for a, s in tally.actors.items() if s.last_seen},
         losses=losses,
         last_eval=tally.last_eval,
+    )
+
+
+def status_charts(status: LearnerStatus, metrics: dict[str, float]) -> dict[str, float]:
+    """TensorBoard scalars of a status snapshot and the newest update's losses."""
+    charts = {
+        "charts/updates_per_s": status.rates["updates_per_s"],
+        "charts/transitions_per_s": status.rates["transitions_per_s"],
+        "charts/policy_lag": status.rates["policy_lag"],
+        "charts/replay_size": status.replay_sizes["transitions"],
+        "charts/update_to_data": status.rates["update_to_data"],
+    }
+    charts.update({k: v for k, v in metrics.items() if k.startswith("losses/")})
+    return charts
+
+
+def progress_line(status: LearnerStatus, tally: LearnerTally) -> str:
+    """The learner's periodic log line."""
+    rates, counters = status.rates, status.counters
+    return (
+        f"version {counters['updates']} | replay {status.replay_sizes['transitions']}"
+        f" | {rates['updates_per_s']:.0f} upd/s | {rates['transitions_per_s']:.0f} transitions/s"
+        f" | lag {rates['policy_lag']:.1f} | actors {len(tally.actors)}"
+        f" | rejected {counters['transitions_rejected']}"
+        f" | td {tally.metrics.get('losses/td_loss', float('nan')):.4g}"
     )

@@ -28,7 +28,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from services.common.transport import free_port
+from services.common.transport import TransportError, ZenohSettings, free_port, open_session
+from services.learner.checkpoint import CheckpointDir
+from services.ops.status import query_alive, query_status, status_dict
 
 log = logging.getLogger("navlearn.up")
 PR_SET_PDEATHSIG = 1
@@ -201,9 +203,6 @@ class Up:
 
     def watch(self, stop: threading.Event, show) -> dict[str, Any] | None:
         """Follow the learner's status until the budget is spent, ``stop`` is set or a child dies."""
-        from services.common.transport import TransportError, ZenohSettings, open_session
-        from services.ops.status import query_alive, query_status, status_dict
-
         cfg = self.config
         settings = ZenohSettings(mode="client", connect=[self.endpoint], run=cfg.run)
         session = None
@@ -263,8 +262,6 @@ class Up:
         return json.loads((policy / "config.json").read_text())["version"] if policy else None
 
     def latest_policy(self) -> Path | None:
-        from services.learner.checkpoint import CheckpointDir
-
         latest = CheckpointDir(self.out / "checkpoints").latest()
         policy = latest / "nnql" / "policy" if latest else None
         return policy if policy and (policy / "config.json").exists() else None
