@@ -1,16 +1,9 @@
 """The MLP every navlearn learner saves, in numpy: its layers, forward pass and files.
 
-A policy directory holds two files (written atomically, temp + rename):
-
-* ``model.safetensors`` - the weights of an MLP in ``nn.Sequential`` layout (TorchRL's
-  ``MLP``): ``"0.weight"``, ``"0.bias"``, ``"2.weight"``, ... one linear layer at every
-  even index, the activation between them; float32.
-* ``config.json`` - ``{"model": name, "kind": kind, "version": int, "architecture":
-  {"obs_dim", "n_actions", "hidden_sizes", "activation"}, ...}`` plus any metadata.
-
-``kind`` says what the network outputs: ``"q_network"`` (Q-values: NNQL, NIRL) or
-``"policy_logits"`` (action logits: imitation). Shared by ``agents.nnql.policy`` (actors) and
-``agents.evaluation.policies`` (``load_policy`` for any of them); numpy only, no torch.
+The policy directory's format (``model.safetensors`` in ``nn.Sequential`` layout + ``config.json``)
+is described in :mod:`agents.evaluation.policies`; :func:`save_policy` here is its one writer. Shared
+by ``agents.nnql.policy`` (actors) and ``agents.evaluation.policies`` (``load_policy`` for any
+learner's policy); numpy only, no torch.
 """
 
 from __future__ import annotations

@@ -1,8 +1,17 @@
-"""Saved policies: ``load_policy`` evaluates the policy directory of any navlearn learner.
+"""Saved policies: one on-disk format for every learner, and ``load_policy`` to evaluate any of them.
 
-The format (``model.safetensors`` + ``config.json``) and its one writer, ``save_policy``, are in
-:mod:`agents.mlp`. Every kind (``"q_network"``: Q-values; ``"policy_logits"``: action logits) is
-evaluated greedily (argmax over actions), with numpy only, so loading a policy needs no torch.
+A policy directory holds two files (written atomically, temp + rename):
+
+* ``model.safetensors`` - the weights of an MLP in ``nn.Sequential`` layout (TorchRL's
+  ``MLP``): ``"0.weight"``, ``"0.bias"``, ``"2.weight"``, ... one linear layer at every
+  even index, the activation between them; float32.
+* ``config.json`` - ``{"model": name, "kind": kind, "version": int, "architecture":
+  {"obs_dim", "n_actions", "hidden_sizes", "activation"}, ...}`` plus any metadata.
+
+``kind`` says what the network outputs: ``"q_network"`` (Q-values, NNQL) or
+``"policy_logits"`` (action logits, imitation and NIRL neural policies). Both are
+evaluated greedily (argmax over actions), with numpy only, so loading a policy
+needs no torch.
 """
 
 from __future__ import annotations
