@@ -12,6 +12,9 @@ A policy directory holds two files (written atomically, temp + rename):
 ``"policy_logits"`` (action logits, imitation and NIRL neural policies). Both are
 evaluated greedily (argmax over actions), with numpy only, so loading a policy
 needs no torch.
+
+``load_policy_or_baseline`` also accepts the name ``heuristic``: the goal-seeking
+baseline of :mod:`worlds.heuristics`, for comparing a learned policy with it.
 """
 
 from __future__ import annotations
@@ -35,8 +38,12 @@ from agents.mlp import (
     mlp_layers,
     save_policy,
 )
+from worlds.config import NavConfig
+from worlds.heuristics import goal_seeking_policy
 
-__all__ = ["GreedyMLPPolicy", "PolicyFormatError", "load_policy", "save_policy"]
+__all__ = ["GreedyMLPPolicy", "PolicyFormatError", "load_policy", "load_policy_or_baseline", "save_policy"]
+HEURISTIC = "heuristic"
+"""the name that ``load_policy_or_baseline`` reads as the goal-seeking baseline"""
 
 
 class PolicyFormatError(ValueError):
@@ -101,3 +108,15 @@ def load_policy(path: str | Path) -> GreedyMLPPolicy:
         return GreedyMLPPolicy(weights, config)
     except (KeyError, ValueError) as exc:
         raise PolicyFormatError(f"{path}: {exc}") from None
+
+
+def load_policy_or_baseline(spec: str | Path, config: NavConfig | None = None):
+    """``load_policy(spec)``, or the goal-seeking baseline for ``config`` when ``spec`` is
+    ``heuristic`` and no directory of that name exists. A missing directory is a
+    :class:`PolicyFormatError` naming it."""
+    path = Path(spec)
+    if str(spec) == HEURISTIC and not path.exists():
+        return goal_seeking_policy(config)
+    if not path.is_dir():
+        raise PolicyFormatError(f"{path}: no such policy directory (or {HEURISTIC!r} for the baseline)")
+    return load_policy(path)
