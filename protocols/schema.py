@@ -151,34 +151,42 @@ def _declare(spec: Spec, **options: Any) -> Any:
 def text(
     *, allow_empty: bool = False, optional: bool = False, choices: Collection[str] = (), **options
 ) -> Any:
+    """A printable string (non-empty unless ``allow_empty``; None allowed if ``optional``)."""
     return _declare(Text(allow_empty, optional, tuple(choices)), **options)
 
 
 def count(**options: Any) -> Any:
+    """An integer in [0, 2**63)."""
     return _declare(Count(), **options)
 
 
 def column(dtype: str, *, width: str | None = None, actions: bool = False) -> Any:
+    """A column of the message's table: ``dtype`` (N,), or (N, <width>) if ``width`` names one."""
     return _declare(Array(np.dtype(dtype), 1 if width is None else 2, True, width, actions))
 
 
 def array(dtype: str, ndim: int, *, actions: bool = False) -> Any:
+    """An array of ``dtype`` with ``ndim`` dimensions, checked alone (the message relates it to others)."""
     return _declare(Array(np.dtype(dtype), ndim, actions=actions))
 
 
 def json_map(*, optional: bool = False, **options: Any) -> Any:
+    """A map of JSON-like values (None allowed if ``optional``)."""
     return _declare(JsonMap(optional), **options)
 
 
 def number_map(number: type, *, finite: bool = True, **options: Any) -> Any:
+    """A flat map from strings to ``number`` (int or float; floats finite unless ``finite=False``)."""
     return _declare(NumberMap(number, finite), **options)
 
 
 def inside(container: str, key: str, reader: Callable, writer: Callable, **options: Any) -> Any:
+    """A typed field carried as the entry ``key`` of map field ``container`` (:class:`Inside`)."""
     return _declare(Inside(container, key, reader, writer), **options)
 
 
 def custom(reader: Callable[[BodyReader, str], Any], writer: Callable | None = None, **options: Any) -> Any:
+    """A field read by ``reader(body, name)`` and written as ``writer(value)`` (as it is if None)."""
     return _declare(Custom(reader, writer), **options)
 
 
