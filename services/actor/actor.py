@@ -74,7 +74,7 @@ class Actor:
         self.n_actions = int(env.single_action_space.n)
         self.policy = None
         self.version = 0
-        self.exploration = None
+        self.exploration: ExplorationSchedule | None = None
         self.rollout = VectorRollout(env, self.act)
         self.receiver = WeightsReceiver(session, run, config.model, limits)
         self.publisher = session.declare_publisher(
