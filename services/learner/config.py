@@ -8,16 +8,6 @@ from pathlib import Path
 from agents.device import DEVICES
 from agents.nnql.replay_storage import STORAGES
 
-EXPLORATION_FIELDS = (
-    "exploration",
-    "temperature_start",
-    "temperature_end",
-    "temperature_decay_updates",
-    "epsilon_start",
-    "epsilon_end",
-    "epsilon_decay_updates",
-)
-
 
 @dataclass
 class LearnerConfig:
