@@ -111,3 +111,19 @@ def test_memmap_columns_feed_the_lean_update(tmp_path):
     assert on_disk.update(4) == in_ram.update(4)
     for a, b in zip(in_ram.network.parameters(), on_disk.network.parameters(), strict=True):
         assert torch.equal(a, b)
+
+
+@pytest.mark.parametrize("memmap", [False, True])
+def test_loading_into_a_learner_that_already_sampled_reads_the_loaded_rows(tmp_path, memmap):
+    """The hot loop keeps views of the storage's columns; a resume must not leave it on stale ones."""
+    replay_dir = tmp_path / "r" if memmap else None
+    saved = NNQLLearner(small_config(), OBS_DIM, N_ACTIONS, replay_dir=replay_dir)
+    saved.add(random_batch(np.random.default_rng(3), 150))
+    path = saved.save_checkpoint(tmp_path / "ckpt")
+    used = NNQLLearner.from_checkpoint(path, replay_dir=replay_dir)
+    used.add(random_batch(np.random.default_rng(4), 100))  # rows the checkpoint does not hold
+    used.update(2)  # views of the columns are cached now
+    used.load_checkpoint(path)
+    assert len(used.replay) == 150
+    fresh = NNQLLearner.from_checkpoint(path, replay_dir=replay_dir)
+    assert used.update(3) == fresh.update(3)

@@ -148,6 +148,7 @@ class NNQLLearner:
         self.lean = LeanUpdate(config, self.network, self.loss, self.optimizer, self.target_updater)
         self.replay_rng = torch.Generator().manual_seed(config.seed)
         self.replay = self._make_replay(replay_dir)
+        self._stored: Batch | None = None
         self.updates = 0
         self.transitions_added = 0
         self.update_credit = 0.0
@@ -242,9 +243,17 @@ class NNQLLearner:
         takes here. The indices come from the sampler, so they are always below ``len``.
         """
         index, info = self.replay.sampler.sample(self.replay.storage, size)
-        stored = Batch.from_tensordict(columns(self.replay))  # weight: None
-        batch = Batch(*(None if column is None else column[index] for column in stored))
-        return index, batch._replace(weight=info.get("priority_weight")).to(self.device)
+        batch = Batch(*(None if column is None else column[index] for column in self._columns()))
+        batch = batch._replace(weight=info.get("priority_weight"))
+        return index, batch if self.device.type == "cpu" else batch.to(self.device)
+
+    def _columns(self) -> Batch:
+        """The storage's columns as full-capacity views (weight: None), looked up again whenever the
+        storage holds other tensors (its first insert, a resume)."""
+        stored = columns(self.replay)
+        if self._stored is None or self._stored.obs is not stored.get("observation"):
+            self._stored = Batch.from_tensordict(stored)
+        return self._stored
 
     def _metrics(self, step: Step) -> dict[str, float]:
         return {
