@@ -32,8 +32,7 @@ from protocols.messages import TransitionBatch
 from services.actor.config import ActorConfig
 from services.actor.status import BACKPRESSURE_SHARE, BlockedShare, actor_status
 from services.common.outbox import Outbox, decode_ack
-from services.common.process import connect
-from services.common.transport import ZenohSettings, declare_alive
+from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.common.weights import WeightsReceiver, split_architecture
 from services.ops.acl import actor_status_key
 
@@ -250,7 +249,7 @@ def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Even
     seed = config.seed if config.seed is not None else seed_for(config.id)
     env = NavigationVectorEnv(config.envs, maps=config.maps, seed=seed)
     limits = Limits(n_actions=int(env.single_action_space.n))
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
     actor = Actor(config, env, session, settings.run, seed, limits)

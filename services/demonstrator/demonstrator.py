@@ -35,8 +35,7 @@ from protocols import keys
 from protocols.codec import encode
 from protocols.messages import DemoBatch, EpisodeMeta
 from services.common.outbox import Outbox, decode_ack
-from services.common.process import connect
-from services.common.transport import Presence, ZenohSettings, declare_alive
+from services.common.transport import Presence, ZenohSettings, declare_alive, open_session
 from services.demonstrator.config import DemonstratorConfig
 
 log = logging.getLogger("navlearn.demonstrator")
@@ -211,7 +210,7 @@ def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: 
     if not config.id:
         config.id = f"{config.source}-{os.getpid()}"
     keys.check_name(config.id, "demonstrator id")
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
     publisher = DemoPublisher(session, settings.run, config, stop)

@@ -22,8 +22,8 @@ from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
 from protocols.messages import EvalReport
-from services.common.process import Scalars, connect
-from services.common.transport import ZenohSettings, declare_alive
+from services.common.process import Scalars
+from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.common.weights import WeightsReceiver, split_architecture
 from services.evaluator.config import EvaluatorConfig
 
@@ -234,7 +234,7 @@ def run_evaluator(config: EvaluatorConfig, settings: ZenohSettings, stop: thread
     start = time.perf_counter()
     eval_sets = [make_eval_set(family, config.episodes, seed=config.eval_seed) for family in config.families]
     log.info("evaluation sets %s ready in %.1f s", ", ".join(config.families), time.perf_counter() - start)
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
     evaluator = Evaluator(

@@ -26,8 +26,8 @@ from protocols.codec import encode
 from protocols.flow import Ack
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, LearnerStatus, TransitionBatch
-from services.common.process import Scalars, connect
-from services.common.transport import ZenohSettings, declare_alive
+from services.common.process import Scalars
+from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.learner.checkpoint import CheckpointDir
 from services.learner.config import EXPLORATION_FIELDS, LearnerConfig
 from services.learner.durable import DurableIngest
@@ -370,7 +370,7 @@ def run_learner(
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
     inbox = Inbox(limits, config.inbox_size, settings.run, log_every=config.log_every)
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
     sender = f"{config.id}#{int(time.time())}"
