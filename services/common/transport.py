@@ -93,6 +93,10 @@ class ZenohSettings:
     connect_timeout: float = _opt(0.0, "--connect-timeout", "NAVLEARN_CONNECT_TIMEOUT", "SECONDS")
     """seconds to wait for a router before giving up with the reason (0: keep waiting, saying so)"""
 
+    def where(self) -> str:
+        """The endpoints a client connects to, for messages (``--connect``, else the default)."""
+        return ", ".join(self.connect or [DEFAULT_ENDPOINT])
+
 
 ROUTER_SKIPS = ("mode", "run", "connect_timeout")
 """a stand-alone router has no mode choice, no run and waits for nobody"""

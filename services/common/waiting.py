@@ -29,8 +29,9 @@ class WaitLog:
         self.first, self.gaps = first, gaps
         self.reset()
 
-    def reset(self) -> None:
-        self.start = time.monotonic()
+    def reset(self, start: float | None = None) -> None:
+        """Start over, counting the wait from ``start`` (a ``time.monotonic()``; default now)."""
+        self.start = time.monotonic() if start is None else start
         self.next = self.start + self.first
         self.said = 0
 

@@ -5,12 +5,14 @@ the newest weights on start), runs the shared evaluation (agents.evaluation) on
 fixed, seeded sets - unseen generated maps, the same with moving obstacles - with
 the greedy policy, publishes an EvalReport on ``eval/<id>``, appends a JSON line
 to ``evaluations.jsonl`` and redraws ``learning_curve.png`` (success and path
-ratio to A* against policy version and wall time). Evaluation takes seconds, so
+ratio to A* against policy version and wall time since the run's first launch; a
+resumed run starts a new segment, marked, with no line across the gap). Evaluation takes seconds, so
 versions that arrive meanwhile are skipped: it always takes the newest.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import threading
@@ -24,6 +26,8 @@ from protocols.limits import Limits
 from protocols.messages import EvalReport
 from services.common.process import Scalars
 from services.common.transport import ZenohSettings, declare_alive, open_session
+from services.common.waiting import WaitLog
+from services.common.warmup import COMPILE_NOTE
 from services.common.weights import WeightsReceiver, split_architecture
 from services.evaluator.config import EvaluatorConfig
 
@@ -54,7 +58,8 @@ def plot_curve(points: list[dict[str, Any]], path: Path) -> Path:
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    start = min(p["time"] for p in points)
+    launches = sorted({p.get("launch", p["time"]) for p in points})
+    start = min(launches[0], min(p["time"] for p in points))
     families = sorted({f for p in points for f in p["metrics"]})
     models = sorted({p.get("model", "") for p in points if p.get("model") != REFERENCE})
     series = [(m, f) for m in models for f in families]
@@ -63,31 +68,47 @@ def plot_curve(points: list[dict[str, Any]], path: Path) -> Path:
     for col, (xlabel, xof) in enumerate(
         (
             ("policy version (updates)", lambda p: p["policy_version"]),
-            ("wall time (min)", lambda p: (p["time"] - start) / 60),
+            ("wall time since launch (min)", lambda p: (p["time"] - start) / 60),
         )
     ):
         for model, family in series:
-            rows = sorted(
-                (xof(p), p["metrics"][family])
-                for p in points
-                if family in p["metrics"] and p.get("model", "") == model
-            )
-            if not rows:
-                continue
-            label = f"{model} {family}".strip() if len(models) > 1 else family
-            xs = [x for x, _ in rows]
-            success = [m["success"] for _, m in rows]
-            (line,) = axes[0, col].plot(xs, [s["value"] for s in success], "o-", ms=3, label=label)
-            axes[0, col].fill_between(
-                xs,
-                [s["low"] for s in success],
-                [s["high"] for s in success],
-                color=line.get_color(),
-                alpha=0.2,
-            )
-            ratio = [(x, m["path_ratio"]) for x, m in rows if m.get("path_ratio") is not None]
-            if ratio:
-                axes[1, col].plot(*zip(*ratio, strict=True), "o-", ms=3, color=line.get_color(), label=label)
+            color = None
+            for launch in launches:  # one segment per launch: no line across a resumed run's gap
+                rows = sorted(
+                    (xof(p), p["metrics"][family])
+                    for p in points
+                    if family in p["metrics"]
+                    and p.get("model", "") == model
+                    and p.get("launch", p["time"]) == launch
+                )
+                if not rows:
+                    continue
+                label = (
+                    (f"{model} {family}".strip() if len(models) > 1 else family) if color is None else None
+                )
+                xs = [x for x, _ in rows]
+                success = [m["success"] for _, m in rows]
+                (line,) = axes[0, col].plot(
+                    xs, [s["value"] for s in success], "o-", ms=3, label=label, color=color
+                )
+                color = line.get_color()
+                axes[0, col].fill_between(
+                    xs, [s["low"] for s in success], [s["high"] for s in success], color=color, alpha=0.2
+                )
+                ratio = [(x, m["path_ratio"]) for x, m in rows if m.get("path_ratio") is not None]
+                if ratio:
+                    axes[1, col].plot(*zip(*ratio, strict=True), "o-", ms=3, color=color, label=label)
+        if col == 1:
+            for k, launch in enumerate(launches[1:]):  # where a resumed run started again
+                for ax in axes[:, col]:
+                    ax.axvline((launch - start) / 60, ls=":", lw=1, color="black")
+                axes[0, col].annotate(
+                    "resumed" if k == 0 else "",
+                    ((launch - start) / 60, 0.02),
+                    fontsize=7,
+                    xytext=(2, 0),
+                    textcoords="offset points",
+                )
         for reference in references:  # a fixed policy (imitation): one horizontal line per family
             for family, metrics in reference["metrics"].items():
                 label = f"{reference.get('name', REFERENCE)} {family}"
@@ -111,13 +132,23 @@ def plot_curve(points: list[dict[str, Any]], path: Path) -> Path:
 class Evaluator:
     """Takes the newest weights, evaluates them, reports, records and plots."""
 
-    def __init__(self, config: EvaluatorConfig, session, run: str, eval_sets: list, limits: Limits) -> None:
+    def __init__(
+        self, config: EvaluatorConfig, session, run: str, eval_sets: list, limits: Limits, where: str = ""
+    ) -> None:
+        """``where``: the router endpoints, named while waiting for the first weights."""
         self.config = config
         self.session = session
         self.run_name = run
         self.eval_sets = eval_sets
         self.receiver = WeightsReceiver(session, run, config.model, limits)
         self.receivers = {config.model: self.receiver}
+        self.first_weights = WaitLog(
+            log,
+            "waiting for the first weights of %s from the learner on run %r via %s (%.0f s so far)",
+            config.model,
+            run,
+            where,
+        )
         for model in config.compare:
             if model not in self.receivers:
                 self.receivers[model] = WeightsReceiver(session, run, model, limits)
@@ -129,6 +160,8 @@ class Evaluator:
         self.scalars = Scalars(config.tensorboard)
         self.seq = 0
         self.last: tuple[str, int] | None = None  # (learner sender, version) last evaluated
+        self.launch = config.launched or time.time()
+        """time zero of this launch's segment of the learning curve"""
 
     def _load_points(self) -> list[dict[str, Any]]:
         path = self.out / LINES_FILE
@@ -168,6 +201,7 @@ class Evaluator:
         point = {
             "policy_version": version,
             "time": time.time(),
+            "launch": self.launch,
             "learner": sender,
             "model": model,
             "metrics": metrics,
@@ -188,7 +222,8 @@ class Evaluator:
         result = evaluate(policy, self.eval_sets)
         log.info("reference policy %s evaluated\n%s", path, result.table())
         metrics = result.to_dict(with_episodes=False)["metrics"]
-        point = {"policy_version": policy.version, "time": time.time(), "learner": "", "model": REFERENCE,
+        point = {"policy_version": policy.version, "time": time.time(), "launch": self.launch,
+                 "learner": "", "model": REFERENCE,
                  "name": policy.model or Path(path).name, "metrics": metrics}  # fmt: skip
         self.points = [p for p in self.points if p.get("model") != REFERENCE] + [point]
         with open(self.out / LINES_FILE, "a") as fh:
@@ -217,6 +252,8 @@ class Evaluator:
                 self.report(message.sender, message.version, metrics, model)
                 done += 1
             if idle:
+                if self.last is None:
+                    self.first_weights.tick()
                 stop.wait(0.2)
         return 0
 
@@ -232,20 +269,26 @@ def run_evaluator(config: EvaluatorConfig, settings: ZenohSettings, stop: thread
     from worlds.config import NavConfig
 
     start = time.perf_counter()
+    log.info("evaluator %s: building the evaluation sets (%s)", config.id, COMPILE_NOTE)
     eval_sets = [make_eval_set(family, config.episodes, seed=config.eval_seed) for family in config.families]
     log.info("evaluation sets %s ready in %.1f s", ", ".join(config.families), time.perf_counter() - start)
     session = open_session(settings, stop=stop)
     if session is None:
         return 0
-    evaluator = Evaluator(
-        config, session, settings.run, eval_sets, Limits(n_actions=NavConfig().robot.n_actions)
-    )
-    token = declare_alive(session, settings.run, "evaluator", config.id)
-    log.info("evaluator %s up: %d episodes per family, run %s", config.id, config.episodes, settings.run)
-    try:
-        return evaluator.run(stop)
-    finally:
-        token.undeclare()
-        evaluator.close()
-        session.close()
-        log.info("evaluator stopped")
+    where = settings.where()
+    limits = Limits(n_actions=NavConfig().robot.n_actions)
+    with (
+        session,
+        contextlib.closing(Evaluator(config, session, settings.run, eval_sets, limits, where)) as evaluator,
+        declare_alive(session, settings.run, "evaluator", config.id),
+    ):
+        log.info(
+            "evaluator %s up: %d episodes per family, run %s via %s",
+            config.id,
+            config.episodes,
+            settings.run,
+            where,
+        )
+        code = evaluator.run(stop)
+    log.info("evaluator stopped")
+    return code

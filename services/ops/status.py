@@ -64,6 +64,30 @@ def query_alive(session, run: str, timeout: float = 2.0) -> list[tuple[str, str]
     return sorted(found)
 
 
+def learner_runs(session, timeout: float = 1.0) -> list[str]:
+    """Runs in which a learner holds its liveliness token, sorted (empty if none, or if an ACL hides them)."""
+    runs = set()
+    for reply in session.liveliness().get(keys.alive_in_every_run("learner"), timeout=timeout):
+        if reply.ok is None:
+            continue
+        try:
+            runs.add(keys.parse(reply.ok.key_expr).run)
+        except ProtocolError:
+            continue
+    return sorted(runs)
+
+
+def no_learner_hint(run: str, runs: list[str]) -> str:
+    """Why no learner answers on ``run``, from the runs that do have one (``learner_runs``)."""
+    if runs:
+        listed = ", ".join(repr(r) for r in runs)
+        return f"no learner on run {run!r}, but on {listed}: give --run {runs[0]} (or start one on {run!r})"
+    return (
+        f"no learner on run {run!r} holds a liveliness token here: start one (navlearn learner --run {run} "
+        "or navlearn up), or check --connect, --run and the router's ACL"
+    )
+
+
 def status_dict(status: LearnerStatus | None, alive: list[tuple[str, str]], now: float | None = None) -> dict:
     """One JSON-able view of the run: the learner's status (None if it did not answer) and who is alive."""
     now = time.time() if now is None else now
