@@ -128,29 +128,46 @@ def _fmt(value: Any, spec: str = ".3g") -> str:
     return str(value)
 
 
-def progress_line(view: dict) -> str:
-    """One line for a live display: version, throughput, replay, lag, actors, last evaluation."""
+def _short(n: float) -> str:
+    """12, 1.2k, 34k, 1.2M: a count in at most 4 characters."""
+    for limit, suffix in ((1e6, "M"), (1e3, "k")):
+        if abs(n) >= limit:
+            scaled = n / limit
+            return f"{scaled:.1f}{suffix}" if scaled < 10 else f"{scaled:.0f}{suffix}"
+    return f"{n:.0f}"
+
+
+def progress_line(view: dict, actors_expected: int | None = None) -> str:
+    """One short line for a live display (under 70 characters in practice): version, updates/s,
+    transitions/s, replay, policy lag, actors if some are missing, rejections if any, and the
+    last evaluation's success per family (first letter: unseen, dynamic, movingai)."""
     learner = view.get("learner")
     if learner is None:
         return "waiting for the learner's status..."
     rates, counters = learner["rates"], learner["counters"]
     version = next(iter(learner["versions"].values()), 0)
     replay = learner["replay_sizes"].get("transitions", 0)
-    line = (
-        f"version {version} | {rates.get('updates_per_s', 0):.0f} upd/s | "
-        f"{rates.get('transitions_per_s', 0):.0f} transitions/s | replay {replay}"
-        f" | lag {rates.get('policy_lag', 0):.1f} | actors {len(view['alive'].get('actor', []))}"
-        f" | rejected {counters.get('transitions_rejected', 0)}"
-    )
+    parts = [
+        f"v{version}",
+        f"{rates.get('updates_per_s', 0):.0f} upd/s",
+        f"{_short(rates.get('transitions_per_s', 0))} tr/s",
+        f"replay {_short(replay)}",
+        f"lag {rates.get('policy_lag', 0):.1f}",
+    ]
+    actors = len(view["alive"].get("actor", []))
+    if actors_expected is None or actors < actors_expected:
+        parts.append(f"actors {actors}" + (f"/{actors_expected}" if actors_expected else ""))
+    if counters.get("transitions_rejected", 0):
+        parts.append(f"rejected {_short(counters['transitions_rejected'])}")
     evaluation = learner.get("last_eval")
     if evaluation:
-        parts = [
-            f"{family} {100 * fam['success']:.0f}%"
+        success = " ".join(
+            f"{family[0]}{100 * fam['success']:.0f}%"
             for family, fam in evaluation.get("families", {}).items()
             if fam.get("success") is not None
-        ]
-        line += f" | eval v{evaluation['policy_version']}: " + ", ".join(parts)
-    return line
+        )
+        parts.append(f"eval v{evaluation['policy_version']} {success}")
+    return "  ".join(parts)
 
 
 def render(view: dict):
