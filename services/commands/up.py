@@ -124,7 +124,7 @@ def main(args: argparse.Namespace) -> int:
                 line = f"[wait {time.monotonic() - start:3.0f} s] {phases}"
             else:
                 clock = f"{elapsed:3.0f}/{config.duration:.0f} s" if config.duration else f"{elapsed:3.0f} s"
-                line = f"[{clock}] {progress_line(current, config.actors)}"
+                line = f"[{clock}] {progress_line(current, config.actors, width - len(clock) - 3)}"
             text = Text(line, no_wrap=True, overflow="ellipsis")
             text.truncate(width, overflow="ellipsis")
             if console.is_terminal:

@@ -137,10 +137,11 @@ def _short(n: float) -> str:
     return f"{n:.0f}"
 
 
-def progress_line(view: dict, actors_expected: int | None = None) -> str:
-    """One short line for a live display (under 70 characters in practice): version, updates/s,
+def progress_line(view: dict, actors_expected: int | None = None, width: int = 68) -> str:
+    """One line of at most ``width`` characters for a live display: version, updates/s,
     transitions/s, replay, policy lag, actors if some are missing, rejections if any, and the
-    last evaluation's success per family (first letter: unseen, dynamic, movingai)."""
+    last evaluation's success per family (first letter: unseen, dynamic, movingai); what does
+    not fit is cut, marked by "..."."""
     learner = view.get("learner")
     if learner is None:
         return "waiting for the learner's status..."
@@ -166,8 +167,9 @@ def progress_line(view: dict, actors_expected: int | None = None) -> str:
             for family, fam in evaluation.get("families", {}).items()
             if fam.get("success") is not None
         )
-        parts.append(f"eval v{evaluation['policy_version']} {success}")
-    return "  ".join(parts)
+        parts.append(f"eval {success}")
+    line = "  ".join(parts)
+    return line if len(line) <= width else line[: width - 3] + "..."
 
 
 def render(view: dict):
