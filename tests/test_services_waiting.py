@@ -175,3 +175,28 @@ def test_the_progress_line_fits_an_80_column_terminal():
     line = progress_line(view, actors_expected=2)
     assert len("[100/900 s] " + line) <= 80 and line.endswith("...")
     assert "actors 1/2" in line
+
+
+def test_the_learning_curve_starts_at_launch_and_does_not_join_a_resumed_run(tmp_path):
+    import matplotlib.pyplot as plt
+
+    from services.evaluator.evaluator import curve_figure, plot_curve
+
+    def point(version: int, time_s: float, launch: float) -> dict:
+        success = {"value": 0.5, "low": 0.3, "high": 0.7}
+        metrics = {"unseen": {"success": success, "path_ratio": 1.2}}
+        return {"policy_version": version, "time": time_s, "launch": launch, "model": "nnql",
+                "metrics": metrics}  # fmt: skip
+
+    t0 = 1_000_000.0
+    points = [point(10, t0 + 60, t0), point(20, t0 + 120, t0), point(30, t0 + 900, t0 + 600),
+              point(40, t0 + 960, t0 + 600)]  # fmt: skip
+    fig = curve_figure(points)
+    wall = fig.axes[1]  # success against wall time
+    segments = [line.get_xdata() for line in wall.get_lines() if line.get_marker() == "o"]
+    assert [list(x) for x in segments] == [[1.0, 2.0], [15.0, 16.0]]  # minutes since launch, two pieces
+    marks = [line.get_xdata()[0] for line in wall.get_lines() if line.get_linestyle() == ":"]
+    assert marks == [10.0]  # the resume, at its launch
+    assert "since launch" in fig.axes[3].get_xlabel()
+    plt.close(fig)
+    assert plot_curve(points, tmp_path / "curve.png").stat().st_size > 10_000

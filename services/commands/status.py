@@ -86,35 +86,36 @@ def main(args: argparse.Namespace) -> int:
 
         return Group(render(view), render_actor_statuses(view["actor_status"]))
 
-    try:
-        if args.watch is None:
-            view = snapshot()
+    with session:
+        try:
+            if args.watch is None:
+                view = snapshot()
+                if args.json:
+                    print(json.dumps(view))
+                else:
+                    from rich.console import Console
+
+                    Console().print(show(view))
+                if view["learner"] is None:
+                    hint = no_learner_hint(
+                        settings.run, learner_runs(session, timeout=min(args.timeout, 1.0))
+                    )
+                    print(
+                        f"navlearn status: no answer on navlearn/{settings.run}/status/learner via "
+                        f"{settings.where()} within {args.timeout:g} s; {hint}",
+                        file=sys.stderr,
+                    )
+                    return 1
+                return 0
             if args.json:
-                print(json.dumps(view))
-            else:
-                from rich.console import Console
+                while True:
+                    print(json.dumps(snapshot()), flush=True)
+                    time.sleep(args.watch)
+            from rich.live import Live
 
-                Console().print(show(view))
-            if view["learner"] is None:
-                hint = no_learner_hint(settings.run, learner_runs(session, timeout=min(args.timeout, 1.0)))
-                print(
-                    f"navlearn status: no answer on navlearn/{settings.run}/status/learner via "
-                    f"{settings.where()} within {args.timeout:g} s; {hint}",
-                    file=sys.stderr,
-                )
-                return 1
+            with Live(show(snapshot()), auto_refresh=False) as live:
+                while True:
+                    time.sleep(args.watch)
+                    live.update(show(snapshot()), refresh=True)
+        except KeyboardInterrupt:
             return 0
-        if args.json:
-            while True:
-                print(json.dumps(snapshot()), flush=True)
-                time.sleep(args.watch)
-        from rich.live import Live
-
-        with Live(show(snapshot()), auto_refresh=False) as live:
-            while True:
-                time.sleep(args.watch)
-                live.update(show(snapshot()), refresh=True)
-    except KeyboardInterrupt:
-        return 0
-    finally:
-        session.close()

@@ -52,7 +52,20 @@ def summary_scalars(metrics: dict[str, Any]) -> dict[str, float]:
 
 
 def plot_curve(points: list[dict[str, Any]], path: Path) -> Path:
-    """Success rate (95% band) and path ratio to A* per family, against policy version and wall time."""
+    """Success rate (95% band) and path ratio to A* per family, against policy version and wall time
+    since the first launch (one segment per launch, each resume marked), written to ``path``."""
+    import matplotlib.pyplot as plt
+
+    fig = curve_figure(points)
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    tmp.replace(path)
+    return path
+
+
+def curve_figure(points: list[dict[str, Any]]):
+    """The learning-curve figure of :func:`plot_curve` (a matplotlib Figure, 2 x 2 axes)."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -122,11 +135,7 @@ def plot_curve(points: list[dict[str, Any]], path: Path) -> Path:
     axes[0, 0].legend(fontsize=8, loc="upper left")
     fig.suptitle(f"{', '.join(models).upper() or 'policies'} on held-out maps (greedy policy)")
     fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    tmp.replace(path)
-    return path
+    return fig
 
 
 class Evaluator:

@@ -28,8 +28,7 @@ def run_router(settings: ZenohSettings, stop: threading.Event) -> int:
             verb = "joined" if event.kind == zenoh.SampleKind.PUT else "left"
             log.info("%s %s %s", event.transport.whatami, event.transport.zid, verb)
 
-        listener = session.info.declare_transport_events_listener(on_transport)
-        stop.wait()
-        listener.undeclare()
+        with session.info.declare_transport_events_listener(on_transport):
+            stop.wait()
     log.info("router stopped")
     return 0

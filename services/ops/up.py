@@ -301,30 +301,31 @@ class Up:
             except TransportError:
                 show(None, None, self.phases(None))
         view, started, baseline = None, None, None
-        try:
-            while session is not None and not stop.is_set():
-                if (dead := self.dead_child()) is not None:
-                    raise ChildFailed(dead)
-                status = query_status(session, cfg.run, timeout=2.0)
-                alive = query_alive(session, cfg.run, timeout=0.5)
-                view = status_dict(status, alive) if status is not None else view
-                received = received_transitions(view)
-                if baseline is None and received is not None:
-                    baseline = received  # a resumed learner's totals include its earlier runs
-                if started is None and baseline is not None and received > baseline:
-                    started = time.monotonic()
-                elapsed = None if started is None else time.monotonic() - started
-                show(view, elapsed, None if started else self.phases(view or status_dict(None, alive)))
-                version = view["learner"]["versions"].get(MODEL, 0) if view else 0
-                if elapsed is not None and cfg.duration and elapsed >= cfg.duration:
-                    break
-                if cfg.updates and version >= cfg.updates:
-                    break
-                stop.wait(1.0)
-        finally:
-            if session is not None:
-                session.close()
-            self.training_s = time.monotonic() - started if started else 0.0
+        if session is None:
+            return view
+        with session:
+            try:
+                while not stop.is_set():
+                    if (dead := self.dead_child()) is not None:
+                        raise ChildFailed(dead)
+                    status = query_status(session, cfg.run, timeout=2.0)
+                    alive = query_alive(session, cfg.run, timeout=0.5)
+                    view = status_dict(status, alive) if status is not None else view
+                    received = received_transitions(view)
+                    if baseline is None and received is not None:
+                        baseline = received  # a resumed learner's totals include its earlier runs
+                    if started is None and baseline is not None and received > baseline:
+                        started = time.monotonic()
+                    elapsed = None if started is None else time.monotonic() - started
+                    show(view, elapsed, None if started else self.phases(view or status_dict(None, alive)))
+                    version = view["learner"]["versions"].get(MODEL, 0) if view else 0
+                    if elapsed is not None and cfg.duration and elapsed >= cfg.duration:
+                        break
+                    if cfg.updates and version >= cfg.updates:
+                        break
+                    stop.wait(1.0)
+            finally:
+                self.training_s = time.monotonic() - started if started else 0.0
         return view
 
     def stop_all(self, eval_wait: float = 60.0) -> dict[str, int]:
