@@ -197,9 +197,13 @@ class Up:
         """the checkpoint the learner resumes from (None: a new run)"""
         self.training_s = 0.0
         """seconds from the first transition the learner received to the end of watch()"""
+        self.first_transition_s: float | None = None
+        """seconds from the processes' start to the first transition the learner received"""
+        self._started_at = time.monotonic()
 
     def start(self) -> None:
         cfg, out = self.config, self.out
+        self._started_at = time.monotonic()
         (out / "logs").mkdir(parents=True, exist_ok=True)
         base = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
         base.update({"NAVLEARN_RUN": cfg.run, "PYTHONUNBUFFERED": "1"})
@@ -316,6 +320,7 @@ class Up:
                         baseline = received  # a resumed learner's totals include its earlier runs
                     if started is None and baseline is not None and received > baseline:
                         started = time.monotonic()
+                        self.first_transition_s = started - self._started_at
                     elapsed = None if started is None else time.monotonic() - started
                     show(view, elapsed, None if started else self.phases(view or status_dict(None, alive)))
                     version = view["learner"]["versions"].get(MODEL, 0) if view else 0
@@ -379,6 +384,9 @@ class Up:
             "run": self.config.run,
             "wall_time_s": round(wall, 1),
             "training_s": round(self.training_s, 1),
+            "first_transition_s": None
+            if self.first_transition_s is None
+            else round(self.first_transition_s, 1),
             "resumed_from": self.resumed_from.name if self.resumed_from else None,
             "final_version": self.final_version(),
             "exit_codes": codes,
