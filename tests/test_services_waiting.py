@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import socket
 import time
 
 import pytest
@@ -132,6 +133,31 @@ def test_up_checks_its_map_before_starting_anything(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "navlearn up: --maps: map spec" in err and "BADFILE" in err and "nor an existing map file" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("flags", "words"),
+    [
+        (["--actors", "0"], "--actors 0: needs at least 1"),
+        (["--duration", "-5"], "--duration -5.0: must be 0 or more"),
+        (["--run", "a/b"], "run 'a/b' may only use"),
+        (["--port", "99999"], "--port 99999: must be 0 (a free port) or 1 to 65535"),
+    ],
+)
+def test_up_checks_cheap_arguments_before_starting_anything(tmp_path, capsys, flags, words):
+    out = tmp_path / "run"
+    assert main(["up", "--out", str(out), *flags]) == 2
+    assert words in capsys.readouterr().err and not out.exists()
+
+
+def test_up_refuses_a_port_in_use_before_starting_anything(tmp_path, capsys):
+    out = tmp_path / "run"
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        assert main(["up", "--out", str(out), "--port", str(port)]) == 2
+    assert f"--port {port}: already in use" in capsys.readouterr().err and not out.exists()
 
 
 def _subparsers() -> dict[str, argparse.ArgumentParser]:

@@ -21,6 +21,7 @@ import logging
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -94,6 +95,15 @@ def check_config(config: UpConfig) -> None:
         raise ValueError(f"--checkpoint-every {config.checkpoint_every}: must be more than 0 seconds")
     if not 0 <= config.port <= 65535:
         raise ValueError(f"--port {config.port}: must be 0 (a free port) or 1 to 65535")
+    if config.port:
+        with socket.socket() as sock:
+            try:
+                sock.bind(("0.0.0.0" if config.listen_all else "127.0.0.1", config.port))
+            except OSError:
+                raise ValueError(
+                    f"--port {config.port}: already in use (another learner or router?); stop it, "
+                    "or give another port or 0 for a free one"
+                ) from None
     keys.check_name(config.run, "run")
     try:
         parse_map_spec(config.maps)
@@ -105,8 +115,6 @@ def check_config(config: UpConfig) -> None:
 
 
 def free_port() -> int:
-    import socket
-
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
