@@ -7,7 +7,7 @@ import argparse
 from agents.nnql.config import NNQLConfig
 from services.commands.learner import SARSA_LOCAL_ONLY
 from services.common.options import add_options
-from services.ops.up import UpConfig
+from services.ops.up_config import UpConfig
 
 DESCRIPTION = """\
 Train NNQL the distributed way on one machine: check the arguments (maps included), compile the
@@ -58,7 +58,8 @@ def main(args: argparse.Namespace) -> int:
     from services.common.process import stop_on_signals
     from services.common.warmup import compile_world
     from services.ops.status import progress_line
-    from services.ops.up import ChildFailed, Up, check_config, checkpoint_number
+    from services.ops.up import ChildFailed, Up, checkpoint_number
+    from services.ops.up_config import check_config
 
     try:
         config = options_from_args(UpConfig, args, "NAVLEARN_UP")

@@ -16,8 +16,6 @@ import argparse
 import json
 import logging
 import os
-import re
-import socket
 import threading
 import time
 from collections.abc import Callable
@@ -25,18 +23,13 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from protocols import keys
+from services.common.endpoints import TransportError, check_endpoints, plain_zenoh_error
 from services.common.options import OptionError, add_options, options_from_args
 from services.common.waiting import WaitLog
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 MODES = ("client", "peer", "router")
-PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream")
-"""Zenoh link protocols an endpoint may name (``<protocol>/<address>``)."""
 log = logging.getLogger("navlearn.transport")
-
-
-class TransportError(RuntimeError):
-    """A Zenoh session cannot be configured or opened; the message says why in one line."""
 
 
 def _opt(default: object, flag: str, env: str, metavar: str | None = None, **more: object):
@@ -145,67 +138,8 @@ def settings_from_args(args: argparse.Namespace | None = None, **overrides: obje
         keys.check_name(settings.run, "run")
     except ValueError as exc:
         raise TransportError(str(exc)) from None
-    check_endpoints(settings, resolve=True)
+    check_endpoints(settings.connect, settings.listen, resolve=True)
     return settings
-
-
-_HOST_PORT = re.compile(r"^(?:\[(?P<v6>[0-9A-Fa-f:.%]+)\]|(?P<host>[^:/\[\]]+)):(?P<port>[^:]*)$")
-
-
-def check_endpoint(endpoint: str, side: str = "connect", resolve: bool = False) -> None:
-    """Raise TransportError, in one plain sentence, if ``endpoint`` is not ``<protocol>/<host>:<port>``
-    (or, with ``resolve``, if its host name does not resolve)."""
-    flag = f"--{side}"
-    locator = re.split(r"[?#]", endpoint, maxsplit=1)[0]
-    protocol, slash, address = locator.partition("/")
-    if not slash:
-        raise TransportError(
-            f"{flag} {endpoint!r} has no protocol: write it as tcp/{endpoint} (protocol/host:port)"
-        )
-    if protocol not in PROTOCOLS:
-        raise TransportError(
-            f"{flag} {endpoint!r} names protocol {protocol!r}, which Zenoh does not know: "
-            f"use one of {', '.join(p + '/' for p in PROTOCOLS)} (e.g. tcp/{address or 'HOST:7447'})"
-        )
-    if protocol == "unixsock-stream":
-        return
-    match = _HOST_PORT.match(address)
-    if match is None:
-        raise TransportError(
-            f"{flag} {endpoint!r} has no port: write it as {protocol}/{address or 'HOST'}:7447 "
-            "(host:port, IPv6 addresses in [brackets])"
-        )
-    port = match["port"]
-    if not port.isdigit() or not (0 if side == "listen" else 1) <= int(port) <= 65535:
-        raise TransportError(f"{flag} {endpoint!r}: port {port!r} is not a number from 1 to 65535")
-    host = match["v6"] or match["host"]
-    if resolve and not match["v6"]:
-        try:
-            socket.getaddrinfo(host, int(port), type=socket.SOCK_STREAM)
-        except socket.gaierror as exc:
-            if exc.errno == socket.EAI_AGAIN:  # no DNS answer right now: Zenoh keeps trying
-                log.warning("%s %s: host %r does not resolve yet (%s)", flag, endpoint, host, exc.strerror)
-                return
-            raise TransportError(
-                f"{flag} {endpoint!r}: host name {host!r} does not resolve; check the spelling "
-                "or give an IP address"
-            ) from None
-
-
-def check_endpoints(settings: ZenohSettings, resolve: bool = False) -> None:
-    """Every --connect and --listen endpoint of ``settings`` through :func:`check_endpoint`."""
-    for side in ("connect", "listen"):
-        for endpoint in getattr(settings, side) or ():
-            check_endpoint(endpoint, side, resolve)
-
-
-def plain_zenoh_error(exc: BaseException) -> str:
-    """Zenoh's message without its Rust wrapping (``Json5Err(Message { msg: ...``, ``at /root/...rs``)."""
-    text = str(exc)
-    if 'msg: "' in text:
-        text = text.split('msg: "', 1)[1]
-    text = re.split(r" at /\S+\.rs:\d+|\s+at /|\\?\", location", text)[0]
-    return text.strip().rstrip(".!") or type(exc).__name__
 
 
 def _file(path: str | None, what: str) -> str | None:
@@ -238,7 +172,7 @@ def build_config(settings: ZenohSettings):
     def put(key: str, value: object) -> None:
         conf.insert_json5(key, json.dumps(value))
 
-    check_endpoints(settings)
+    check_endpoints(settings.connect, settings.listen)
     try:
         conf = (
             zenoh.Config.from_file(_file(settings.config_file, "Zenoh config"))
@@ -322,7 +256,7 @@ def open_session(
 
     if isinstance(source, ZenohSettings):
         settings = replace(source, **overrides)
-        check_endpoints(settings, resolve=True)
+        check_endpoints(settings.connect, settings.listen, resolve=True)
     else:
         settings = settings_from_args(source, **overrides)
     conf = build_config(settings)
