@@ -1,7 +1,7 @@
 """The robot world's numba kernels, compiled once before the processes that use them start.
 
 Every kernel is compiled with ``cache=True``: the first process on a machine (or the
-first after worlds/ changed) compiles them - about 40 s on a busy 2-core machine - and
+first after worlds/ changed) compiles them - 1 to 2.5 minutes on a busy 2-core machine - and
 writes numba's cache (``__pycache__`` beside the sources, or ``NUMBA_CACHE_DIR``); later
 processes load it in about a second. ``navlearn up`` calls :func:`compile_world` before it
 starts its processes, so they do not all compile at once while the training clock runs.
@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-COMPILE_NOTE = "a cold numba cache compiles the world first, about a minute; later starts load it"
+COMPILE_NOTE = "a cold numba cache compiles the world first, a minute or more; later starts load it"
 
 
 def compile_world(maps: str) -> tuple[float, bool]:
