@@ -8,13 +8,11 @@ write it instead, in one sentence.
 
 from __future__ import annotations
 
-import logging
 import re
 import socket
 
 PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream")
 """Zenoh link protocols an endpoint may name (``<protocol>/<address>``)."""
-log = logging.getLogger("navlearn.transport")
 
 
 class TransportError(RuntimeError):
@@ -55,11 +53,13 @@ def check_endpoint(endpoint: str, side: str = "connect", resolve: bool = False) 
         try:
             socket.getaddrinfo(host, int(port), type=socket.SOCK_STREAM)
         except socket.gaierror as exc:
-            if exc.errno == socket.EAI_AGAIN:  # no DNS answer right now: Zenoh keeps trying
-                log.warning("%s %s: host %r does not resolve yet (%s)", flag, endpoint, host, exc.strerror)
-                return
+            why = (
+                "could not be resolved now (no DNS answer)"
+                if exc.errno == socket.EAI_AGAIN
+                else "does not resolve"
+            )
             raise TransportError(
-                f"{flag} {endpoint!r}: host name {host!r} does not resolve; check the spelling "
+                f"{flag} {endpoint!r}: host name {host!r} {why}; check the spelling and the DNS, "
                 "or give an IP address"
             ) from None
 
