@@ -104,16 +104,21 @@ def _actor(endpoint: str, run: str):
     return start(argv)
 
 
-def test_an_actor_on_a_run_without_learner_says_so_and_names_the_run_that_has_one(
-    router_with_a_learner_token_on_run_b,
-):
-    endpoint = router_with_a_learner_token_on_run_b
-    proc, lines = _actor(endpoint, "a")
+def test_an_actor_on_a_wrong_run_says_so_and_names_the_run_the_learner_is_on(tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    argv = ["-m", "services.cli", "learner", "--listen", endpoint, "--run", "b",
+            "--checkpoint-dir", str(tmp_path / "ckpt"), "--hidden-sizes", "16"]  # fmt: skip
+    learner, learner_lines = start(argv)
     try:
-        line = wait_for_line(lines, "no acknowledgement from the learner on run 'a'", timeout=240)
-        assert f"via {endpoint}" in line and "no learner on run 'a', but on 'b': give --run b" in line
+        wait_for_line(learner_lines, "learner learner up", timeout=240)
+        proc, lines = _actor(endpoint, "a")
+        try:
+            line = wait_for_line(lines, "no acknowledgement from the learner on run 'a'", timeout=240)
+            assert f"via {endpoint}" in line and "no learner on run 'a', but on 'b': give --run b" in line
+        finally:
+            assert stop(proc) == 0
     finally:
-        assert stop(proc) == 0
+        stop(learner, timeout=60)
 
 
 def test_an_actor_with_no_learner_anywhere_says_so():
