@@ -9,7 +9,7 @@ With ``--up SECONDS`` it also runs ``navlearn up --duration SECONDS`` (the READM
 otherwise: 2 actors x 8 robots) on another empty cache and reports the compile step, the
 seconds from the processes' start to the first transition, and the seconds trained.
 
-    python bench/first_run.py --rounds 2 --up 30   # human lines, then one JSON object on the last line
+    python -m bench.first_run --rounds 2 --up 30   # human lines, then one JSON object on the last line
 """
 
 from __future__ import annotations

@@ -211,7 +211,7 @@ def test_the_progress_line_fits_an_80_column_terminal():
 def test_the_learning_curve_starts_at_launch_and_does_not_join_a_resumed_run(tmp_path):
     import matplotlib.pyplot as plt
 
-    from services.evaluator.evaluator import curve_figure, plot_curve
+    from agents.evaluation.plots import evaluations_figure, plot_evaluations
 
     def point(version: int, time_s: float, launch: float) -> dict:
         success = {"value": 0.5, "low": 0.3, "high": 0.7}
@@ -222,7 +222,7 @@ def test_the_learning_curve_starts_at_launch_and_does_not_join_a_resumed_run(tmp
     t0 = 1_000_000.0
     points = [point(10, t0 + 60, t0), point(20, t0 + 120, t0), point(30, t0 + 900, t0 + 600),
               point(40, t0 + 960, t0 + 600)]  # fmt: skip
-    fig = curve_figure(points)
+    fig = evaluations_figure(points)
     wall = fig.axes[1]  # success against wall time
     segments = [line.get_xdata() for line in wall.get_lines() if line.get_marker() == "o"]
     assert [list(x) for x in segments] == [[1.0, 2.0], [15.0, 16.0]]  # minutes since launch, two pieces
@@ -230,4 +230,4 @@ def test_the_learning_curve_starts_at_launch_and_does_not_join_a_resumed_run(tmp
     assert marks == [10.0]  # the resume, at its launch
     assert "since launch" in fig.axes[3].get_xlabel()
     plt.close(fig)
-    assert plot_curve(points, tmp_path / "curve.png").stat().st_size > 10_000
+    assert plot_evaluations(points, tmp_path / "curve.png").stat().st_size > 10_000

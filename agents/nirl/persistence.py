@@ -8,6 +8,9 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from safetensors.numpy import save_file
+
+from agents.mlp import save_policy
 
 MODEL_NAME = "nirl"
 REWARD_FILE = "reward.safetensors"
@@ -15,12 +18,8 @@ STATE_FILE = "nirl.pt"
 
 
 def save_policy_files(learner: Any, path: str | Path, **metadata: Any) -> Path:
-    """The Q-network in the shared policy format (``agents.evaluation.policies``: model "nirl",
+    """The Q-network in the shared policy format (``agents.mlp``: model "nirl",
     kind "q_network", loadable by ``navlearn evaluate``) plus ``reward.safetensors``."""
-    from safetensors.numpy import save_file
-
-    from agents.evaluation.policies import save_policy
-
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     save_file(learner.reward_weights(), str(path / (REWARD_FILE + ".tmp")))

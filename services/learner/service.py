@@ -18,25 +18,31 @@ import queue
 import threading
 import time
 from pathlib import Path
-from typing import Any
 
+from agents.nirl.config import NIRLConfig
 from agents.nnql.config import NNQLConfig
+from agents.nnql.learner import NNQLLearner
 from protocols import keys
 from protocols.codec import encode
 from protocols.flow import Ack
 from protocols.limits import Limits
-from protocols.messages import DemoBatch, EvalReport, LearnerStatus, TransitionBatch
+from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, LearnerStatus, TransitionBatch
 from services.common.process import Scalars
 from services.common.transport import ZenohSettings, declare_alive, open_session
+from services.common.weights import WeightsBroadcaster
 from services.learner.checkpoint import CheckpointDir
-from services.learner.config import EXPLORATION_FIELDS, LearnerConfig
+from services.learner.config import LearnerConfig
+from services.learner.demo_buffer import DemoBuffer
 from services.learner.durable import DurableIngest
 from services.learner.inbox import Inbox, Received
+from services.learner.nirl import NIRLTrainer
 from services.learner.ratelimit import RateLimiter
-from services.learner.state import load_service_state, write_service_state
-from services.learner.stats import ActorStats, LagWindow, RateWindow
-from services.learner.status import build_status
+from services.learner.state import LearnerParts
+from services.learner.stats import LearnerTally
+from services.learner.status import build_status, progress_line, status_charts
 from services.ops.status import eval_summary
+from worlds.config import NavConfig
+from worlds.env import observation_space
 
 log = logging.getLogger("navlearn.learner")
 
@@ -45,9 +51,16 @@ class LearnerService:
     """One NNQL learner behind Zenoh. Built by ``run_learner``; ``run(stop)`` is the main loop."""
 
     def __init__(
-        self, config: LearnerConfig, learner, session, run: str, inbox: Inbox, demos, sender: str, nirl=None
+        self,
+        config: LearnerConfig,
+        learner: NNQLLearner,
+        session,
+        run: str,
+        inbox: Inbox,
+        demos: DemoBuffer,
+        sender: str,
+        nirl: NIRLTrainer | None = None,
     ):
-        from services.common.weights import WeightsBroadcaster
 
         self.config = config
         self.learner = learner
@@ -56,7 +69,7 @@ class LearnerService:
         self.inbox = inbox
         self.demos = demos
         self.sender = sender
-        self.nirl = nirl  # services.learner.nirl.NIRLTrainer, or None
+        self.nirl = nirl
         self.nnql_ran = 0  # NNQL updates in the last loop (NIRL's pace once warm)
         nnql = learner.config
         self.limiter = RateLimiter(
@@ -68,13 +81,7 @@ class LearnerService:
         if self.checkpoints is not None:
             self.checkpoints.remove_unfinished()
         self.scalars = Scalars(config.tensorboard)
-        self.actors: dict[str, ActorStats] = {}
-        self.lags = LagWindow()
-        self.update_rate = RateWindow()
-        self.insert_rate = RateWindow()
-        self.metrics: dict[str, float] = {}
-        self.last_eval: dict[str, Any] | None = None
-        self.counters: dict[str, int] = {}
+        self.tally = LearnerTally()
         self.status_bytes: bytes = b""
         self.status_seq = 0
         self.ack_seq = 0
@@ -85,6 +92,8 @@ class LearnerService:
             else None
         )  # write-ahead log + duplicate filter: acknowledged means durably stored
         self._replaying = False
+        self.parts = LearnerParts(learner, demos, self.limiter, inbox, self.tally, self.durable, nirl)
+        """the typed view that checkpoints and the status snapshot are made from"""
         self.weights = WeightsBroadcaster(session, run, config.model, sender)
         self._status_queryable = session.declare_queryable(keys.status(run), self._on_status, complete=True)
 
@@ -95,7 +104,7 @@ class LearnerService:
             return None
         start = time.perf_counter()
 
-        path = self.checkpoints.save(lambda tmp: write_service_state(self, tmp))
+        path = self.checkpoints.save(self.parts.write)
         if self.durable is not None:
             self.durable.checkpointed()
         self._count("checkpoints")
@@ -109,7 +118,7 @@ class LearnerService:
         return path
 
     def resume(self, path: Path) -> None:
-        load_service_state(self, path)
+        self.parts.load(path)
         log.info(
             "resumed from %s: version %d, replay %d, demos %d",
             path,
@@ -204,11 +213,9 @@ class LearnerService:
             return
         n = self.learner.add(batch)
         self.limiter.inserted(n)
-        self.insert_rate.add(n)
-        self.lags.add(self.learner.version - batch.policy_version)
-        self.actors.setdefault(item.name, ActorStats()).add(n, batch.seq, item.arrived)
-        self._count("transitions_received", n)
-        self._count("batches_received")
+        self.tally.inserted(
+            item.name, n, batch.seq, item.arrived, self.learner.version - batch.policy_version
+        )
         self._ack(item.name, batch.seq, batch.sender)
 
     def _ack(self, actor: str, seq: int, incarnation: str) -> None:
@@ -240,9 +247,9 @@ class LearnerService:
         ran = 0
         replay_size = len(self.learner.replay)
         while ran < max_updates and self.limiter.can_update(replay_size):
-            self.metrics = self.learner.update()
+            self.tally.metrics = self.learner.update()
             self.limiter.updated()
-            self.update_rate.add()
+            self.tally.update_rate.add()
             ran += 1
             if self.learner.version % self.config.broadcast_every == 0:
                 self.broadcast()
@@ -286,8 +293,8 @@ class LearnerService:
 
     def _on_eval(self, item: Received) -> None:
         self._count("eval_reports")
-        self.last_eval = eval_summary(item.name, item.message, item.arrived)
-        families = self.last_eval["families"]
+        self.tally.last_eval = eval_summary(item.name, item.message, item.arrived)
+        families = self.tally.last_eval["families"]
         log.info(
             "eval report from %s for version %d: %s",
             item.name,
@@ -296,53 +303,34 @@ class LearnerService:
         )
 
     def broadcast(self) -> None:
-        nnql: NNQLConfig = self.learner.config
-        architecture = dict(self.learner.architecture)
-        architecture["exploration"] = {name: getattr(nnql, name) for name in EXPLORATION_FIELDS}
-        self.weights.publish(self.learner.get_weights(), self.learner.version, architecture)
+        exploration = ExplorationSchedule.of(self.learner.config)
+        self.weights.publish(
+            self.learner.get_weights(), self.learner.version, self.learner.architecture, exploration
+        )
         self._count("weights_broadcast")
         if self.nirl is not None:
             self.nirl.broadcast()
 
     def _count(self, name: str, n: int = 1) -> None:
-        self.counters[name] = self.counters.get(name, 0) + int(n)
+        self.tally.count(name, n)
 
     # ---------------------------------------------------------------- status
 
     def status(self) -> LearnerStatus:
         self.status_seq += 1
-        return build_status(self, self.status_seq)
+        return build_status(self.parts, self.config.model, self.sender, self.status_seq)
 
     def refresh_status(self) -> None:
         status = self.status()
         self.status_bytes = encode(status)
-        charts = {
-            "charts/updates_per_s": status.rates["updates_per_s"],
-            "charts/transitions_per_s": status.rates["transitions_per_s"],
-            "charts/policy_lag": status.rates["policy_lag"],
-            "charts/replay_size": status.replay_sizes["transitions"],
-            "charts/update_to_data": status.rates["update_to_data"],
-        }
-        charts.update({k: v for k, v in self.metrics.items() if k.startswith("losses/")})
+        charts = status_charts(status, self.tally.metrics)
         self.scalars.add(charts, self.learner.version)
 
     def _on_status(self, query) -> None:
         query.reply(keys.status(self.run_name), self.status_bytes)
 
     def _log_progress(self) -> None:
-        s = self.status()
-        log.info(
-            "version %d | replay %d | %.0f upd/s | %.0f transitions/s | lag %.1f | actors %d | rejected %d"
-            " | td %.4g",
-            self.learner.version,
-            s.replay_sizes["transitions"],
-            s.rates["updates_per_s"],
-            s.rates["transitions_per_s"],
-            s.rates["policy_lag"],
-            len(self.actors),
-            s.counters["transitions_rejected"],
-            self.metrics.get("losses/td_loss", float("nan")),
-        )
+        log.info("%s", progress_line(self.status(), self.tally))
 
     def close(self) -> None:
         self._status_queryable.undeclare()
@@ -359,10 +347,6 @@ def run_learner(
 ) -> int:
     """Process set-up: learner, Zenoh session (hosting the router unless told to connect), the loop.
     ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
-    from agents.nnql.learner import NNQLLearner
-    from services.learner.demo_buffer import DemoBuffer
-    from worlds.config import NavConfig
-    from worlds.env import observation_space
 
     nav = NavConfig()
     obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
@@ -376,9 +360,6 @@ def run_learner(
     sender = f"{config.id}#{int(time.time())}"
     trainer = None
     if config.nirl:
-        from agents.nirl.config import NIRLConfig
-        from services.learner.nirl import NIRLTrainer
-
         nirl = nirl or NIRLConfig(seed=nnql.seed)
         trainer = NIRLTrainer(
             nirl, learner.replay, demos.replay, session, settings.run, sender, config.broadcast_every

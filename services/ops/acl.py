@@ -30,18 +30,6 @@ from pathlib import Path
 
 from protocols import keys
 
-ACTOR_STATUS_PREFIX = "actor:"
-"""an actor answers its status on ``status/actor:<id>`` (the ``status`` channel has one name)"""
-
-
-def actor_status_key(run: str, actor: str) -> str:
-    return f"{keys.prefix(run)}/status/{ACTOR_STATUS_PREFIX}{keys.check_name(actor, 'actor id')}"
-
-
-def all_status_keys(run: str) -> str:
-    """Every status queryable of ``run``: the learner's and each actor's."""
-    return f"{keys.prefix(run)}/status/*"
-
 
 @dataclass
 class Deployment:
@@ -107,7 +95,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
     }
     for a in d.actors:
         own = [f"{p}/transitions/{a}", f"{p}/alive/actor/{a}"]
-        status = [actor_status_key(d.run, a)]
+        status = [keys.actor_status(d.run, a)]
         out[f"actor-{a}"] = (
             a,
             [
@@ -123,7 +111,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
                 _rule(f"actor-{a}-answers", ["reply"], "egress", [f"{p}/weights/*"]),
                 _rule(f"actor-{a}-status", ["declare_queryable", "reply"], "ingress", status),
                 # queries reach it as sent: `status/*` (navlearn status --actors) or its own key
-                _rule(f"actor-{a}-status-asked", ["query"], "egress", [all_status_keys(d.run)]),
+                _rule(f"actor-{a}-status-asked", ["query"], "egress", [keys.everything(d.run, "status")]),
             ],
         )
     for ident, source in d.demonstrator_sources():
@@ -156,7 +144,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
             ],
         )
     for o in d.operators:
-        asks = [all_status_keys(d.run), f"{p}/alive/**"]
+        asks = [keys.everything(d.run, "status"), f"{p}/alive/**"]
         out[f"operator-{o}"] = (
             o,
             [

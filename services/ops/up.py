@@ -21,7 +21,6 @@ import logging
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -29,7 +28,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from services.common.transport import TransportError, ZenohSettings, free_port, open_session
 from services.learner.checkpoint import CheckpointDir
+from services.ops.status import query_alive, query_status, status_dict
 from services.ops.up_config import UpConfig
 
 log = logging.getLogger("navlearn.up")
@@ -43,12 +44,6 @@ PHASES = (
     (" up", "up"),
 )
 """(what a child's log line says, the phase shown): its newest matching line is what it is doing"""
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def _die_with_parent() -> None:
@@ -230,9 +225,6 @@ class Up:
         ``show(view, elapsed, phases)``: ``elapsed`` counts from the first transition the learner
         received (None before it), ``phases`` says what each process is doing until then.
         """
-        from services.common.transport import TransportError, ZenohSettings, open_session
-        from services.ops.status import query_alive, query_status, status_dict
-
         cfg = self.config
         settings = ZenohSettings(mode="client", connect=[self.endpoint], run=cfg.run)
         session = None
