@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from services.learner.dedup import Deduplicator
@@ -44,19 +45,133 @@ def test_torn_tail_is_cut_and_appending_continues(tmp_path):
     again.close()
 
 
-def test_bit_flip_in_the_middle_stops_there(tmp_path, caplog):
+def test_damaged_last_record_is_cut_like_a_torn_tail(tmp_path, caplog):
     _fill(tmp_path, [b"x" * 50 for _ in range(5)])
     segment = WriteAheadLog(tmp_path).segments()[-1]
     data = bytearray(segment.read_bytes())
     record = HEADER.size + 50
-    data[2 * record + HEADER.size + 10] ^= 0x04  # payload of record 3
+    data[4 * record + HEADER.size + 10] ^= 0x04  # payload of the last record: a damaged end is cut
     segment.write_bytes(bytes(data))
     wal = WriteAheadLog(tmp_path)
-    assert [s for s, _ in wal.recover()] == [1, 2]
+    assert [s for s, _ in wal.recover()] == [1, 2, 3, 4]
     assert wal.counters["corrupt_records"] == 1
     assert "checksum mismatch" in caplog.text
-    assert segment.stat().st_size == 2 * record
+    assert segment.stat().st_size == 4 * record
     wal.close()
+
+
+def _records(path) -> list[tuple[int, int]]:
+    """(offset, length) of each record of a segment."""
+    data, offset, out = path.read_bytes(), 0, []
+    while offset < len(data):
+        length = HEADER.unpack_from(data, offset)[1]
+        out.append((offset, HEADER.size + length))
+        offset += HEADER.size + length
+    return out
+
+
+@pytest.mark.parametrize("where", ["payload", "length", "magic", "crc", "seq"])
+def test_one_damaged_record_in_the_middle_loses_only_that_record(tmp_path, caplog, where):
+    rng = np.random.default_rng(3)
+    payloads = [rng.bytes(int(rng.integers(20, 400))) for _ in range(40)]
+    _fill(tmp_path, payloads)
+    segment = WriteAheadLog(tmp_path).segments()[-1]
+    data = bytearray(segment.read_bytes())
+    offset, length = _records(segment)[2]  # record 3 of 40
+    at = {"magic": 1, "length": 5, "seq": 10, "crc": 17, "payload": HEADER.size + length // 3}[where]
+    data[offset + min(at, length - 1)] ^= 0x10
+    segment.write_bytes(bytes(data))
+    wal = WriteAheadLog(tmp_path)
+    got = list(wal.recover())
+    assert got == [(i + 1, p) for i, p in enumerate(payloads) if i != 2]
+    assert wal.counters["corrupt_records"] == 1
+    assert wal.counters["skipped_records"] == 1
+    assert wal.counters["skipped_bytes"] == length
+    assert wal.counters["cut_bytes"] == 0
+    assert "skipped" in caplog.text and "records 3..3 are missing" in caplog.text
+    assert wal.append(b"next") == 41  # appending continues after the newest record
+    wal.close()
+
+
+def test_damaged_end_of_an_older_segment_loses_only_that_record(tmp_path):
+    wal = WriteAheadLog(tmp_path)
+    list(wal.recover())
+    for i in range(3):
+        wal.append(b"first%d" % i)
+    wal.rotate(keep_after=0)  # as after a checkpoint, with an older checkpoint still needing seq 1..
+    for i in range(3):
+        wal.append(b"second%d" % i)
+    wal.close()
+    first = wal.segments()[0]
+    data = bytearray(first.read_bytes())
+    data[-2] ^= 0x01  # the last record of the older segment
+    first.write_bytes(bytes(data))
+    again = WriteAheadLog(tmp_path)
+    assert [s for s, _ in again.recover()] == [1, 2, 4, 5, 6]
+    assert again.counters["skipped_records"] == 1 and again.counters["cut_bytes"] == 0
+    again.close()
+
+
+def test_log_written_by_the_previous_release_reads(tmp_path):
+    """The record format is unchanged (magic NLW1, length, seq, crc32 over seq + payload): a segment
+    built byte by byte as navlearn wrote it before resynchronisation existed still reads."""
+    import struct
+    import zlib
+
+    records = b""
+    for seq, payload in enumerate([b"alpha", b"beta" * 10, b""], 1):
+        crc = zlib.crc32(payload, zlib.crc32(struct.pack("<Q", seq)))
+        records += struct.pack("<4sIQI", b"NLW1", len(payload), seq, crc) + payload
+    (tmp_path / "wal-0000000000000001.log").write_bytes(records)
+    wal = WriteAheadLog(tmp_path)
+    assert list(wal.recover()) == [(1, b"alpha"), (2, b"beta" * 10), (3, b"")]
+    assert wal.counters["corrupt_records"] == 0
+    wal.close()
+
+
+def test_failed_write_cuts_back_to_the_last_synced_group(tmp_path, monkeypatch):
+    import errno
+    import os
+
+    from services.learner import wal as wal_module
+
+    wal = WriteAheadLog(tmp_path)
+    list(wal.recover())
+    wal.append(b"kept")
+    wal.append(b"group-1", sync=False)  # part of a group that will not be synced
+    real_write = os.write
+
+    def half_then_full(fd, data):
+        real_write(fd, bytes(data[: len(data) // 2]))
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(wal_module.os, "write", half_then_full)
+    with pytest.raises(OSError):
+        wal.append(b"group-2", sync=False)
+    monkeypatch.undo()
+    assert wal.last_seq == 1  # the whole unsynced group is gone, not acknowledged
+    assert wal.append(b"after") == 2
+    wal.close()
+    again = WriteAheadLog(tmp_path)
+    assert list(again.recover()) == [(1, b"kept"), (2, b"after")]
+    assert again.counters["corrupt_records"] == 0
+    again.close()
+
+
+def test_rotation_keeps_what_the_oldest_checkpoint_needs(tmp_path):
+    wal = WriteAheadLog(tmp_path)
+    list(wal.recover())
+    positions = []
+    for round_ in range(4):
+        for i in range(3):
+            wal.append(b"r%d-%d" % (round_, i))
+        positions.append(wal.last_seq)  # a checkpoint here, keep=2
+        wal.rotate(keep_after=positions[-2] if len(positions) >= 2 else 0)
+    wal.close()
+    again = WriteAheadLog(tmp_path)
+    assert [s for s, _ in again.recover(after=positions[-2])] == [10, 11, 12]
+    assert min(s for s, _ in WriteAheadLog(tmp_path).recover()) == positions[-2] + 1
+    again.close()
 
 
 def test_replay_after_checkpoint_and_rotation(tmp_path):

@@ -50,3 +50,12 @@ def load_service_state(service: Any, path: Path) -> None:
     service.last_eval = state["last_eval"]
     if service.durable is not None:
         service.durable.load_state(state.get("durable"))
+
+
+def checkpoint_wal_seq(path: Path) -> int:
+    """The write-ahead log position a checkpoint holds everything up to (0 if it cannot say)."""
+    try:
+        durable = json.loads((path / "service.json").read_text()).get("durable") or {}
+        return int(durable.get("wal_seq", 0))
+    except (OSError, ValueError, AttributeError, TypeError):
+        return 0

@@ -10,7 +10,12 @@ from protocols.messages import LearnerStatus
 def build_status(service: Any, seq: int) -> LearnerStatus:
     """Counters (incl. rejections by reason and the write-ahead log's), rates, versions, replay sizes,
     per-actor totals and last seen, losses and the last evaluation of a LearnerService."""
-    counters = {**service.counters, **service.inbox.counts(), "updates": service.learner.version}
+    counters = {
+        **service.counters,
+        **service.inbox.counts(),
+        **service.storage.counters(),
+        "updates": service.learner.version,
+    }
     if service.durable is not None:
         counters.update(service.durable.status_counters())
     counters["transitions_rejected"] = sum(v for k, v in counters.items() if k.startswith("rejected/"))
