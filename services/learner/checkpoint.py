@@ -148,7 +148,10 @@ class CheckpointDir:
                 damaged.append((path, str(exc)))
                 continue
             for bad, reason in damaged:
-                aside = bad.with_name(DAMAGED_PREFIX + bad.name)
+                aside, n = bad.with_name(DAMAGED_PREFIX + bad.name), 0
+                while aside.exists():  # a number reused after an earlier one was set aside
+                    n += 1
+                    aside = bad.with_name(f"{DAMAGED_PREFIX}{bad.name}.{n}")
                 os.rename(bad, aside)
                 log.error(
                     "checkpoint %s is damaged (%s); set aside as %s, resuming from %s",
