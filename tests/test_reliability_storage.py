@@ -5,6 +5,8 @@
   newest intact one plus its write-ahead log: every acknowledged transition is stored.
 - A crafted pickle in a checkpoint (with a manifest recomputed, as someone who can write
   the directory would) never runs.
+- The write-ahead log holds the bytes the learner accepted (not a re-encoding) and is
+  replayed under the learner's own limits (its number of actions), not the defaults.
 - A full disk (a 20 MB tmpfs, as root) under the write-ahead log and under a checkpoint:
   one log line naming the path and the error, ``storage_error 1`` in a status that keeps
   answering, no acknowledgement while failing, recovery once there is room, a clean stop on
@@ -23,14 +25,27 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+import msgpack
 import numpy as np
 import pytest
 
+from protocols import keys
+from protocols.codec import decode, encode
+from protocols.messages import TransitionBatch
 from services.common.transport import ZenohSettings, open_session
 from services.learner.checkpoint import CheckpointDir, write_manifest
+from services.learner.wal import WriteAheadLog
 from services.ops.status import query_status
 from tests.conftest import free_port
-from tests.reliability_helpers import TracedActor, learner_argv, start_learner, stop_process, stored_ids
+from tests.reliability_helpers import (
+    N_ACTIONS,
+    OBS_DIM,
+    TracedActor,
+    learner_argv,
+    start_learner,
+    stop_process,
+    stored_ids,
+)
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(420)]
 
@@ -286,3 +301,55 @@ def test_full_disk_under_a_checkpoint_is_no_sigbus(tmp_path):
             assert not [p for p in (disk / "ckpt").iterdir() if p.name.startswith(".tmp-ckpt")]
         finally:
             rig.close()
+
+
+# ---------------------------------------------------------------- what the log holds
+
+
+def _batch(seq: int, ids: list[float], action: int = 0) -> TransitionBatch:
+    n = len(ids)
+    return TransitionBatch(
+        sender="a1#1", seq=seq, actor="a1", model="nnql", policy_version=0,
+        env_ids=np.arange(n, dtype=np.int32), obs=np.zeros((n, OBS_DIM), np.float32),
+        action=np.full(n, action), reward=np.asarray(ids, np.float32),
+        next_obs=np.zeros((n, OBS_DIM), np.float32), terminated=np.zeros(n, bool),
+        truncated=np.zeros(n, bool),
+    )  # fmt: skip
+
+
+def _reordered(payload: bytes) -> bytes:
+    """The same message with its map keys in another order: valid, but not what encode() writes."""
+    unpacked = msgpack.unpackb(payload, raw=False, ext_hook=msgpack.ExtType, strict_map_key=False)
+    return msgpack.packb(dict(reversed(list(unpacked.items()))), use_bin_type=True)
+
+
+def test_the_log_holds_the_accepted_bytes_and_replays_under_the_learners_limits(tmp_path):
+    ckpt_dir = tmp_path / "ckpt"
+    wal = WriteAheadLog(ckpt_dir / "wal")
+    list(wal.recover())
+    wal.append(encode(_batch(1, [1001, 1002, 1003], action=N_ACTIONS + 2)))  # valid only without limits
+    wal.append(encode(_batch(2, [1004, 1005])))
+    wal.close()
+    port = free_port()
+    endpoint, run = f"tcp/127.0.0.1:{port}", f"bytes{port}"
+    learner = start_learner(learner_argv(endpoint, run, ckpt_dir), tmp_path / "learner.log")
+    session = None
+    try:
+        session = open_session(ZenohSettings(mode="client", connect=[endpoint], run=run, connect_timeout=120))
+        wait_for(lambda: query_status(session, run, timeout=3.0) is not None, 120, "the learner")
+        status = query_status(session, run, timeout=3.0)
+        assert status.counters["wal_undecodable"] == 1  # the learner's n_actions, not the defaults
+        assert status.replay_sizes["transitions"] == 2
+
+        sent = _reordered(encode(_batch(3, [1006, 1007, 1008, 1009])))
+        assert encode(decode(sent)) != sent
+        session.put(keys.transitions(run, "a1"), sent)
+        stored = lambda: query_status(session, run, timeout=3.0).replay_sizes["transitions"] == 6  # noqa: E731
+        wait_for(stored, 60, "the batch to be stored")
+    finally:
+        if session is not None:
+            session.close()
+        learner.kill()  # no final checkpoint: the log keeps the records
+        learner.wait()
+    logged = [payload for seq, payload in WriteAheadLog(ckpt_dir / "wal").recover() if seq == 3]
+    assert logged == [sent]  # byte for byte what arrived, not a re-encoding

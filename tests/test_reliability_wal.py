@@ -1,12 +1,24 @@
-"""Write-ahead log and de-duplication: round trip, torn tail, bit flip, replay after a checkpoint."""
+"""Write-ahead log and de-duplication: round trip, torn tail, resynchronisation after a damaged record,
+replay after a checkpoint, a failed write or sync cut back, the storage back-off."""
 
 from __future__ import annotations
+
+import errno
+import logging
+import os
+import struct
+import zlib
 
 import numpy as np
 import pytest
 
+from protocols.codec import encode
+from services.learner import wal as wal_module
 from services.learner.dedup import Deduplicator
+from services.learner.durable import DurableIngest
+from services.learner.storage import StorageGuard
 from services.learner.wal import HEADER, WriteAheadLog, parse_fsync
+from tests.test_reliability_storage import _batch
 
 
 def _fill(path, payloads, fsync="always"):
@@ -115,9 +127,6 @@ def test_damaged_end_of_an_older_segment_loses_only_that_record(tmp_path):
 def test_log_written_by_the_previous_release_reads(tmp_path):
     """The record format is unchanged (magic NLW1, length, seq, crc32 over seq + payload): a segment
     built byte by byte as navlearn wrote it before resynchronisation existed still reads."""
-    import struct
-    import zlib
-
     records = b""
     for seq, payload in enumerate([b"alpha", b"beta" * 10, b""], 1):
         crc = zlib.crc32(payload, zlib.crc32(struct.pack("<Q", seq)))
@@ -130,11 +139,6 @@ def test_log_written_by_the_previous_release_reads(tmp_path):
 
 
 def test_failed_write_cuts_back_to_the_last_synced_group(tmp_path, monkeypatch):
-    import errno
-    import os
-
-    from services.learner import wal as wal_module
-
     wal = WriteAheadLog(tmp_path)
     list(wal.recover())
     wal.append(b"kept")
@@ -234,3 +238,56 @@ def test_dedup_contiguous_gaps_and_state_round_trip():
     assert restored.seen("a#1", 3) and restored.seen("a#2", 1)
     assert not restored.seen("a#1", 5)
     assert not d.seen("b", 0) and not d.seen("b", 0)  # unnumbered messages are never duplicates
+
+
+def test_dedup_forget_undoes_seen():
+    d = Deduplicator()
+    for seq in (1, 2, 3, 5):
+        d.seen("a", seq)
+    d.forget("a", 2)  # below the contiguous floor
+    d.forget("a", 5)  # above it
+    assert not d.seen("a", 2) and not d.seen("a", 5)
+    assert d.seen("a", 1) and d.seen("a", 3)
+
+
+def test_a_failed_group_is_forgotten_so_its_resends_are_taken(tmp_path, monkeypatch):
+    durable = DurableIngest(tmp_path, "always")
+    list(durable.replay())
+    first, second = _batch(1, [1.0]), _batch(2, [2.0])
+    assert durable.admit(first, encode(first))
+    durable.sync()
+    assert durable.admit(second, encode(second))
+
+    def no_space(_fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(wal_module.os, "fsync", no_space)
+    with pytest.raises(OSError):
+        durable.sync()
+    monkeypatch.undo()
+    assert not durable.admit(first, encode(first))  # synced before: still a duplicate
+    assert durable.admit(second, encode(second))  # its group failed: the resend is new
+    durable.sync()
+    durable.close()
+    again = DurableIngest(tmp_path, "always")
+    assert [r.message.seq for r in again.replay()] == [1, 2]
+    again.close()
+
+
+def test_storage_guard_backs_off_and_recovers(caplog):
+    caplog.set_level(logging.INFO, logger="navlearn.storage")
+    guard = StorageGuard(first=1.0, longest=4.0)
+    assert not guard.blocked(0.0) and guard.counters() == {"storage_error": 0, "storage_failures": 0}
+    failure = OSError(28, "No space left on device")
+    guard.failed("write-ahead log", "/x/wal", failure, now=10.0)
+    assert guard.blocked(10.5) and not guard.blocked(11.0)
+    guard.failed("write-ahead log", "/x/wal", failure, now=11.0)
+    guard.failed("write-ahead log", "/x/wal", failure, now=13.0)
+    guard.failed("write-ahead log", "/x/wal", failure, now=17.0)
+    assert guard.retry_at == 21.0  # 1, 2, 4, then capped at 4
+    assert guard.counters() == {"storage_error": 1, "storage_failures": 4}
+    errors = [r for r in caplog.records if r.levelname == "ERROR"]
+    assert len(errors) == 1 and "/x/wal" in errors[0].message and "No space left" in errors[0].message
+    guard.succeeded()
+    assert not guard.blocked(17.5) and guard.counters()["storage_error"] == 0
+    assert "storage recovered" in caplog.text

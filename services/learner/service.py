@@ -168,8 +168,10 @@ class LearnerService:
             busy |= not blocked and self._ingest(max_batches=16)
             busy |= self._train(max_updates=32)
             busy |= self._train_nirl()
-            if not busy:
-                time.sleep(0.05) if blocked else self._wait_for_data(0.05)
+            if not busy and blocked:
+                time.sleep(0.05)  # storage is failing: nothing to take in until the retry
+            elif not busy:
+                self._wait_for_data(0.05)
             now = time.monotonic()
             if self.storage.what == "checkpoint" and not self.storage.blocked(now):
                 next_checkpoint = now  # retry the checkpoint that failed
@@ -225,7 +227,7 @@ class LearnerService:
         try:
             fresh = self.durable.admit(item.message, item.payload)
         except OSError as exc:
-            self._storage_failed(exc)
+            self._storage_failed(exc, also_lost=1)
             return
         if fresh:
             self._pending.append(item)
@@ -251,10 +253,10 @@ class LearnerService:
             self._count("batches_received")
         self._ack(item.name, message.seq, message.sender)
 
-    def _storage_failed(self, exc: OSError) -> None:
+    def _storage_failed(self, exc: OSError, also_lost: int = 0) -> None:
         """The log could not take the group: none of it is stored or acknowledged (actors resend)."""
         self.storage.failed("write-ahead log", self.durable.path, exc, time.monotonic())
-        self._count("batches_not_stored", len(self._pending))
+        self._count("batches_not_stored", len(self._pending) + also_lost)
         self._pending.clear()
         self._unacked.clear()
 
