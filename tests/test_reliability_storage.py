@@ -35,7 +35,7 @@ from protocols.messages import TransitionBatch
 from services.common.transport import ZenohSettings, open_session
 from services.learner.checkpoint import CheckpointDir, write_manifest
 from services.learner.wal import WriteAheadLog
-from services.ops.status import query_status
+from services.ops.status import progress_line, query_status, status_dict
 from tests.conftest import free_port
 from tests.reliability_helpers import (
     N_ACTIONS,
@@ -251,6 +251,7 @@ def test_full_disk_under_the_write_ahead_log(tmp_path):
             time.sleep(4.0)
             assert rig.acked() == before, "acknowledged while the log could not be written"
             assert rig.learner.poll() is None and rig.status() is not None  # alive, status answering
+            assert "STORAGE ERROR" in progress_line(status_dict(rig.status(), []))  # navlearn status/up
             log = rig.log_path.read_text()
             first = [line for line in log.splitlines() if "storage error writing the write-ahead log" in line]
             assert len(first) == 1, first
