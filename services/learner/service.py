@@ -202,7 +202,7 @@ class LearnerService:
 
     def _ingest(self, max_batches: int) -> bool:
         done = 0
-        while done < max_batches and self.limiter.can_insert() and self.storage.error is None:
+        while done < max_batches and self.limiter.can_insert() and not self.storage.blocked(time.monotonic()):
             try:
                 item = self.inbox.transitions.get_nowait()
             except queue.Empty:
