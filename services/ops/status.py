@@ -148,8 +148,10 @@ def progress_line(view: dict, actors_expected: int | None = None, width: int = 6
     rates, counters = learner["rates"], learner["counters"]
     version = next(iter(learner["versions"].values()), 0)
     replay = learner["replay_sizes"].get("transitions", 0)
-    parts = [
-        f"v{version}",
+    parts = [f"v{version}"]
+    if counters.get("storage_error"):  # first, so that it is never cut off
+        parts.append("STORAGE ERROR: not acknowledging (see the learner's log)")
+    parts += [
         f"{rates.get('updates_per_s', 0):.0f} upd/s",
         f"{_short(rates.get('transitions_per_s', 0))} tr/s",
         f"replay {_short(replay)}",
