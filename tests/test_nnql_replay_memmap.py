@@ -35,7 +35,7 @@ def test_checkpoint_holds_state_not_transitions_and_resumes_in_place(tmp_path):
         learner.add(random_batch(rng, 50))
         learner.train_due()
     path = learner.save_checkpoint(tmp_path / "ckpt")
-    assert sorted(p.name for p in (path / "replay").iterdir()) == ["replay.json"]
+    assert sorted(p.name for p in (path / "replay").iterdir()) == ["memmap.json"]
 
     restored = NNQLLearner.from_checkpoint(path, replay_dir=tmp_path / "replay")
     assert_same_replay(learner, restored)

@@ -96,7 +96,7 @@ def test_sigkill_learner_loses_no_acknowledged_transition_and_stores_none_twice(
 
     acked = actor.acked_ids()
     latest = CheckpointDir(ckpt_dir).latest()
-    memmap = (latest / "nnql" / "replay" / "replay.json").exists()  # its state only, not the transitions
+    memmap = (latest / "nnql" / "replay" / "memmap.json").exists()  # its state only, not the transitions
     assert memmap == (replay_storage == "memmap") == (ckpt_dir / "replay").is_dir()
     stored = stored_ids(latest)
     unique, counts = np.unique(stored, return_counts=True)

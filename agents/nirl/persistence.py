@@ -11,6 +11,7 @@ import torch
 from safetensors.numpy import save_file
 
 from agents.mlp import save_policy
+from agents.replay_files import load_replay, save_replay
 
 MODEL_NAME = "nirl"
 REWARD_FILE = "reward.safetensors"
@@ -48,7 +49,7 @@ def save_checkpoint(learner: Any, path: str | Path) -> Path:
     learner.q.save_checkpoint(tmp / "q")
     torch.save(learner.state_dict(), tmp / STATE_FILE)
     if learner.owns_demos and len(learner.demos):
-        learner.demos.dumps(tmp / "demos")
+        save_replay(learner.demos, tmp / "demos")
     old = path.with_name(f".{path.name}.old{os.getpid()}")
     if path.exists():
         os.replace(path, old)
@@ -62,4 +63,4 @@ def load_checkpoint(learner: Any, path: str | Path) -> None:
     learner.q.load_checkpoint(path / "q")
     learner.load_state_dict(torch.load(path / STATE_FILE, weights_only=True))
     if learner.owns_demos and (path / "demos").exists():
-        learner.demos.loads(path / "demos")
+        load_replay(learner.demos, path / "demos")

@@ -46,6 +46,7 @@ from agents.nnql.replay_storage import (
     make_storage,
     save_memmap,
 )
+from agents.replay_files import load_replay, save_replay
 
 TRANSITION_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "truncated")
 """Flat transition batch (the field names of protocols' TransitionBatch): float32 (N, obs_dim), int (N,),
@@ -356,12 +357,13 @@ class NNQLLearner:
         torch.set_rng_state(state["torch_rng"])
 
     def save_replay(self, path: str | Path) -> None:
-        """The replay buffer: in RAM, TorchRL's dumps (storage, sampler priorities, writer, rng);
-        memory-mapped, its files flushed in place and their state (see replay_storage)."""
+        """The replay buffer: in RAM, every stored row, the writer, sampler and rng, nothing pickled
+        (agents.replay_files); memory-mapped, its files flushed in place and their state (see
+        agents/nnql/replay_storage.py)."""
         if is_memmap(self.replay):
             save_memmap(self.replay, self.replay_rng, Path(path))
         elif len(self.replay):
-            self.replay.dumps(path)
+            save_replay(self.replay, path)
 
     def load_replay(self, path: str | Path) -> None:
         """Inverse of save_replay; a missing directory means an empty buffer."""
@@ -374,7 +376,7 @@ class NNQLLearner:
                 f"{path} holds a memory-mapped replay's state; build the learner with replay_dir"
             )
         elif path.exists():
-            self.replay.loads(path)
+            load_replay(self.replay, path)
 
     def save_checkpoint(self, path: str | Path) -> Path:
         """A directory with learner.pt, replay/ and policy/, replaced atomically."""

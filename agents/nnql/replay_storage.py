@@ -1,15 +1,15 @@
 """Where the NNQL replay keeps its transitions, and what a checkpoint of it writes.
 
-``memory``: TorchRL's ``LazyTensorStorage`` in RAM; a checkpoint is TorchRL's own
-``replay.dumps`` (storage, sampler, writer), so it writes the whole buffer: its cost grows
-with the replay (about 110 bytes per transition of the default observation).
+``memory``: TorchRL's ``LazyTensorStorage`` in RAM; a checkpoint writes every stored row
+(``agents.replay_files``), so its cost grows with the replay (about 110 bytes per transition
+of the default observation).
 
 ``memmap``: TorchRL's ``LazyMemmapStorage``, one file per column under a directory the
 caller names (the learner service puts it at ``<checkpoint dir>/replay``), so capacities
 beyond RAM work (10 M transitions are about 1.1 GB on disk) and a checkpoint never copies
 them: it flushes the column files (``fsync``: the cost of the pages written since the last
 flush, not of the capacity) and records a few hundred bytes - the length, the writer's
-cursor, the sampling generator's state and the directory (``replay.json``). Resuming opens
+cursor, the sampling generator's state and the directory (``memmap.json``). Resuming opens
 the files in place (TorchRL's ``LazyMemmapStorage`` loading from its own scratch
 directory) and sets length and cursor back. Transitions inserted after that checkpoint sit
 in the slots after the cursor; the learner service's write-ahead log inserts them again,
@@ -34,7 +34,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictReplayBuffer
 
 STORAGES = ("memory", "memmap")
-STATE_FILE = "replay.json"
+STATE_FILE = "memmap.json"
 
 
 def make_storage(capacity: int, directory: str | Path | None) -> LazyTensorStorage:
@@ -60,7 +60,7 @@ def _column_files(replay: TensorDictReplayBuffer) -> list[str]:
 
 
 def save_memmap(replay: TensorDictReplayBuffer, rng: torch.Generator, path: Path) -> None:
-    """Flush the column files and write ``path/replay.json`` (length, cursor, rng, directory)."""
+    """Flush the column files and write ``path/memmap.json`` (length, cursor, rng, directory)."""
     storage = replay.storage
     if storage.initialized:
         for name in _column_files(replay):
@@ -83,7 +83,7 @@ def save_memmap(replay: TensorDictReplayBuffer, rng: torch.Generator, path: Path
 
 
 def load_memmap(replay: TensorDictReplayBuffer, rng: torch.Generator, path: Path) -> None:
-    """Open the column files named by ``path/replay.json`` in place and restore length, cursor, rng."""
+    """Open the column files named by ``path/memmap.json`` in place and restore length, cursor, rng."""
     state = json.loads((path / STATE_FILE).read_text())
     storage = replay.storage
     if Path(state["directory"]).absolute() != Path(storage.scratch_dir).absolute():

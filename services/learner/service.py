@@ -6,7 +6,9 @@ while the limiter lets it train, broadcasts weights every ``broadcast_every``
 updates, acknowledges each inserted batch to its actor (flow control; the batches
 drained together share one write-ahead-log fsync before their acks go out), keeps the
 status snapshot that the ``status/learner`` queryable serves, writes TensorBoard
-scalars and checkpoints. ``run_learner`` does the process set-up around it. Its settings
+scalars and checkpoints. A failing disk write (write-ahead log or checkpoint) stops intake and
+acknowledgements until a retry works (services.learner.storage); the loop, status and SIGTERM
+go on. ``run_learner`` does the process set-up around it. Its settings
 are in services.learner.config, what a checkpoint holds besides the networks in
 services.learner.state, the status snapshot in services.learner.status.
 """
@@ -14,6 +16,7 @@ services.learner.state, the status snapshot in services.learner.status.
 from __future__ import annotations
 
 import logging
+import pickle
 import queue
 import threading
 import time
@@ -23,13 +26,14 @@ import agents.evaluation.policies  # noqa: F401 - save_policy_dir imports it laz
 from agents.nirl.config import NIRLConfig
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
+from agents.replay_files import stored_bytes
 from protocols import keys
 from protocols.codec import encode
 from protocols.flow import Ack
 from protocols.limits import Limits
-from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, LearnerStatus, TransitionBatch
-from services.common.process import Scalars, connect
-from services.common.transport import ZenohSettings, declare_alive
+from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, LearnerStatus
+from services.common.process import Scalars
+from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.common.weights import WeightsBroadcaster
 from services.learner.checkpoint import CheckpointDir
 from services.learner.config import LearnerConfig
@@ -38,9 +42,10 @@ from services.learner.durable import DurableIngest
 from services.learner.inbox import Inbox, Received
 from services.learner.nirl import NIRLTrainer
 from services.learner.ratelimit import RateLimiter
-from services.learner.state import LearnerParts
+from services.learner.state import LearnerParts, checkpoint_wal_seq
 from services.learner.stats import LearnerTally
 from services.learner.status import build_status, progress_line, status_charts
+from services.learner.storage import StorageGuard
 from services.ops.status import eval_summary
 from worlds.config import NavConfig
 from worlds.env import observation_space
@@ -62,7 +67,6 @@ class LearnerService:
         sender: str,
         nirl: NIRLTrainer | None = None,
     ):
-
         self.config = config
         self.learner = learner
         self.session = session
@@ -87,13 +91,17 @@ class LearnerService:
         self.status_seq = 0
         self.ack_seq = 0
         self._unacked: list[tuple[str, int, str]] = []  # (key name, seq, incarnation) awaiting commit
+        self._pending: list[Received] = []  # logged, stored and acknowledged once the log is synced
         self.durable = (
-            DurableIngest(Path(config.checkpoint_dir) / "wal", config.wal_fsync)
+            DurableIngest(Path(config.checkpoint_dir) / "wal", config.wal_fsync, inbox.limits)
             if config.checkpoint_dir
             else None
         )  # write-ahead log + duplicate filter: acknowledged means durably stored
+        self.storage = StorageGuard()
         self._replaying = False
-        self.parts = LearnerParts(learner, demos, self.limiter, inbox, self.tally, self.durable, nirl)
+        self.parts = LearnerParts(
+            learner, demos, self.limiter, inbox, self.tally, self.durable, nirl, self.storage
+        )
         """the typed view that checkpoints and the status snapshot are made from"""
         self.weights = WeightsBroadcaster(session, run, config.model, sender)
         self._status_queryable = session.declare_queryable(keys.status(run), self._on_status, complete=True)
@@ -104,10 +112,18 @@ class LearnerService:
         if self.checkpoints is None:
             return None
         start = time.perf_counter()
-
-        path = self.checkpoints.save(self.parts.write)
+        estimate = stored_bytes(self.learner.replay) + stored_bytes(self.demos.replay)
+        try:
+            path = self.checkpoints.save(self.parts.write, estimate)
+        except Exception as exc:  # ENOSPC, EIO, or a library's own wrapper of them (torch: RuntimeError)
+            self.storage.failed("checkpoint", self.checkpoints.root, exc, time.monotonic())
+            return None
+        self.storage.succeeded()
         if self.durable is not None:
-            self.durable.checkpointed()
+            try:  # keep the log the oldest kept checkpoint needs (a resume from it if newer ones are damaged)
+                self.durable.checkpointed(checkpoint_wal_seq(self.checkpoints.all()[0]))
+            except OSError as exc:
+                self.storage.failed("write-ahead log", self.durable.path, exc, time.monotonic())
         self._count("checkpoints")
         log.info(
             "checkpoint %s (version %d, replay %d) in %.2f s",
@@ -119,7 +135,13 @@ class LearnerService:
         return path
 
     def resume(self, path: Path) -> None:
-        self.parts.load(path)
+        try:
+            self.parts.load(path)
+        except (ValueError, KeyError, TypeError, OSError, RuntimeError, pickle.UnpicklingError) as exc:
+            raise ValueError(
+                f"checkpoint {path} matches its checksums but does not load here "
+                f"({type(exc).__name__}: {exc}); was it written with other settings?"
+            ) from exc
         log.info(
             "resumed from %s: version %d, replay %d, demos %d",
             path,
@@ -134,12 +156,7 @@ class LearnerService:
             return
         self._replaying = True
         for record in self.durable.replay():
-            item = Received(record.channel, record.name, record.message, time.time())
-            if record.channel == "transitions":
-                self._insert(item)
-            else:
-                self.inbox.other.put(item)
-                self._drain_other()
+            self._insert(Received(record.channel, record.name, record.message, time.time()))
         self._commit()
         self._replaying = False
         log.info("write-ahead log replayed: %s", self.durable.status_counters())
@@ -157,13 +174,18 @@ class LearnerService:
             if cfg.max_updates and self.learner.version >= cfg.max_updates:
                 log.info("reached %d updates", cfg.max_updates)
                 break
-            busy = self._drain_other()
-            busy |= self._ingest(max_batches=16)
+            blocked = self.storage.blocked(time.monotonic())
+            busy = self._drain_other(blocked)
+            busy |= not blocked and self._ingest(max_batches=16)
             busy |= self._train(max_updates=32)
             busy |= self._train_nirl()
-            if not busy:
+            if not busy and blocked:
+                time.sleep(0.05)  # storage is failing: nothing to take in until the retry
+            elif not busy:
                 self._wait_for_data(0.05)
             now = time.monotonic()
+            if self.storage.what == "checkpoint" and not self.storage.blocked(now):
+                next_checkpoint = now  # retry the checkpoint that failed
             if now >= next_status:
                 self.refresh_status()
                 next_status = now + 0.5
@@ -174,7 +196,7 @@ class LearnerService:
                 self.save_checkpoint()
                 next_checkpoint = time.monotonic() + cfg.checkpoint_every
         self.broadcast()
-        self.save_checkpoint()
+        self.save_checkpoint()  # a failure is logged; the write-ahead log holds what was acknowledged
         self.refresh_status()
         return 0
 
@@ -191,7 +213,7 @@ class LearnerService:
 
     def _ingest(self, max_batches: int) -> bool:
         done = 0
-        while done < max_batches and self.limiter.can_insert():
+        while done < max_batches and self.limiter.can_insert() and not self.storage.blocked(time.monotonic()):
             try:
                 item = self.inbox.transitions.get_nowait()
             except queue.Empty:
@@ -202,22 +224,50 @@ class LearnerService:
         return done > 0
 
     def _insert(self, item: Received) -> None:
-        batch: TransitionBatch = item.message
-        obs_dim = self.learner.architecture["obs_dim"]
-        if batch.obs.shape[1] != obs_dim:
+        """A transition or demonstration batch: checked, logged, then stored and acknowledged at the
+        next ``_commit`` (at once when there is no log, or when it comes from the log's replay)."""
+        obs_dim, obs = self.learner.architecture["obs_dim"], item.message.obs
+        if obs.shape[1] != obs_dim:
             self.inbox.reject(
-                "shape", f"batch from {item.name} has obs_dim {batch.obs.shape[1]}, not {obs_dim}"
+                "shape", f"{item.channel} from {item.name} have obs_dim {obs.shape[1]}, not {obs_dim}"
             )
             return
-        if self.durable is not None and not self._replaying and not self.durable.admit(batch):
-            self._ack(item.name, batch.seq, batch.sender)  # a resend of a stored batch: ack it again
+        if self.durable is None or self._replaying:
+            self._store(item)
             return
-        n = self.learner.add(batch)
-        self.limiter.inserted(n)
-        self.tally.inserted(
-            item.name, n, batch.seq, item.arrived, self.learner.version - batch.policy_version
-        )
-        self._ack(item.name, batch.seq, batch.sender)
+        try:
+            fresh = self.durable.admit(item.message, item.payload)
+        except OSError as exc:
+            self._storage_failed(exc, also_lost=1)
+            return
+        if fresh:
+            self._pending.append(item)
+        else:  # a resend of a stored batch: acknowledge it again
+            self._ack(item.name, item.message.seq, item.message.sender)
+
+    def _store(self, item: Received) -> None:
+        """Insert a (durably logged) batch into its buffer, count it and queue its acknowledgement."""
+        message = item.message
+        if isinstance(message, DemoBatch):
+            steps = self.demos.add(message)
+            self._count("demo_steps", steps)
+            self._count("demo_batches")
+            self._count(f"demo_steps/{message.source}", steps)
+            self._count(f"demo_episodes/{message.source}", len(message.episode_lengths))
+        else:
+            n = self.learner.add(message)
+            self.limiter.inserted(n)
+            self.tally.inserted(
+                item.name, n, message.seq, item.arrived, self.learner.version - message.policy_version
+            )
+        self._ack(item.name, message.seq, message.sender)
+
+    def _storage_failed(self, exc: OSError, also_lost: int = 0) -> None:
+        """The log could not take the group: none of it is stored or acknowledged (actors resend)."""
+        self.storage.failed("write-ahead log", self.durable.path, exc, time.monotonic())
+        self._count("batches_not_stored", len(self._pending) + also_lost)
+        self._pending.clear()
+        self._unacked.clear()
 
     def _ack(self, actor: str, seq: int, incarnation: str) -> None:
         """Acknowledge batch ``seq`` of ``incarnation`` (its envelope sender, ``<id>#<start>``), so a
@@ -228,10 +278,16 @@ class LearnerService:
     def _commit(self) -> None:
         """Group commit: one write-ahead-log sync for the batches logged since the last commit,
         then their acknowledgements."""
-        if not self._unacked:
-            return
-        if self.durable is not None:
-            self.durable.sync()
+        if self._pending:
+            try:
+                self.durable.sync()
+            except OSError as exc:
+                self._storage_failed(exc)
+                return
+            self.storage.succeeded()
+            for item in self._pending:
+                self._store(item)
+            self._pending.clear()
         for actor, seq, incarnation in self._unacked:
             self.ack_seq += 1
             ack = Ack(
@@ -271,7 +327,9 @@ class LearnerService:
         due = 8 if warming else self.config.nirl_updates * self.nnql_ran
         return self.nirl.train(due) > 0
 
-    def _drain_other(self) -> bool:
+    def _drain_other(self, blocked: bool = False) -> bool:
+        """Demonstrations (dropped and counted while storage is failing: their sender resends) and
+        evaluation reports."""
         busy = False
         while True:
             try:
@@ -281,18 +339,10 @@ class LearnerService:
                 return busy
             busy = True
             if isinstance(item.message, DemoBatch):
-                if item.message.obs.shape[1] != self.learner.architecture["obs_dim"]:
-                    self.inbox.reject("shape", f"demos from {item.name} have the wrong obs_dim")
-                    continue
-                if self.durable is not None and not self._replaying and not self.durable.admit(item.message):
-                    self._ack(item.name, item.message.seq, item.message.sender)  # a resend: ack again
-                    continue
-                steps = self.demos.add(item.message)
-                self._ack(item.name, item.message.seq, item.message.sender)
-                self._count("demo_steps", steps)
-                self._count("demo_batches")
-                self._count(f"demo_steps/{item.message.source}", steps)
-                self._count(f"demo_episodes/{item.message.source}", len(item.message.episode_lengths))
+                if blocked:
+                    self.inbox.count("dropped/storage_error")
+                else:
+                    self._insert(item)
             elif isinstance(item.message, EvalReport):
                 self._on_eval(item)
 
@@ -352,14 +402,13 @@ def run_learner(
 ) -> int:
     """Process set-up: learner, Zenoh session (hosting the router unless told to connect), the loop.
     ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
-
     nav = NavConfig()
     obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
     learner = NNQLLearner(nnql, obs_dim, n_actions, device=config.device, replay_dir=config.replay_dir)
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
     inbox = Inbox(limits, config.inbox_size, settings.run, log_every=config.log_every)
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
     sender = f"{config.id}#{int(time.time())}"
@@ -371,7 +420,8 @@ def run_learner(
         )
     service = LearnerService(config, learner, session, settings.run, inbox, demos, sender, nirl=trainer)
     try:
-        if config.resume and service.checkpoints is not None and (latest := service.checkpoints.latest()):
+        latest = service.checkpoints.newest_intact() if config.resume and service.checkpoints else None
+        if latest is not None:
             service.resume(latest)
         service.replay_log()
         subscribers = inbox.subscribe(session)
@@ -389,6 +439,8 @@ def run_learner(
             subscriber.undeclare()
         return code
     finally:
-        service.close()
-        session.close()
-        log.info("learner stopped")
+        try:
+            service.close()
+        finally:
+            session.close()  # even if closing the service failed: a held session keeps the process alive
+            log.info("learner stopped")

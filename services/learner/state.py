@@ -19,6 +19,7 @@ from services.learner.inbox import Inbox
 from services.learner.nirl import NIRLTrainer
 from services.learner.ratelimit import RateLimiter
 from services.learner.stats import LearnerTally
+from services.learner.storage import StorageGuard
 
 
 @dataclass(frozen=True)
@@ -33,6 +34,8 @@ class LearnerParts:
     durable: DurableIngest | None
     """write-ahead log and duplicate filter (None without a checkpoint directory)"""
     nirl: NIRLTrainer | None
+    storage: StorageGuard
+    """whether the last write-ahead-log or checkpoint write failed (its counters go into the status)"""
 
     def write(self, tmp: Path) -> None:
         """Write the state into the unfinished checkpoint directory ``tmp``."""
@@ -64,3 +67,12 @@ class LearnerParts:
             self.nirl.load(path / "nirl")
         if self.durable is not None:
             self.durable.load_state(state.get("durable"))
+
+
+def checkpoint_wal_seq(path: Path) -> int:
+    """The write-ahead log position a checkpoint holds everything up to (0 if it cannot say)."""
+    try:
+        durable = json.loads((path / "service.json").read_text()).get("durable") or {}
+        return int(durable.get("wal_seq", 0))
+    except (OSError, ValueError, AttributeError, TypeError):
+        return 0

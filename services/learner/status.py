@@ -11,7 +11,12 @@ def build_status(parts: LearnerParts, model: str, sender: str, seq: int) -> Lear
     """Counters (incl. rejections by reason and the write-ahead log's), rates, versions, replay sizes,
     per-actor totals and last seen, losses and the last evaluation of a learner service's parts."""
     tally, learner = parts.tally, parts.learner
-    counters = {**tally.counters, **parts.inbox.counts(), "updates": learner.version}
+    counters = {
+        **tally.counters,
+        **parts.inbox.counts(),
+        **parts.storage.counters(),
+        "updates": learner.version,
+    }
     if parts.durable is not None:
         counters.update(parts.durable.status_counters())
     counters["transitions_rejected"] = sum(v for k, v in counters.items() if k.startswith("rejected/"))

@@ -23,12 +23,12 @@ to be the id (Zenoh ANDs a subject's attributes): user/password *and* mutual TLS
 from __future__ import annotations
 
 import json
-import os
 import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from protocols import keys
+from services.ops.secret_files import write_private
 
 
 @dataclass
@@ -180,12 +180,6 @@ def access_control(d: Deployment) -> dict:
     }
 
 
-def _write_private(path: Path, text: str) -> None:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-
-
 def write_deployment(out: str | Path, d: Deployment) -> dict[str, Path]:
     """Write users.txt, one <user>.credentials per process (fresh random passwords) and acl.json5."""
     users = d.users()
@@ -193,10 +187,10 @@ def write_deployment(out: str | Path, d: Deployment) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
     passwords = {user: secrets.token_urlsafe(24) for user in users}
     written = {"users.txt": out / "users.txt", "acl.json5": out / "acl.json5"}
-    _write_private(written["users.txt"], "".join(f"{u}:{pw}\n" for u, pw in passwords.items()))
+    write_private(written["users.txt"], "".join(f"{u}:{pw}\n" for u, pw in passwords.items()))
     for user, password in passwords.items():
         written[f"{user}.credentials"] = out / f"{user}.credentials"
-        _write_private(written[f"{user}.credentials"], f"{user}:{password}\n")
+        write_private(written[f"{user}.credentials"], f"{user}:{password}\n")
     header = (
         f"// navlearn access control for run {d.run!r}: navlearn router --auth-dictionary users.txt "
         "--acl acl.json5\n"
