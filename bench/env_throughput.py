@@ -12,8 +12,8 @@ one thread. The machine is shared, so each figure is reported per wall-clock sec
 CPU second of this process (all its threads), with the load average; the threaded ratio is a
 wall-clock ratio (what threads buy is wall-clock time).
 
-    python bench/env_throughput.py     # human lines, then one JSON object on the last line
-    python bench/env_throughput.py --nav learning --robots 256   # the observation policies learn with
+    python -m bench.env_throughput     # human lines, then one JSON object on the last line
+    python -m bench.env_throughput --nav learning --robots 256   # the observation policies learn with
 
 ``--nav learning`` measures :data:`worlds.config.LEARNING_NAV` (sector minima, own-map subgoal
 ..., issue 14) instead of ``NavConfig()``; its target is 200k robot-steps per CPU-second, far
@@ -27,13 +27,9 @@ import json
 import os
 import sys
 import time
-from pathlib import Path
-
-import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import gymnasium as gym
+import numpy as np
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import worlds  # noqa: F401  (registers navlearn/Navigation-v0)

@@ -14,6 +14,7 @@ from worlds.maps import Task
 from worlds.obstacles import DiscObstacles
 from worlds.outcomes import Outcome
 from worlds.perception import observation_bounds
+from worlds.render import render_rgb
 from worlds.rng import seed_state
 from worlds.tasks import DEFAULT_MAPS, TaskSampler, as_sampler
 
@@ -158,6 +159,5 @@ class NavigationEnv(gym.Env):
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from worlds.render import render_rgb
 
         return render_rgb(self.batch, 0, self._trajectory)
