@@ -200,3 +200,24 @@ def test_human_teleop_through_a_pseudo_terminal(network, tmp_path):
         time.sleep(0.5)
     assert status is not None and status.counters.get("demo_episodes/human") == 1, status
     assert status.replay_sizes["demos"] == len(actions)
+
+
+def test_file_source_refuses_demonstrations_in_another_observation_than_the_learners(tmp_path):
+    from gymnasium import spaces
+
+    from agents.demos import DemoFormatError, write_demos
+    from agents.planning.demonstrate import generate_demos
+    from services.demonstrator.config import DemonstratorConfig
+    from services.demonstrator.episodes import check_file
+    from worlds.config import LEARNING_NAV, NavConfig
+    from worlds.env import observation_space
+    from worlds.perception import observation_dim
+
+    for name, nav in (("plain", NavConfig()), ("learning", LEARNING_NAV)):
+        demos, _ = generate_demos("rooms:10", 1, seed=3, config=nav)
+        write_demos(tmp_path / name / "expert-v0", demos, observation_space(nav), spaces.Discrete(5))
+    check_file(DemonstratorConfig(source="file", file=str(tmp_path / "learning" / "expert-v0")))
+    with pytest.raises(
+        DemoFormatError, match=f"width \\[11\\], the learner takes {observation_dim(LEARNING_NAV)}"
+    ):
+        check_file(DemonstratorConfig(source="file", file=str(tmp_path / "plain" / "expert-v0")))

@@ -58,12 +58,15 @@ def test_demonstrators_learner_actor_evaluator_train_and_compare_nirl(tmp_path):
     from agents.imitation.config import ImitationConfig
     from agents.imitation.train import save_trained, train_policy
     from agents.planning.demonstrate import generate_demos
-    from worlds.config import NavConfig
+    from worlds.config import LEARNING_NAV, NavConfig
     from worlds.env import observation_space
 
-    demos, _ = generate_demos("rooms:10", 4, seed=3, config=NavConfig())
+    # the file demonstrator sends what the learner takes (LEARNING_NAV); the imitation reference
+    # is a policy of the plain observation, which its config.json leaves unrecorded (legacy)
+    learning, _ = generate_demos("rooms:10", 4, seed=3, config=LEARNING_NAV)
     dataset = tmp_path / "demos" / "expert-v0"
-    write_demos(dataset, demos, observation_space(NavConfig()), spaces.Discrete(5))
+    write_demos(dataset, learning, observation_space(LEARNING_NAV), spaces.Discrete(5))
+    demos, _ = generate_demos("rooms:10", 4, seed=3, config=NavConfig())
     imitation = tmp_path / "imitation"
     result = train_policy(demos, ImitationConfig(hidden_sizes=(16,), max_epochs=3), n_actions=5)
     save_trained(imitation, result, ImitationConfig(hidden_sizes=(16,), max_epochs=3))
@@ -141,6 +144,8 @@ def test_demonstrators_learner_actor_evaluator_train_and_compare_nirl(tmp_path):
         assert status.versions["nirl"] > SMALL_NIRL["warmstart_updates"], status.versions
         assert any(k.startswith("nirl/") for k in status.losses), status.losses
         assert models >= {"nnql", "nirl"}, models
+        for name in ("astar", "file"):  # they stop by themselves, all acknowledged: no SIGTERM mid-exit
+            processes[name].wait(60)
         subscriber.undeclare()
     finally:
         if session is not None:

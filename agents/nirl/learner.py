@@ -37,6 +37,8 @@ from agents.nirl.losses import (
 from agents.nirl.networks import RewardNetwork, goal_reached
 from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
 from agents.nnql.policy import NNQLPolicy
+from worlds.config import NavConfig, observation_settings
+from worlds.perception import observation_dim
 
 Q_KEYS = (
     "observation",
@@ -66,12 +68,11 @@ class NIRLLearner:
         experience: TensorDictReplayBuffer | None = None,
         demos: TensorDictReplayBuffer | None = None,
     ):
-        from worlds.config import NavConfig
-
         self.config = config
         nav = nav or NavConfig()
-        obs_dim, n_actions = nav.sensors.n_beams + 3, nav.robot.n_actions
-        self.q = NNQLLearner(config.nnql_config(), obs_dim, n_actions)  # seeds torch
+        obs_dim, n_actions = observation_dim(nav), nav.robot.n_actions
+        observation = observation_settings(nav)
+        self.q = NNQLLearner(config.nnql_config(), obs_dim, n_actions, observation=observation)  # seeds torch
         self.reward = RewardNetwork.for_navigation(
             nav, config.reward_hidden_sizes, config.activation, config.reward_scale
         )

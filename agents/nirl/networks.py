@@ -22,6 +22,7 @@ from torch import nn
 from torchrl.modules import MLP
 
 from agents.nnql.networks import ACTIVATIONS
+from worlds.perception import observation_dim
 
 N_ACTION_FEATURES = 3
 """range along the new heading, sin and cos of the goal bearing from the new heading"""
@@ -111,8 +112,10 @@ class RewardNetwork(nn.Module):
         if activation not in ACTIVATIONS:
             raise ValueError(f"unknown activation {activation!r}; expected one of {sorted(ACTIVATIONS)}")
         turns = np.asarray(turns, dtype=np.float64)
-        if len(turns) != n_actions or obs_dim != n_beams + 3:
-            raise ValueError(f"need {n_actions} turns and obs_dim = n_beams + 3, got {len(turns)}, {obs_dim}")
+        if len(turns) != n_actions or obs_dim < n_beams + 3:
+            raise ValueError(
+                f"need {n_actions} turns and obs_dim >= n_beams + 3, got {len(turns)}, {obs_dim}"
+            )
         self.architecture: dict[str, Any] = {
             "obs_dim": int(obs_dim),
             "n_actions": int(n_actions),
@@ -138,10 +141,11 @@ class RewardNetwork(nn.Module):
 
     @classmethod
     def for_navigation(cls, nav: Any, hidden_sizes, activation: str, scale: float) -> RewardNetwork:
-        """The reward network for a ``worlds.config.NavConfig``'s robot and sensors."""
+        """The reward network for a ``worlds.config.NavConfig``'s robot, sensors and observation
+        (its structured features read the newest frame's readings and goal, which lead every frame)."""
         sensors = nav.sensors
         return cls(
-            obs_dim=sensors.n_beams + 3,
+            obs_dim=observation_dim(nav),
             n_actions=nav.robot.n_actions,
             hidden_sizes=hidden_sizes,
             activation=activation,

@@ -26,6 +26,8 @@ def save_policy_files(learner: Any, path: str | Path, **metadata: Any) -> Path:
     save_file(learner.reward_weights(), str(path / (REWARD_FILE + ".tmp")))
     os.replace(path / (REWARD_FILE + ".tmp"), path / REWARD_FILE)
     metadata.setdefault("nirl_config", learner.config.to_dict())
+    if learner.q.observation is not None:
+        metadata.setdefault("observation", learner.q.observation)
     return save_policy(
         path,
         learner.get_weights(),

@@ -32,7 +32,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from agents.demos import Demo, load_demos
+from agents.demos import Demo
 from protocols import keys
 from protocols.codec import encode
 from protocols.messages import DemoBatch, EpisodeMeta
@@ -40,7 +40,7 @@ from services.common.outbox import Outbox, decode_ack
 from services.common.transport import Presence, ZenohSettings, declare_alive, open_session
 from services.common.waiting import WaitLog
 from services.demonstrator.config import DemonstratorConfig
-from services.demonstrator.episodes import expert_episodes, file_episodes
+from services.demonstrator.episodes import check_file, expert_episodes, file_episodes
 from services.demonstrator.teleop import drive
 
 log = logging.getLogger("navlearn.demonstrator")
@@ -176,7 +176,7 @@ class DemoPublisher:
 def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
     """Process set-up: Zenoh session, liveliness, the source, the publisher."""
     if config.source == "file":
-        load_demos(config.file)  # a bad dataset fails here, before joining the network
+        check_file(config)  # a bad dataset fails here, before joining the network
     if not config.id:
         config.id = f"{config.source}-{os.getpid()}"
     keys.check_name(config.id, "demonstrator id")

@@ -18,6 +18,7 @@ from agents.nirl.learner import NIRLLearner
 from agents.nirl.weights import WeightHistory
 from protocols.messages import ExplorationSchedule
 from services.common.weights import WeightsBroadcaster
+from worlds.config import NavConfig
 
 log = logging.getLogger("navlearn.learner.nirl")
 MODEL = "nirl"
@@ -29,9 +30,17 @@ class NIRLTrainer:
     """One NIRL learner fed by the service; ``train(n)`` runs up to n updates when demos exist."""
 
     def __init__(
-        self, config: NIRLConfig, experience, demos, session, run: str, sender: str, broadcast_every: int
+        self,
+        config: NIRLConfig,
+        nav: NavConfig,
+        experience,
+        demos,
+        session,
+        run: str,
+        sender: str,
+        broadcast_every: int,
     ):
-        self.learner = NIRLLearner(config, experience=experience, demos=demos)
+        self.learner = NIRLLearner(config, nav, experience=experience, demos=demos)
         self.weights = WeightsBroadcaster(session, run, MODEL, sender)
         self.broadcast_every = max(int(broadcast_every), 1)
         self.history = WeightHistory()

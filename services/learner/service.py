@@ -423,7 +423,7 @@ def run_learner(
     if config.nirl:
         nirl = nirl or NIRLConfig(seed=nnql.seed)
         trainer = NIRLTrainer(
-            nirl, learner.replay, demos.replay, session, settings.run, sender, config.broadcast_every
+            nirl, nav, learner.replay, demos.replay, session, settings.run, sender, config.broadcast_every
         )
     service = LearnerService(config, learner, session, settings.run, inbox, demos, sender, nirl=trainer)
     try:
