@@ -99,6 +99,7 @@ def main(args: argparse.Namespace) -> int:
         else f"robot world loaded from the compile cache in {seconds:.1f} s"
     )
     stop = stop_on_signals()
+    resumed_version = up.final_version()  # the checkpoint's: the learner's first status is past it already
     up.start()
     start = time.monotonic()
     view, failed = None, None
@@ -117,7 +118,7 @@ def main(args: argparse.Namespace) -> int:
                 learner = current["learner"]
                 console.print(
                     f"resumed from checkpoint {checkpoint_number(up.resumed_from)} "
-                    f"(version {next(iter(learner['versions'].values()), 0)}, "
+                    f"(version {resumed_version}, "
                     f"replay {learner['replay_sizes'].get('transitions', 0)})"
                 )
                 said_resumed[0] = True
