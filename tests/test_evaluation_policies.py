@@ -13,6 +13,7 @@ from agents.evaluation.policies import PolicyFormatError, load_policy, save_poli
 from agents.evaluation.runner import evaluate, make_eval_set
 from agents.nnql.policy import NNQLPolicy
 from worlds.config import (
+    LEARNING_NAV,
     LEGACY_OBSERVATION,
     NavConfig,
     ObservationConfig,
@@ -150,7 +151,21 @@ def test_mismatched_observation_settings_fail_naming_the_field(tmp_path):
         load_policy(tmp_path / "p")
 
 
-def test_shipped_pretrained_policy_loads_with_the_legacy_observation():
+def test_shipped_pretrained_policy_observes_what_policies_learn_with():
     policy = load_policy(PRETRAINED)
+    assert policy.observation == observation_settings(LEARNING_NAV)
+    assert observation_dim(policy.nav_config()) == policy.obs_dim == observation_dim(LEARNING_NAV)
+
+
+def test_policy_saved_without_an_observation_record_evaluates_in_the_legacy_observation(tmp_path):
+    """Every policy saved before the observation settings existed (the first pretrained/nnql)."""
+    save_policy(tmp_path / "old", _weights(np.random.default_rng(2)), ARCH, model="nnql", kind="q_network")
+    assert "observation" not in json.loads((tmp_path / "old" / "config.json").read_text())
+    policy = load_policy(tmp_path / "old")
     assert policy.observation == LEGACY_OBSERVATION
-    assert observation_dim(policy.nav_config()) == policy.obs_dim == 11
+    episodes = make_eval_set("unseen", 4, seed=5)
+    legacy = evaluate(policy, episodes).episodes["unseen"]
+    plain = evaluate(policy, episodes, config=NavConfig()).episodes["unseen"]
+    assert [(e.outcome, e.steps) for e in legacy] == [(e.outcome, e.steps) for e in plain]
+    with pytest.raises(ValueError, match=r"sensors\.n_beams=8 \(the env has 24\)"):
+        evaluate(policy, episodes, config=LEARNING_NAV)
