@@ -47,3 +47,29 @@ def test_goal_seeking_policy_reaches_goals():
         if "final_info" in info:
             outcomes += info["final_info"]["outcome"][info["_final_info"]].tolist()
     assert np.mean(np.asarray(outcomes) == 1) > 0.5  # random actions reach well under 10%
+
+
+def test_learning_observation_is_drawn_sector_arcs_and_the_subgoal(tmp_path, capsys):
+    from worlds.config import LEARNING_NAV
+    from worlds.render import draw_robot, observed_subgoal, sector_arcs
+
+    env = NavigationVectorEnv(1, config=LEARNING_NAV, maps="rooms:12", seed=2)
+    env.reset(seed=2)
+    env.step(np.array([2]))
+    batch = env.batch
+    arcs = sector_arcs(batch, 0)
+    assert len(arcs) == LEARNING_NAV.sensors.n_beams == 24
+    reading = batch.obs[0, 0] * LEARNING_NAV.sensors.max_range  # each arc lies at its sector's reading
+    assert np.allclose(np.hypot(arcs[0][:, 0] - batch.x[0], arcs[0][:, 1] - batch.y[0]), reading, atol=1e-4)
+    subgoal = observed_subgoal(batch, 0)
+    assert subgoal is not None and np.allclose(subgoal, batch.perception.waypoint[0])
+    labels = [line.get_label() for line in draw_robot(None, batch, 0).axes[0].lines]
+    assert "subgoal" in labels
+    env.close()
+    plain = NavigationVectorEnv(1, config=NavConfig(), maps="rooms:12", seed=2)
+    plain.reset(seed=2)
+    assert sector_arcs(plain.batch, 0) == [] and observed_subgoal(plain.batch, 0) is None
+    plain.close()
+    out = tmp_path / "learning.png"
+    assert main(["world", "show", "--learning", "--out", str(out), "--steps", "6", "--map", "rooms:12"]) == 0
+    assert Image.open(out).size[0] > 300

@@ -27,11 +27,15 @@ def draw(
     goal: Cell | None = None,
     robot_radius: float = 0.25,
     title: str | None = None,
+    sectors: Sequence[np.ndarray] = (),
+    subgoal: tuple[float, float] | None = None,
 ) -> Figure:
     """Draw ``grid`` (blocked cells dark), the ``trajectory`` ((n, 2) x, y in m), the robot at
     ``pose`` (x, y, theta) with its ``beams`` ((k, 2) end points), moving ``obstacles`` ((k, 3)
-    x, y, radius), and the ``start``/``goal`` cells. Returns the figure (a new one when ``ax``
-    is None). Axes are metres with y growing downwards, as rows do."""
+    x, y, radius), and the ``start``/``goal`` cells; with sector minima, each reading's arc across
+    its sector (``sectors``: one (m, 2) polyline each), and the ``subgoal`` (x, y) the robot
+    observes. Returns the figure (a new one when ``ax`` is None). Axes are metres with y growing
+    downwards, as rows do."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -64,11 +68,15 @@ def draw(
             for bx, by in np.asarray(beams, dtype=float).reshape(-1, 2):
                 ax.plot([x, bx], [y, by], "-", color="tab:red", lw=0.7, alpha=0.7)
                 ax.plot(bx, by, ".", color="tab:red", ms=3)
+        for arc in sectors:
+            ax.plot(arc[:, 0], arc[:, 1], "-", color="tab:red", lw=1.2, alpha=0.8)
         ax.add_patch(Circle((x, y), robot_radius, color="tab:purple", zorder=5))
         ax.plot([x, x + 1.6 * robot_radius * np.cos(theta)], [y, y + 1.6 * robot_radius * np.sin(theta)],
                 "-", color="white", lw=1.5, zorder=6)  # fmt: skip
+    if subgoal is not None:
+        ax.plot(*subgoal, "*", color="tab:green", ms=12, mec="black", zorder=7, label="subgoal")
     handles = [h for h in ax.patches if h.get_label() in ("start", "goal")]
-    handles += [line for line in ax.lines if line.get_label() == "trajectory"]
+    handles += [line for line in ax.lines if line.get_label() in ("trajectory", "subgoal")]
     if obstacles is not None and len(np.asarray(obstacles).reshape(-1, 3)):
         handles.append(Circle((0, 0), 1, color="tab:orange", label="moving disc"))
     if handles:
@@ -91,13 +99,39 @@ def beam_endpoints(batch: NavBatch, i: int) -> np.ndarray:
     return np.stack([batch.x[i] + ranges * np.cos(angles), batch.y[i] + ranges * np.sin(angles)], axis=1)
 
 
+def sector_arcs(batch: NavBatch, i: int, points: int = 8) -> list[np.ndarray]:
+    """With sector minima (``sensors.rays_per_beam`` > 1): per reading of robot ``i``, the arc
+    at the range it read across its sector, ``points`` (x, y) points each; else none."""
+    cfg = batch.config.sensors
+    if cfg.rays_per_beam == 1:
+        return []
+    ranges = batch.obs[i, : cfg.n_beams].astype(float) * cfg.max_range
+    half = cfg.fov / cfg.n_beams / 2
+    arcs = []
+    for reading, centre in zip(ranges, batch.theta[i] + cfg.beam_angles, strict=True):
+        angles = np.linspace(centre - half, centre + half, points)
+        arcs.append(
+            np.stack([batch.x[i] + reading * np.cos(angles), batch.y[i] + reading * np.sin(angles)], 1)
+        )
+    return arcs
+
+
+def observed_subgoal(batch: NavBatch, i: int) -> tuple[float, float] | None:
+    """The subgoal (x, y in m) robot ``i`` observes now, when its observation has one."""
+    if batch.perception is None or batch.config.observation.subgoal == "none":
+        return None
+    x, y = batch.perception.waypoint[i]
+    return float(x), float(y)
+
+
 def draw_robot(ax: Axes | None, batch: NavBatch, i: int, trajectory=None, title: str | None = None) -> Figure:
-    """Draw robot ``i`` of a batch in its current episode."""
+    """Draw robot ``i`` of a batch in its current episode (with its sectors and subgoal, if any)."""
     task = batch.task(i)
     return draw(
         ax, task.grid, trajectory=trajectory, pose=(batch.x[i], batch.y[i], batch.theta[i]),
         beams=beam_endpoints(batch, i), obstacles=batch.discs(i), start=task.start, goal=task.goal,
-        robot_radius=batch.config.robot.radius, title=title,
+        robot_radius=batch.config.robot.radius, title=title, sectors=sector_arcs(batch, i),
+        subgoal=observed_subgoal(batch, i),
     )  # fmt: skip
 
 

@@ -8,7 +8,9 @@ DESCRIPTION = """\
 Draw the robot world to a PNG: a map (a generated one by default), the robot driven for up
 to --steps steps by a simple goal-seeking policy (or uniformly random actions with --random),
 its trajectory, its range beams at the last step, moving discs, start and goal. It needs no
-file: `navlearn world show --out world.png` draws a generated map.
+file: `navlearn world show --out world.png` draws a generated map. With --learning the robot
+observes what learned policies observe: its 24 sector minima are drawn as arcs across their
+sectors and its subgoal (2.5 m along A* on the map its rays have built) as a star.
 
 --map takes a map spec: FAMILY:N or FAMILY:HxW with FAMILY one of rects, discs, rooms, maze,
 mixed (e.g. rooms:16, rects:24x32), or the path of a MovingAI .map/.scen file or an ASCII
@@ -46,6 +48,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     show.add_argument("--beams", type=int, default=8, help="number of range beams (default 8)")
     show.add_argument("--random", action="store_true", help="drive with uniformly random actions")
+    show.add_argument(
+        "--learning",
+        action="store_true",
+        help="the observation learned policies use (worlds.config.LEARNING_NAV): 24 sector minima of 96 "
+        "rays, drawn as arcs, and the subgoal on the robot's own map, drawn as a star (--beams ignored)",
+    )
     show.set_defaults(func=show_main)
     world.set_defaults(func=lambda args: (world.print_help(), 2)[1])
 
@@ -59,14 +67,15 @@ def show_main(args: argparse.Namespace) -> int:
     if args.steps < 1 or args.beams < 1 or args.obstacles < 0:
         print("navlearn world show: --steps and --beams must be >= 1, --obstacles >= 0", file=sys.stderr)
         return 2
-    from worlds.config import NavConfig, ObstacleConfig, SensorConfig
+    from worlds.config import LEARNING_NAV, NavConfig, ObstacleConfig, SensorConfig
     from worlds.env import NavigationEnv
     from worlds.heuristics import goal_seeking_policy
     from worlds.outcomes import OUTCOME_NAMES
     from worlds.render import draw_robot
 
     config = NavConfig(
-        sensors=replace(SensorConfig(), n_beams=args.beams),
+        sensors=LEARNING_NAV.sensors if args.learning else replace(SensorConfig(), n_beams=args.beams),
+        observation=LEARNING_NAV.observation if args.learning else NavConfig().observation,
         obstacles=ObstacleConfig(count=args.obstacles, mode=args.obstacle_mode),
         max_steps=args.steps,
         pool_size=8,
