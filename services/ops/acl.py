@@ -16,6 +16,13 @@ for ``navlearn router --acl``). A process's user name is its id:
 * evaluator ``e`` publishes ``eval/e`` and its token, receives and asks for ``weights/*``;
 * operators (``status``) query ``status/*`` and see who is alive.
 
+Each publisher is also told of the learner's subscription to its channel (``declare_subscriber``
+in egress on ``transitions/*``, ``demos/*``, ``eval/*``: the key expression the learner
+subscribes with, which a rule on the publisher's own key does not include). Without it the
+publisher's ``matching_status`` stays False and a Zenoh client drops its publisher's puts for
+want of a known subscriber (writer-side filtering), so the outbox, which sends while a
+subscriber matches, would never send. The declaration carries no data and names nobody.
+
 With ``cert_names`` a subject also requires the TLS client certificate's common name
 to be the id (Zenoh ANDs a subject's attributes): user/password *and* mutual TLS.
 """
@@ -89,6 +96,11 @@ def _rule(ident: str, messages: list[str], flow: str, key_exprs: list[str]) -> d
     return {"id": ident, "messages": messages, "flows": [flow], "permission": "allow", "key_exprs": key_exprs}
 
 
+def _learner_subscribes(ident: str, run: str, channel: str) -> dict:
+    """Let a publisher see the learner's ``<channel>/*`` subscription (its matching status)."""
+    return _rule(f"{ident}-matching", ["declare_subscriber"], "egress", [keys.everything(run, channel)])
+
+
 def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
     """subject id -> (user name, its rules)."""
     p = keys.prefix(d.run)
@@ -112,6 +124,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
             a,
             [
                 _rule(f"actor-{a}-publish", ["put", "liveliness_token"], "ingress", own),
+                _learner_subscribes(f"actor-{a}", d.run, "transitions"),
                 _rule(
                     f"actor-{a}-follow",
                     ["declare_subscriber"],
@@ -133,6 +146,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
             ident,
             [
                 _rule(f"demonstrator-{ident}-publish", ["put", "liveliness_token"], "ingress", own),
+                _learner_subscribes(f"demonstrator-{ident}", d.run, "demos"),
                 _rule(
                     f"demonstrator-{ident}-follow",
                     ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
@@ -149,6 +163,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
             e,
             [
                 _rule(f"evaluator-{e}-publish", ["put", "liveliness_token"], "ingress", own),
+                _learner_subscribes(f"evaluator-{e}", d.run, "eval"),
                 _rule(
                     f"evaluator-{e}-follow", ["declare_subscriber", "query"], "ingress", [f"{p}/weights/*"]
                 ),
