@@ -36,6 +36,8 @@ from services.learner.ratelimit import RateLimiter
 from services.learner.state import load_service_state, write_service_state
 from services.learner.stats import ActorStats, LagWindow, RateWindow
 from services.learner.status import build_status
+from services.ops.acl import acl_publishers
+from services.ops.router import exposure_warning
 from services.ops.status import eval_summary
 
 log = logging.getLogger("navlearn.learner")
@@ -128,8 +130,7 @@ class LearnerService:
             if record.channel == "transitions":
                 self._insert(item)
             else:
-                self.inbox.other.put(item)
-                self._drain_other()
+                self._handle_other(item)
         self._commit()
         self._replaying = False
         log.info("write-ahead log replayed: %s", self.durable.status_counters())
@@ -169,24 +170,22 @@ class LearnerService:
         return 0
 
     def _wait_for_data(self, timeout: float) -> None:
-        if not self.limiter.can_insert():
-            time.sleep(timeout)  # cannot happen with tolerance >= 1, kept as a guard against a busy loop
-            return
-        try:
-            item = self.inbox.transitions.get(timeout=timeout)
-        except queue.Empty:
-            return
-        self._insert(item)
-        self._commit()
+        """Idle: wait for a batch, or sleep when the next one waits for the rate limiter (cannot
+        happen while updates are possible: kept as a guard against a busy loop)."""
+        if self.inbox.transitions.qsize():
+            time.sleep(timeout)
+        elif self.inbox.transitions.wait(timeout):
+            self._ingest(max_batches=1)
 
     def _ingest(self, max_batches: int) -> bool:
+        """Insert up to ``max_batches`` batches, in the inbox's fair order, each once the rate limiter
+        has room for its rows (a batch waits for the updates it owes; it never jumps ahead)."""
         done = 0
-        while done < max_batches and self.limiter.can_insert():
-            try:
-                item = self.inbox.transitions.get_nowait()
-            except queue.Empty:
+        while done < max_batches:
+            item = self.inbox.transitions.peek()
+            if item is None or not self.limiter.can_insert(len(item.message)):
                 break
-            self._insert(item)
+            self._insert(self.inbox.transitions.get_nowait())
             done += 1
         self._commit()
         return done > 0
@@ -268,21 +267,24 @@ class LearnerService:
                 self._commit()
                 return busy
             busy = True
-            if isinstance(item.message, DemoBatch):
-                if item.message.obs.shape[1] != self.learner.architecture["obs_dim"]:
-                    self.inbox.reject("shape", f"demos from {item.name} have the wrong obs_dim")
-                    continue
-                if self.durable is not None and not self._replaying and not self.durable.admit(item.message):
-                    self._ack(item.name, item.message.seq, item.message.sender)  # a resend: ack again
-                    continue
-                steps = self.demos.add(item.message)
-                self._ack(item.name, item.message.seq, item.message.sender)
-                self._count("demo_steps", steps)
-                self._count("demo_batches")
-                self._count(f"demo_steps/{item.message.source}", steps)
-                self._count(f"demo_episodes/{item.message.source}", len(item.message.episode_lengths))
-            elif isinstance(item.message, EvalReport):
-                self._on_eval(item)
+            self._handle_other(item)
+
+    def _handle_other(self, item: Received) -> None:
+        if isinstance(item.message, DemoBatch):
+            if item.message.obs.shape[1] != self.learner.architecture["obs_dim"]:
+                self.inbox.reject("shape", f"demos from {item.name} have the wrong obs_dim")
+                return
+            if self.durable is not None and not self._replaying and not self.durable.admit(item.message):
+                self._ack(item.name, item.message.seq, item.message.sender)  # a resend: ack again
+                return
+            steps = self.demos.add(item.message)
+            self._ack(item.name, item.message.seq, item.message.sender)
+            self._count("demo_steps", steps)
+            self._count("demo_batches")
+            self._count(f"demo_steps/{item.message.source}", steps)
+            self._count(f"demo_episodes/{item.message.source}", len(item.message.episode_lengths))
+        elif isinstance(item.message, EvalReport):
+            self._on_eval(item)
 
     def _on_eval(self, item: Received) -> None:
         self._count("eval_reports")
@@ -354,6 +356,19 @@ class LearnerService:
         self.scalars.close()
 
 
+def max_batch_rows(config: LearnerConfig, nnql: NNQLConfig) -> int:
+    """The most transitions one batch may hold: a ``max_batch_fraction`` of the replay, and no more
+    than the rate limiter lets in at once (``rate_tolerance / utd_ratio``)."""
+    fits_limiter = RateLimiter(nnql.utd_ratio, 1, config.rate_tolerance).max_rows()
+    rows = min(int(config.max_batch_fraction * nnql.replay_capacity), fits_limiter)
+    if rows < 1:
+        raise ValueError(
+            f"max_batch_fraction {config.max_batch_fraction} x replay_capacity {nnql.replay_capacity} admits "
+            "no transition batch; raise --max-batch-fraction"
+        )
+    return rows
+
+
 def run_learner(
     config: LearnerConfig, nnql: NNQLConfig, settings: ZenohSettings, stop: threading.Event, nirl=None
 ) -> int:
@@ -369,7 +384,19 @@ def run_learner(
     learner = NNQLLearner(nnql, obs_dim, n_actions)
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
-    inbox = Inbox(limits, config.inbox_size, settings.run, log_every=config.log_every)
+    known = [acl_publishers(f, settings.run) for f in (config.acl_names, settings.acl_file) if f]
+    inbox = Inbox(
+        limits,
+        config.inbox_size,
+        settings.run,
+        log_every=config.log_every,
+        capacity_bytes=config.inbox_mb * 2**20,
+        max_rows=max_batch_rows(config, nnql),
+        max_names=config.max_names,
+        known_names=frozenset().union(*known),
+    )
+    if settings.mode == "router" and (warning := exposure_warning(settings)):
+        log.warning("%s", warning)  # the learner hosts the router
     session = connect(settings, stop)
     if session is None:
         return 0

@@ -41,9 +41,21 @@ def load_service_state(service: Any, path: Path) -> None:
     state = json.loads((path / "service.json").read_text())
     service.limiter.load_state(state["limiter"])
     service.counters = {k: int(v) for k, v in state["counters"].items()}
-    service.inbox.load_counts(state["inbox_counts"])
-    for actor, saved in state["actors"].items():
-        service.actors[actor] = ActorStats(transitions=saved["transitions"], batches=saved["batches"])
+    # names beyond the inbox's bound (a checkpoint of a learner without one) are dropped, busiest kept
+    busiest = sorted(state["actors"].items(), key=lambda kv: -int(kv[1]["transitions"]))
+    service.inbox.remember(name for name, _ in busiest)
+    kept = service.inbox.names() | service.inbox.known_names
+    per_name = ("dropped/sender_full/",)
+    service.inbox.load_counts(
+        {
+            k: v
+            for k, v in state["inbox_counts"].items()
+            if not k.startswith(per_name) or k.split("/")[-1] in kept
+        }
+    )
+    for actor, saved in busiest:
+        if actor in kept:
+            service.actors[actor] = ActorStats(transitions=saved["transitions"], batches=saved["batches"])
     service.demos.load(path / "demos", state["demo_episodes"])
     if service.nirl is not None:
         service.nirl.load(path / "nirl")

@@ -35,7 +35,10 @@ import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import zenoh
+
 from protocols import keys
+from protocols.errors import ProtocolError
 
 ACTOR_STATUS_PREFIX = "actor:"
 """an actor answers its status on ``status/actor:<id>`` (the ``status`` channel has one name)"""
@@ -205,6 +208,30 @@ def access_control(d: Deployment) -> dict:
         "subjects": subjects,
         "policies": policies,
     }
+
+
+def acl_publishers(path: str | Path, run: str) -> set[str]:
+    """The names an ACL file lets publish ``transitions/<name>``, ``demos/<name>`` or ``eval/<name>``
+    in ``run`` (what a learner accepts however many other names it has seen)."""
+    section = json.loads(zenoh.Config.from_file(str(path)).get_json("access_control")) or {}
+    names = set()
+    for rule in section.get("rules") or []:
+        if rule.get("permission") != "allow" or "put" not in rule.get("messages", []):
+            continue
+        if "ingress" not in rule.get("flows", []):
+            continue
+        for expr in rule.get("key_exprs", []):
+            try:
+                parsed = keys.parse(expr)
+            except ProtocolError:
+                continue  # a wildcard or another run's key: names nobody
+            if (
+                parsed.run == run
+                and parsed.channel in ("transitions", "demos", "eval")
+                and "*" not in parsed.name
+            ):
+                names.add(parsed.name)
+    return names
 
 
 def _write_private(path: Path, text: str) -> None:
