@@ -8,7 +8,15 @@ Outbox, one Zenoh session each) and a flooder publishing the same big batch with
 At the end the learner is stopped with SIGTERM and its final checkpoint is read back:
 every acknowledged id must be stored exactly once.
 
+Then the flood and large-batch phases (issue #19): a fresh learner, one normal traced actor
+sending as fast as its acknowledgements allow, and bench/flooder.py in its own process, in
+interleaved rounds: alone; with a flood (valid batches of the largest accepted size on the
+flooder's own key plus ~60 MB valid batches on 4 more keys); with large batches only. Reported:
+the normal actor's acknowledged batches/s per phase, its slowdown under each, the learner's
+peak RSS (VmHWM) and what it refused.
+
     python bench/chaos.py --actors 3 --kills 3 --seconds 45
+    python bench/chaos.py --only-flood --flood-rounds 3 --flood-seconds 10
 """
 
 from __future__ import annotations
@@ -34,6 +42,7 @@ from services.learner.checkpoint import CheckpointDir
 from services.ops.status import query_status
 from tests.conftest import free_port
 from tests.reliability_helpers import TracedActor, start_learner, stop_process, stored_ids
+from tests.reliability_helpers import learner_argv as hosting_learner_argv
 
 
 def parse_args() -> argparse.Namespace:
@@ -47,6 +56,10 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--ingest-rounds", type=int, default=4, help="ingest rounds after the warm-up")
     p.add_argument("--wal-fsync", default="always", help="learner --wal-fsync in the ingest comparison")
     p.add_argument("--only-ingest", action="store_true", help="skip the chaos phase, measure ingest only")
+    p.add_argument("--only-flood", action="store_true", help="run only the flood and large-batch phases")
+    p.add_argument("--flood-rounds", type=int, default=3, help="interleaved rounds of the flood phases")
+    p.add_argument("--flood-seconds", type=float, default=10.0, help="each flood-phase measurement")
+    p.add_argument("--flooder-nice", type=int, default=19, help="nice of the flooder process (0: none)")
     return p.parse_args()
 
 
@@ -211,11 +224,82 @@ def chaos(args, root: Path) -> dict:
     return result
 
 
+FLOOD_PHASES = {
+    "alone": None,
+    "flood": ["--rows", "1000", "--big-mb", "60", "--big-keys", "4"],
+    "large": ["--rows", "0", "--big-mb", "60", "--big-keys", "4"],
+}
+"""flooder.py arguments per phase (1000 rows: the learner's default row limit, 1% of its 100k replay)"""
+
+
+def flood(args, root: Path) -> dict:
+    """The normal actor's acknowledged rate alone, under a flood and under large batches."""
+    endpoint, run = f"tcp/127.0.0.1:{free_port()}", "flood"
+    argv = hosting_learner_argv(endpoint, run, root / "flood-ckpt")  # hosts the router; 100k replay
+    learner = start_learner(argv, root / "flood-learner.log")
+    normal = ActorThread(endpoint, run, "normal", first_id=1)
+    watcher = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
+    deadline = time.monotonic() + 180
+    while len(normal.actor.acked_seqs) < 50 and time.monotonic() < deadline:
+        time.sleep(0.2)
+    rates: dict[str, list[float]] = {phase: [] for phase in FLOOD_PHASES}
+    rss_before = peak_rss_mb(learner.pid)
+    nice = ["nice", "-n", str(args.flooder_nice)] if args.flooder_nice else []
+    flooder_cmd = [
+        sys.executable,
+        str(Path(__file__).with_name("flooder.py")),
+        "--connect",
+        endpoint,
+        "--run",
+        run,
+    ]
+    for _ in range(args.flood_rounds):
+        for phase, extra in FLOOD_PHASES.items():
+            proc = (
+                None
+                if extra is None
+                else subprocess.Popen([*nice, *flooder_cmd, *extra], stdout=subprocess.PIPE)
+            )
+            if proc is not None:
+                time.sleep(3.0)  # its session up and flooding
+            start, acked = time.monotonic(), len(normal.actor.acked_seqs)
+            time.sleep(args.flood_seconds)
+            rates[phase].append((len(normal.actor.acked_seqs) - acked) / (time.monotonic() - start))
+            if proc is not None:
+                stop_process(proc, timeout=30)
+            print(f"{phase}: normal actor {rates[phase][-1]:.1f} acknowledged batches/s")
+    status = query_status(watcher, run, timeout=5.0)
+    peak = peak_rss_mb(learner.pid)
+    normal.drain(60)
+    lost = len(normal.actor.outbox)
+    normal.close()
+    watcher.close()
+    stop_process(learner)
+    counters = status.counters if status else {}
+    alone = float(np.median(rates["alone"]))
+    return {
+        "flood/normal_batches_per_s": {k: [round(r, 1) for r in v] for k, v in rates.items()},
+        "flood/slowdown": round(1 - float(np.median(rates["flood"])) / alone, 3),
+        "flood/large_batch_slowdown": round(1 - float(np.median(rates["large"])) / alone, 3),
+        "flood/learner_rss_mb_before": round(rss_before, 1),
+        "flood/learner_peak_rss_mb": round(peak, 1),
+        "flood/rejected_batch_too_large": int(counters.get("rejected/batch_too_large", 0)),
+        "flood/dropped_sender_full_flood": int(counters.get("dropped/sender_full/flood", 0)),
+        "flood/flood_transitions_stored": int(counters.get("transitions/flood", 0)),
+        "flood/normal_unacknowledged_at_end": lost,
+    }
+
+
 def main() -> None:
     args = parse_args()
     with tempfile.TemporaryDirectory(prefix="navlearn-chaos-") as tmp:
         root = Path(tmp)
+        if args.only_flood:
+            print(json.dumps(flood(args, root)))
+            return
         result = {} if args.only_ingest else chaos(args, root)
+        if not args.only_ingest:
+            result.update(flood(args, root))
         if not args.only_ingest:
             print(
                 f"sent {result['transitions_sent']}, acknowledged {result['transitions_acknowledged']}, "
