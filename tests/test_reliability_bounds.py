@@ -19,9 +19,8 @@ from protocols.limits import Limits
 from protocols.messages import TransitionBatch
 from services.learner.config import LearnerConfig
 from services.learner.fairqueue import MESSAGE_WORK, FairQueue, SenderFull
-from services.learner.inbox import Inbox, transition_bytes_bound
+from services.learner.inbox import Inbox, max_batch_rows, transition_bytes_bound
 from services.learner.ratelimit import RateLimiter
-from services.learner.service import max_batch_rows
 from services.ops.acl import Deployment, acl_publishers, write_deployment
 from tests.reliability_helpers import N_ACTIONS, OBS_DIM
 

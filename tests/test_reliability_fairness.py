@@ -155,7 +155,16 @@ def test_a_flood_of_actor_names_is_refused_beyond_the_bound_and_status_stays_sma
             for i in range(2000):
                 payload = encode(make_batch(f"n{i}", 4, 1))
                 session.put(keys.transitions(run, f"n{i}"), payload, congestion_control=BLOCK)
-            time.sleep(3.0)
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline:  # until the 32 admitted batches are inserted
+                status = query_status(session, run, timeout=5.0)
+                if (
+                    status is not None
+                    and len([k for k in status.counters if k.startswith("transitions/")]) >= 32
+                ):
+                    break
+                time.sleep(0.5)
+            time.sleep(1.0)
             status = query_status(session, run, timeout=5.0)
             size = len(encode(status))
         stop_process(learner)  # with a final checkpoint: the names survive a restart, bounded

@@ -31,12 +31,16 @@ import time
 from collections import Counter
 from dataclasses import dataclass
 
+from agents.nnql.config import NNQLConfig
 from protocols import keys
 from protocols.codec import decode
 from protocols.errors import ProtocolError
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, Message, TransitionBatch
+from services.learner.config import LearnerConfig
 from services.learner.fairqueue import FairQueue, SenderFull
+from services.learner.ratelimit import RateLimiter
+from services.ops.acl import acl_publishers
 
 log = logging.getLogger("navlearn.inbox")
 MB = 2**20
@@ -83,7 +87,7 @@ class Inbox:
         if capacity_bytes < 2 * limits.max_message_bytes:
             raise ValueError(
                 f"inbox of {capacity_bytes / MB:.0f} MB cannot hold two messages of the largest size "
-                f"accepted ({limits.max_message_bytes / MB:.0f} MB); raise the inbox's bytes"
+                f"accepted ({limits.max_message_bytes / MB:.0f} MB); raise the inbox's bytes (--inbox-mb)"
             )
         self.limits = limits
         self.run = run
@@ -205,3 +209,34 @@ class Inbox:
         if now - self._last_log.get(reason, -1e9) >= self._log_every:
             self._last_log[reason] = now
             log.warning("%s (counting %s; logged at most every %.0f s)", text, reason, self._log_every)
+
+
+def max_batch_rows(config: LearnerConfig, nnql: NNQLConfig) -> int:
+    """The most transitions one batch may hold: a ``max_batch_fraction`` of the replay, and no more
+    than the rate limiter lets in at once (``rate_tolerance / utd_ratio``)."""
+    fits_limiter = RateLimiter(nnql.utd_ratio, 1, config.rate_tolerance).max_rows()
+    rows = min(int(config.max_batch_fraction * nnql.replay_capacity), fits_limiter)
+    if rows < 1:
+        raise ValueError(
+            f"max_batch_fraction {config.max_batch_fraction} x replay_capacity {nnql.replay_capacity} admits "
+            "no transition batch; raise --max-batch-fraction"
+        )
+    return rows
+
+
+def learner_inbox(
+    config: LearnerConfig, nnql: NNQLConfig, limits: Limits, run: str, acl_files: tuple[str | None, ...]
+) -> Inbox:
+    """The learner service's inbox: its bounds from ``config`` and ``nnql``; the publishers named in
+    ``acl_files`` (empty entries skipped) always accepted."""
+    known = [acl_publishers(f, run) for f in acl_files if f]
+    return Inbox(
+        limits,
+        config.inbox_size,
+        run,
+        log_every=config.log_every,
+        capacity_bytes=config.inbox_mb * MB,
+        max_rows=max_batch_rows(config, nnql),
+        max_names=config.max_names,
+        known_names=frozenset().union(*known),
+    )

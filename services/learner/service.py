@@ -31,12 +31,11 @@ from services.common.transport import ZenohSettings, declare_alive
 from services.learner.checkpoint import CheckpointDir
 from services.learner.config import EXPLORATION_FIELDS, LearnerConfig
 from services.learner.durable import DurableIngest
-from services.learner.inbox import Inbox, Received
+from services.learner.inbox import Inbox, Received, learner_inbox
 from services.learner.ratelimit import RateLimiter
 from services.learner.state import load_service_state, write_service_state
 from services.learner.stats import ActorStats, LagWindow, RateWindow
 from services.learner.status import build_status
-from services.ops.acl import acl_publishers
 from services.ops.router import exposure_warning
 from services.ops.status import eval_summary
 
@@ -356,19 +355,6 @@ class LearnerService:
         self.scalars.close()
 
 
-def max_batch_rows(config: LearnerConfig, nnql: NNQLConfig) -> int:
-    """The most transitions one batch may hold: a ``max_batch_fraction`` of the replay, and no more
-    than the rate limiter lets in at once (``rate_tolerance / utd_ratio``)."""
-    fits_limiter = RateLimiter(nnql.utd_ratio, 1, config.rate_tolerance).max_rows()
-    rows = min(int(config.max_batch_fraction * nnql.replay_capacity), fits_limiter)
-    if rows < 1:
-        raise ValueError(
-            f"max_batch_fraction {config.max_batch_fraction} x replay_capacity {nnql.replay_capacity} admits "
-            "no transition batch; raise --max-batch-fraction"
-        )
-    return rows
-
-
 def run_learner(
     config: LearnerConfig, nnql: NNQLConfig, settings: ZenohSettings, stop: threading.Event, nirl=None
 ) -> int:
@@ -384,17 +370,7 @@ def run_learner(
     learner = NNQLLearner(nnql, obs_dim, n_actions)
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
-    known = [acl_publishers(f, settings.run) for f in (config.acl_names, settings.acl_file) if f]
-    inbox = Inbox(
-        limits,
-        config.inbox_size,
-        settings.run,
-        log_every=config.log_every,
-        capacity_bytes=config.inbox_mb * 2**20,
-        max_rows=max_batch_rows(config, nnql),
-        max_names=config.max_names,
-        known_names=frozenset().union(*known),
-    )
+    inbox = learner_inbox(config, nnql, limits, settings.run, (config.acl_names, settings.acl_file))
     if settings.mode == "router" and (warning := exposure_warning(settings)):
         log.warning("%s", warning)  # the learner hosts the router
     session = connect(settings, stop)
