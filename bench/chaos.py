@@ -10,8 +10,8 @@ every acknowledged id must be stored exactly once.
 
 Then the flood and large-batch phases (issue #19): a fresh learner, one normal traced actor
 sending as fast as its acknowledgements allow, and bench/flooder.py in its own process, in
-interleaved rounds: alone; with a flood (valid batches of the largest accepted size on the
-flooder's own key plus ~60 MB valid batches on 4 more keys); with large batches only. Reported:
+interleaved rounds: alone; with valid batches of the largest accepted size (1000 rows) on the
+flooder's own key; with ~60 MB valid batches on 4 more keys; with both. Reported:
 the normal actor's acknowledged batches/s per phase, its slowdown under each, the learner's
 peak RSS (VmHWM) and what it refused.
 
@@ -41,7 +41,7 @@ from services.common.transport import ZenohSettings, open_session
 from services.learner.checkpoint import CheckpointDir
 from services.ops.status import query_status
 from tests.conftest import free_port
-from tests.reliability_helpers import TracedActor, start_learner, stop_process, stored_ids
+from tests.reliability_helpers import TracedActor, settle, start_learner, stop_process, stored_ids
 from tests.reliability_helpers import learner_argv as hosting_learner_argv
 
 
@@ -60,6 +60,9 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--flood-rounds", type=int, default=3, help="interleaved rounds of the flood phases")
     p.add_argument("--flood-seconds", type=float, default=10.0, help="each flood-phase measurement")
     p.add_argument("--flooder-nice", type=int, default=19, help="nice of the flooder process (0: none)")
+    p.add_argument(
+        "--normal-rate", type=float, default=25.0, help="batches/s the normal actor offers (0: all it can)"
+    )
     return p.parse_args()
 
 
@@ -98,17 +101,21 @@ def start_router(endpoint: str, log: Path) -> subprocess.Popen:
 class ActorThread:
     """One traceable actor with its own session, sending until stopped."""
 
-    def __init__(self, endpoint: str, run: str, name: str, first_id: int) -> None:
+    def __init__(self, endpoint: str, run: str, name: str, first_id: int, rate: float = 0.0) -> None:
+        """``rate``: batches/s offered (0: as fast as acknowledgements allow, 5 ms apart)."""
         self.session = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
         self.actor = TracedActor(self.session, run, name, per_batch=16, first_id=first_id)
+        self.rate = rate
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._loop, daemon=True)
         self.thread.start()
 
     def _loop(self) -> None:
+        due = time.monotonic()
         while not self.stop.is_set():
             self.actor.send_one(self.stop)
-            time.sleep(0.005)
+            due = due + 1.0 / self.rate if self.rate else time.monotonic() + 0.005
+            self.stop.wait(max(0.0, due - time.monotonic()))
 
     def drain(self, timeout: float) -> None:
         self.stop.set()
@@ -226,8 +233,9 @@ def chaos(args, root: Path) -> dict:
 
 FLOOD_PHASES = {
     "alone": None,
-    "flood": ["--rows", "1000", "--big-mb", "60", "--big-keys", "4"],
+    "rows": ["--rows", "1000"],
     "large": ["--rows", "0", "--big-mb", "60", "--big-keys", "4"],
+    "flood": ["--rows", "1000", "--big-mb", "60", "--big-keys", "4"],
 }
 """flooder.py arguments per phase (1000 rows: the learner's default row limit, 1% of its 100k replay)"""
 
@@ -237,12 +245,13 @@ def flood(args, root: Path) -> dict:
     endpoint, run = f"tcp/127.0.0.1:{free_port()}", "flood"
     argv = hosting_learner_argv(endpoint, run, root / "flood-ckpt")  # hosts the router; 100k replay
     learner = start_learner(argv, root / "flood-learner.log")
-    normal = ActorThread(endpoint, run, "normal", first_id=1)
+    normal = ActorThread(endpoint, run, "normal", first_id=1, rate=args.normal_rate)
     watcher = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
     deadline = time.monotonic() + 180
     while len(normal.actor.acked_seqs) < 50 and time.monotonic() < deadline:
         time.sleep(0.2)
     rates: dict[str, list[float]] = {phase: [] for phase in FLOOD_PHASES}
+    settle(watcher, run)
     rss_before = peak_rss_mb(learner.pid)
     nice = ["nice", "-n", str(args.flooder_nice)] if args.flooder_nice else []
     flooder_cmd = [
@@ -267,6 +276,7 @@ def flood(args, root: Path) -> dict:
             rates[phase].append((len(normal.actor.acked_seqs) - acked) / (time.monotonic() - start))
             if proc is not None:
                 stop_process(proc, timeout=30)
+                settle(watcher, run)  # what the router still held of the flood is through
             print(f"{phase}: normal actor {rates[phase][-1]:.1f} acknowledged batches/s")
     status = query_status(watcher, run, timeout=5.0)
     peak = peak_rss_mb(learner.pid)
@@ -279,8 +289,11 @@ def flood(args, root: Path) -> dict:
     alone = float(np.median(rates["alone"]))
     return {
         "flood/normal_batches_per_s": {k: [round(r, 1) for r in v] for k, v in rates.items()},
-        "flood/slowdown": round(1 - float(np.median(rates["flood"])) / alone, 3),
-        "flood/large_batch_slowdown": round(1 - float(np.median(rates["large"])) / alone, 3),
+        **{
+            f"flood/slowdown/{k}": round(1 - float(np.median(v)) / alone, 3)
+            for k, v in rates.items()
+            if k != "alone"
+        },
         "flood/learner_rss_mb_before": round(rss_before, 1),
         "flood/learner_peak_rss_mb": round(peak, 1),
         "flood/rejected_batch_too_large": int(counters.get("rejected/batch_too_large", 0)),

@@ -23,6 +23,7 @@ from protocols.codec import decode, encode
 from protocols.flow import Ack
 from protocols.messages import TransitionBatch
 from services.common.outbox import Outbox
+from services.ops.status import query_status
 
 OBS_DIM, N_ACTIONS = 11, 5  # worlds' default robot: 8 beams + 3 goal features, 5 turns
 
@@ -97,6 +98,25 @@ class TracedActor:
     def close(self) -> None:
         self.acks.undeclare()
         self.publisher.undeclare()
+
+
+def settle(session, run: str, timeout: float = 60.0) -> None:
+    """Wait until the learner's flood counters stop moving (the router may still be delivering a
+    flood after the flooder stopped)."""
+    watched = (
+        "rejected/batch_too_large",
+        "dropped/sender_full/flood",
+        "transitions/flood",
+        "batches_received",
+    )
+    last, deadline = None, time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        status = query_status(session, run, timeout=5.0)
+        now = status and tuple(status.counters.get(k, 0) for k in watched)
+        if now is not None and now == last:
+            return
+        last = now
+        time.sleep(1.5)
 
 
 def learner_argv(endpoint: str, run: str, checkpoint_dir: Path, *extra: str) -> list[str]:

@@ -1,7 +1,8 @@
 """A flooder in its own process against a real learner (issue #19): valid batches of the largest
 accepted size on its own key as fast as Zenoh takes them, and ~60 MB valid batches on 4 more keys.
-A normal actor's acknowledged rate, measured in interleaved rounds with and without the flood,
-falls by at most SLOWDOWN_BOUND; the learner's RSS grows by at most RSS_BOUND_MB; the large batches
+A normal actor's acknowledged rate (it sends at its own pace, within its fair share, as a real
+actor's robots do), measured in interleaved rounds with and without the flood, falls by at most
+SLOWDOWN_BOUND; the learner's RSS grows by at most RSS_BOUND_MB; the large batches
 are refused with their reason, the flooder's excess dropped on its own share; nothing of the
 normal actor is lost. And a flood of distinct actor names leaves the status readable and small.
 
@@ -27,7 +28,7 @@ from protocols.codec import encode
 from services.common.transport import ZenohSettings, open_session
 from services.ops.status import query_status
 from tests.conftest import free_port
-from tests.reliability_helpers import TracedActor, learner_argv, start_learner, stop_process
+from tests.reliability_helpers import TracedActor, learner_argv, settle, start_learner, stop_process
 
 REPO = Path(__file__).resolve().parents[1]
 SLOWDOWN_BOUND = 0.20
@@ -36,6 +37,8 @@ RSS_BOUND_MB = 600
 """the learner's RSS under the flood grows by at most this (two inbox queues of 256 MB, plus
 Zenoh's buffers for the message being received)"""
 ROUNDS, ROUND_S = 2, 8.0
+NORMAL_RATE = 25.0
+"""batches/s the normal actor offers (16 transitions each): well within its fair share"""
 BLOCK = zenoh.CongestionControl.BLOCK
 
 
@@ -47,7 +50,8 @@ def rss_mb(pid: int) -> float:
 
 
 class Normal:
-    """A traced actor sending through the real Outbox as fast as its acknowledgements allow."""
+    """A traced actor offering NORMAL_RATE batches/s through the real Outbox (window 4), as a real
+    actor's robots produce data at their own pace: about a twentieth of what this learner takes."""
 
     def __init__(self, session, run: str) -> None:
         self.actor = TracedActor(session, run, "normal", per_batch=16)
@@ -56,9 +60,11 @@ class Normal:
         self.thread.start()
 
     def _loop(self) -> None:
+        due = time.monotonic()
         while not self.stop.is_set():
             self.actor.send_one(self.stop)
-            time.sleep(0.002)
+            due += 1.0 / NORMAL_RATE
+            self.stop.wait(max(0.0, due - time.monotonic()))
 
     def acked(self) -> int:
         return len(self.actor.acked_seqs)
@@ -101,7 +107,7 @@ def test_a_flooder_slows_a_normal_actor_by_at_most_the_bound_and_memory_stays_bo
         while normal.acked() < 50 and time.monotonic() < deadline:
             time.sleep(0.2)
         assert normal.acked() >= 50, (tmp_path / "learner.log").read_text()[-2000:]
-        time.sleep(2.0)
+        settle(session, run)
         baseline_rss = rss_mb(learner.pid)
         for _ in range(ROUNDS):
             for phase in ("alone", "flood"):
@@ -116,6 +122,7 @@ def test_a_flooder_slows_a_normal_actor_by_at_most_the_bound_and_memory_stays_bo
                 if proc is not None:
                     stop_process(proc, timeout=30)
                     print("flooder:", proc.stdout.read().strip().splitlines()[-1:])
+                    settle(session, run)  # what the router still held of the flood is through
         status = query_status(session, run, timeout=5.0)
         normal.close(drain_s=60)
         lost = len(normal.actor.outbox)

@@ -234,10 +234,17 @@ class LearnerService:
             self.session.put(keys.acks(self.run_name, actor), encode(ack))
         self._unacked.clear()
 
-    def _train(self, max_updates: int) -> bool:
+    def _train(self, max_updates: int, max_seconds: float = 0.02) -> bool:
+        """Up to ``max_updates`` updates the rate limiter allows, for at most about ``max_seconds``
+        (so a batch waiting in the inbox waits one slice, not a burst of updates, before it goes in)."""
         ran = 0
         replay_size = len(self.learner.replay)
-        while ran < max_updates and self.limiter.can_update(replay_size):
+        until = time.monotonic() + max_seconds
+        while (
+            ran < max_updates
+            and self.limiter.can_update(replay_size)
+            and (ran == 0 or time.monotonic() < until)
+        ):
             self.metrics = self.learner.update()
             self.limiter.updated()
             self.update_rate.add()
