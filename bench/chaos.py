@@ -41,7 +41,7 @@ from services.common.transport import ZenohSettings, open_session
 from services.learner.checkpoint import CheckpointDir
 from services.ops.status import query_status
 from tests.conftest import free_port
-from tests.reliability_helpers import TracedActor, settle, start_learner, stop_process, stored_ids
+from tests.reliability_helpers import TracedActor, caught_up, settle, start_learner, stop_process, stored_ids
 from tests.reliability_helpers import learner_argv as hosting_learner_argv
 
 
@@ -243,7 +243,8 @@ FLOOD_PHASES = {
 def flood(args, root: Path) -> dict:
     """The normal actor's acknowledged rate alone, under a flood and under large batches."""
     endpoint, run = f"tcp/127.0.0.1:{free_port()}", "flood"
-    argv = hosting_learner_argv(endpoint, run, root / "flood-ckpt")  # hosts the router; 100k replay
+    # hosts the router; 100k replay; checkpoints only on stop (a periodic one would stall every phase alike)
+    argv = hosting_learner_argv(endpoint, run, root / "flood-ckpt", "--checkpoint-every", "0")
     learner = start_learner(argv, root / "flood-learner.log")
     normal = ActorThread(endpoint, run, "normal", first_id=1, rate=args.normal_rate)
     watcher = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
@@ -277,6 +278,7 @@ def flood(args, root: Path) -> dict:
             if proc is not None:
                 stop_process(proc, timeout=30)
                 settle(watcher, run)  # what the router still held of the flood is through
+            caught_up(normal.actor)  # the next phase starts without a backlog to catch up on
             print(f"{phase}: normal actor {rates[phase][-1]:.1f} acknowledged batches/s")
     status = query_status(watcher, run, timeout=5.0)
     peak = peak_rss_mb(learner.pid)

@@ -119,6 +119,13 @@ def settle(session, run: str, timeout: float = 60.0) -> None:
         time.sleep(1.5)
 
 
+def caught_up(actor: TracedActor, timeout: float = 60.0) -> None:
+    """Wait until ``actor``'s outbox holds no more than its window (no backlog of unsent batches)."""
+    deadline = time.monotonic() + timeout
+    while len(actor.outbox) > actor.outbox.window and time.monotonic() < deadline:
+        time.sleep(0.1)
+
+
 def learner_argv(endpoint: str, run: str, checkpoint_dir: Path, *extra: str) -> list[str]:
     return [
         sys.executable, "-m", "services.cli", "learner", "--listen", endpoint, "--run", run,

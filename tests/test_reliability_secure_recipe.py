@@ -98,7 +98,7 @@ def test_the_secure_recipe_trains_and_still_refuses_what_it_must(tmp_path: Path)
         for name, user, flags in (
             ("learner", "learner", ["--checkpoint-dir", str(tmp_path / "ckpt"), "--hidden-sizes", "16",
                                     "--batch-size", "16", "--learning-starts", "64", "--broadcast-every", "5",
-                                    "--log-every", "5"]),
+                                    "--log-every", "5", "--acl-names", str(secrets / "acl.json5")]),
             ("actor", "a1", ["--id", "a1", "--envs", "2", "--batch-steps", "8", "--maps", "rooms:12",
                              "--log-every", "5"]),
             ("demonstrator", "astar", ["--id", "astar", "--source", "astar", "--rate", "0", "--episodes",
