@@ -114,7 +114,8 @@ class ActorThread:
         due = time.monotonic()
         while not self.stop.is_set():
             self.actor.send_one(self.stop)
-            due = due + 1.0 / self.rate if self.rate else time.monotonic() + 0.005
+            # held back by the learner, a real actor's robots stop too: no burst to make up for it
+            due = max(due + 1.0 / self.rate, time.monotonic()) if self.rate else time.monotonic() + 0.005
             self.stop.wait(max(0.0, due - time.monotonic()))
 
     def drain(self, timeout: float) -> None:

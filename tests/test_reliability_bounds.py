@@ -86,10 +86,10 @@ def test_fair_queue_serves_bytes_not_batches():
     big, small = 100_000, 2_000
     for _ in range(50):
         q.put_nowait("flood", ("flood", big), big)
-    for _ in range(500):
+    for _ in range(5000):
         q.put_nowait("calm", ("calm", small), small)
     served = {"flood": 0, "calm": 0}
-    while sum(served.values()) < 40 * (big + MESSAGE_WORK):
+    while sum(served.values()) < 40 * (big + MESSAGE_WORK):  # both still backlogged
         sender, nbytes = q.get_nowait()
         served[sender] += nbytes + MESSAGE_WORK
     assert abs(served["flood"] - served["calm"]) <= big + MESSAGE_WORK, served

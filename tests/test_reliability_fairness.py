@@ -70,8 +70,9 @@ class Normal:
         due = time.monotonic()
         while not self.stop.is_set():
             self.actor.send_one(self.stop)
-            due += 1.0 / NORMAL_RATE
-            self.stop.wait(max(0.0, due - time.monotonic()))
+            # held back by the learner, a real actor's robots stop too: no burst to make up for it
+            due = max(due + 1.0 / NORMAL_RATE, time.monotonic())
+            self.stop.wait(due - time.monotonic())
 
     def acked(self) -> int:
         return len(self.actor.acked_seqs)

@@ -27,8 +27,12 @@ from typing import Generic, TypeVar
 
 T = TypeVar("T")
 
-MESSAGE_WORK = 4096
-"""fixed work charged per message, in bytes of payload (about 40 transitions of 11 floats)"""
+MESSAGE_WORK = 256
+"""fixed work charged per message, in bytes of payload (about 2.5 transitions of 11 floats). A
+training learner's binding cost is per transition (one update per 1/utd_ratio transitions; an update
+of the default network took ~6 ms on one core here) and a message's own (a 20-26 us
+decode, bench/RESULTS.md, a log record, an ack) is a fraction of one transition's; the charge
+keeps a sender of tiny batches from taking a larger share of the messages."""
 
 
 class SenderFull(queue.Full):
