@@ -63,6 +63,14 @@ def parse_args() -> argparse.Namespace:
     p.add_argument(
         "--normal-rate", type=float, default=25.0, help="batches/s the normal actor offers (0: all it can)"
     )
+    p.add_argument(
+        "--phases", nargs="+", default=list(FLOOD_PHASES), choices=list(FLOOD_PHASES), help="flood phases run"
+    )
+    p.add_argument(
+        "--learner-code",
+        default="",
+        help="run the flood phases' learner from this checkout (PYTHONPATH), e.g. a worktree of main",
+    )
     return p.parse_args()
 
 
@@ -246,13 +254,15 @@ def flood(args, root: Path) -> dict:
     endpoint, run = f"tcp/127.0.0.1:{free_port()}", "flood"
     # hosts the router; 100k replay; checkpoints only on stop (a periodic one would stall every phase alike)
     argv = hosting_learner_argv(endpoint, run, root / "flood-ckpt", "--checkpoint-every", "0")
+    if args.learner_code:
+        argv = ["env", f"PYTHONPATH={args.learner_code}", *argv]
     learner = start_learner(argv, root / "flood-learner.log")
     normal = ActorThread(endpoint, run, "normal", first_id=1, rate=args.normal_rate)
     watcher = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
     deadline = time.monotonic() + 180
     while len(normal.actor.acked_seqs) < 50 and time.monotonic() < deadline:
         time.sleep(0.2)
-    rates: dict[str, list[float]] = {phase: [] for phase in FLOOD_PHASES}
+    rates: dict[str, list[float]] = {phase: [] for phase in args.phases}
     settle(watcher, run)
     rss_before = peak_rss_mb(learner.pid)
     nice = ["nice", "-n", str(args.flooder_nice)] if args.flooder_nice else []
@@ -265,7 +275,8 @@ def flood(args, root: Path) -> dict:
         run,
     ]
     for _ in range(args.flood_rounds):
-        for phase, extra in FLOOD_PHASES.items():
+        for phase in args.phases:
+            extra = FLOOD_PHASES[phase]
             proc = (
                 None
                 if extra is None
