@@ -9,14 +9,14 @@ At the end the learner is stopped with SIGTERM and its final checkpoint is read 
 every acknowledged id must be stored exactly once.
 
 Then the flood and large-batch phases (issue #19): a fresh learner, one normal traced actor
-sending as fast as its acknowledgements allow, and bench/flooder.py in its own process, in
+offering 25 batches/s (``--normal-rate``), and bench/flooder.py in its own process, in
 interleaved rounds: alone; with valid batches of the largest accepted size (1000 rows) on the
 flooder's own key; with ~60 MB valid batches on 4 more keys; with both. Reported:
 the normal actor's acknowledged batches/s per phase, its slowdown under each, the learner's
 peak RSS (VmHWM) and what it refused.
 
-    python bench/chaos.py --actors 3 --kills 3 --seconds 45
-    python bench/chaos.py --only-flood --flood-rounds 3 --flood-seconds 10
+    python -m bench.chaos --actors 3 --kills 3 --seconds 45
+    python -m bench.chaos --only-flood --flood-rounds 3 --flood-seconds 10
 """
 
 from __future__ import annotations
@@ -33,14 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench import ingest
 from protocols.codec import encode
-from services.common.transport import ZenohSettings, open_session
+from services.common.transport import ZenohSettings, free_port, open_session
 from services.learner.checkpoint import CheckpointDir
 from services.ops.status import query_status
-from tests.conftest import free_port
 from tests.reliability_helpers import TracedActor, caught_up, settle, start_learner, stop_process, stored_ids
 from tests.reliability_helpers import learner_argv as hosting_learner_argv
 

@@ -6,7 +6,7 @@ none is a duplicate), and every ``--big-every`` of them one valid batch of about
 on one of ``--big-keys`` more keys (``<id>-big0``, ...). Prints one JSON line when stopped
 (SIGTERM or ``--seconds``): what it published.
 
-    python bench/flooder.py --connect tcp/127.0.0.1:7447 --run r --id flood --rows 1000 --big-mb 60
+    python -m bench.flooder --connect tcp/127.0.0.1:7447 --run r --id flood --rows 1000 --big-mb 60
 """
 
 from __future__ import annotations

@@ -50,12 +50,14 @@ EXPECTED = {"transitions": TransitionBatch, "demos": DemoBatch, "eval": EvalRepo
 
 @dataclass
 class Received:
-    """One accepted message: the name in its key (actor, source, evaluator), when it arrived."""
+    """One accepted message: the name in its key (actor, source, evaluator), when it arrived, and the
+    bytes it came as (what the write-ahead log stores: the decoded arrays are views of them)."""
 
     channel: str
     name: str
     message: Message
     arrived: float
+    payload: bytes = b""
 
 
 def transition_bytes_bound(rows: int, obs_dim: int) -> int:
@@ -150,7 +152,8 @@ class Inbox:
             if queue_.sender_full(parsed.name, nbytes):
                 self._sender_full(parsed.name)
                 return
-            message = decode(sample.payload.to_bytes(), self.limits)
+            payload = sample.payload.to_bytes()
+            message = decode(payload, self.limits)
             expected = EXPECTED.get(parsed.channel)
             if expected is None or not isinstance(message, expected):
                 raise ProtocolError("kind", f"{message.KIND} message on {parsed.channel}/{parsed.name}")
@@ -165,7 +168,7 @@ class Inbox:
                 "batch_too_large", f"{len(message)} transitions from {parsed.name}: {self._rows_fix()}"
             )
             return
-        item = Received(parsed.channel, parsed.name, message, arrived)
+        item = Received(parsed.channel, parsed.name, message, arrived, payload)
         try:
             queue_.put_nowait(parsed.name, item, nbytes)
             self._accepted(parsed.name)
