@@ -143,7 +143,7 @@ class Inbox:
                 self.reject(
                     "too_many_names",
                     f"refused {parsed.channel}/{parsed.name}: {self.max_names} sender names known already "
-                    "(raise --max-names, or give the learner the ACL with --acl)",
+                    "(raise --max-names, or give the learner the ACL with --acl-names)",
                 )
                 return
             if parsed.channel == "transitions" and nbytes > self.max_transition_bytes:
