@@ -1,10 +1,13 @@
 """Many hosts: two Zenoh routers in two network namespaces, linked router-to-router over mutual TLS.
 
-    host A (namespace): actor ──► router A: listens on its loopback and tls/10.213.8.1:7447 (mutual TLS)
-    host B (namespace): learner ──► router B: listens on its loopback and tcp/10.213.9.1:7447,
-                        connects to router A at tls/10.213.8.1:7447 (veth 10.213.8.2/30)
+    host A (namespace): actor ──► router A: listens on its loopback,
+                        connects to router B at tls/10.213.8.2:7447 (veth 10.213.8.1/30, mutual TLS)
+    host B (namespace): learner ──► router B: listens on its loopback, tls/10.213.8.2:7447 and
+                        tcp/10.213.9.1:7447
     host C (namespace): evaluator ──► tcp/10.213.9.1:7447 (veth 10.213.9.2/30)
 
+The learner host's router listens and each actor host's router connects to it: more actor
+hosts are more routers connecting to the same listener.
 Real processes run in the namespaces with ``ip netns exec``. Batches cross both routers and
 the TLS link to the learner, acknowledgements and weights cross back to the actor, and the
 evaluator (reaching router B only) evaluates the learner's weights and its report arrives. The
@@ -113,7 +116,7 @@ def test_actor_and_learner_behind_two_routers_linked_by_mutual_tls(tmp_path: Pat
     run = f"hosts{tag}"
     tls = tmp_path / "tls"
     made = subprocess.run(
-        [*CLI, "certs", "--out", str(tls), "--hosts", LINK_A, "--clients", "router-b"],
+        [*CLI, "certs", "--out", str(tls), "--hosts", LINK_B, "--clients", "router-a"],
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert made.returncode == 0, made.stderr
@@ -126,14 +129,14 @@ def test_actor_and_learner_behind_two_routers_linked_by_mutual_tls(tmp_path: Pat
         try:
             local = f"tcp/127.0.0.1:{PORT}"
             hosts.start(
-                "router-a", ns_a, "router", "--listen", f"tls/{LINK_A}:{PORT}", "--listen", local,
-                "--tls-root-ca", str(tls / "ca.pem"), "--tls-cert", str(tls / "server.pem"),
-                "--tls-key", str(tls / "server.key"), "--tls-mtls",
+                "router-b", ns_b, "router", "--listen", f"tls/{LINK_B}:{PORT}", "--listen", local,
+                "--listen", f"tcp/{EVAL_B}:{PORT}", "--tls-root-ca", str(tls / "ca.pem"),
+                "--tls-cert", str(tls / "server.pem"), "--tls-key", str(tls / "server.key"), "--tls-mtls",
             )  # fmt: skip
             hosts.start(
-                "router-b", ns_b, "router", "--connect", f"tls/{LINK_A}:{PORT}", "--listen", local,
-                "--listen", f"tcp/{EVAL_B}:{PORT}", "--tls-root-ca", str(tls / "ca.pem"),
-                "--tls-cert", str(tls / "router-b.pem"), "--tls-key", str(tls / "router-b.key"), "--tls-mtls",
+                "router-a", ns_a, "router", "--connect", f"tls/{LINK_B}:{PORT}", "--listen", local,
+                "--tls-root-ca", str(tls / "ca.pem"), "--tls-cert", str(tls / "router-a.pem"),
+                "--tls-key", str(tls / "router-a.key"), "--tls-mtls",
             )  # fmt: skip
             zenoh = ["--run", run, "--connect-timeout", "120"]
             hosts.start(
@@ -172,7 +175,8 @@ def test_actor_and_learner_behind_two_routers_linked_by_mutual_tls(tmp_path: Pat
             assert actor.get("weights_applied", 0) >= 1, (actor, context)
             assert learner["last_eval"] and learner["last_eval"]["policy_version"] >= 1, context
             assert view["alive"].get("evaluator") == ["evaluator"], view["alive"]
-            assert "joined" in hosts.log("router-a") and "router" in hosts.log("router-a")
+            joined = hosts.log("router-b").split("listening", 1)[1]
+            assert "INFO router " in joined, joined  # router A joined router B over the TLS link
         finally:
             codes = hosts.stop()
     assert not any(ns in _ip("netns", "list").stdout for ns in (ns_a, ns_b, ns_c))
