@@ -17,7 +17,8 @@ machine whose cores are not shared, unlike wall-clock rates on this 2-core machi
 (d) router: TransitionBatch messages through `navlearn router` processes on loopback, one
     router (TCP), and two routers linked router-to-router over mutual TLS (the multi-host
     path of tests/test_multihost_routers.py): a publisher as fast as BLOCK allows, a
-    subscriber counting; messages per CPU-second of each router.
+    subscriber counting; router CPU per message. Zenoh's shared memory (on by default) is
+    turned off there, as between hosts; one router with it on is shown for comparison.
 
 Model (one learner main thread does updates, ingest and the log in turn): at update-to-data
 ratio r a transition costs the learner r/u + 1/i + 1/w seconds (u updates and i transitions
@@ -99,12 +100,13 @@ def stop(process: subprocess.Popen) -> str:
     return out or ""
 
 
-def session_for(endpoint: str, mode: str = "client"):
+def session_for(endpoint: str, mode: str = "client", config_file: str | None = None):
     from services.common.transport import ZenohSettings, open_session
 
     if mode == "router":
         return open_session(ZenohSettings(mode="router", listen=[endpoint], run=RUN))
-    return open_session(ZenohSettings(connect=[endpoint], run=RUN, connect_timeout=60))
+    settings = ZenohSettings(connect=[endpoint], run=RUN, connect_timeout=60, config_file=config_file)
+    return open_session(settings)
 
 
 def actor_batch(rows: int, rng: np.random.Generator):
@@ -151,7 +153,7 @@ def sink_main(endpoint: str) -> None:
             pass
 
 
-def publisher_main(endpoint: str, rows: int) -> None:
+def publisher_main(endpoint: str, rows: int, config_file: str | None) -> None:
     """Puts one encoded actor batch as fast as BLOCK congestion control lets it through."""
     import zenoh
 
@@ -159,7 +161,7 @@ def publisher_main(endpoint: str, rows: int) -> None:
     from protocols.codec import encode
 
     payload = encode(actor_batch(rows, np.random.default_rng(0)))
-    with session_for(endpoint) as session:
+    with session_for(endpoint, config_file=config_file) as session:
         publisher = session.declare_publisher(
             keys.transitions(RUN, "bench"), congestion_control=zenoh.CongestionControl.BLOCK
         )
@@ -172,7 +174,7 @@ def publisher_main(endpoint: str, rows: int) -> None:
             publisher.put(payload)
 
 
-def subscriber_main(endpoint: str) -> None:
+def subscriber_main(endpoint: str, config_file: str | None) -> None:
     """Counts messages and bytes; prints the count when asked (SIGUSR1) and at the end."""
     from protocols import keys
 
@@ -182,7 +184,7 @@ def subscriber_main(endpoint: str) -> None:
         count[0] += 1
         count[1] += len(sample.payload)
 
-    with session_for(endpoint) as session:
+    with session_for(endpoint, config_file=config_file) as session:
         session.declare_subscriber(keys.everything(RUN, "transitions"), on_sample)
         done = threading.Event()
         signal.signal(signal.SIGTERM, lambda *_: done.set())
@@ -323,10 +325,18 @@ def bench_learner(envs: int, seconds: float, wal_dir: Path) -> dict:
 # ---------------------------------------------------------------- (d) router
 
 
-def bench_router(rows: int, seconds: float, two: bool, workdir: Path) -> dict:
+NO_SHM = "{ transport: { shared_memory: { enabled: false } } }\n"
+"""Zenoh config without shared memory: Zenoh otherwise moves messages over 3 kB between processes
+of one host through shared memory (on by default), so loopback would not measure a network."""
+
+
+def bench_router(rows: int, seconds: float, two: bool, shm: bool, workdir: Path) -> dict:
     """Messages of ``rows`` transitions through one router, or two linked by mutual TLS."""
     port_in, port_out = free_port(), free_port()
     routers: list[subprocess.Popen] = []
+    config = workdir / "no-shm.json5"
+    config.write_text(NO_SHM)
+    base = [] if shm else ["--zenoh-config", str(config)]
     log = open(workdir / "routers.log", "a")  # noqa: SIM115 - closed below
     if two:
         tls = workdir / "tls"
@@ -334,43 +344,17 @@ def bench_router(rows: int, seconds: float, two: bool, workdir: Path) -> dict:
             made = ["--out", str(tls), "--hosts", "127.0.0.1", "--clients", "router-a"]
             subprocess.run([*CLI, "certs", *made], check=True, capture_output=True, timeout=120)
         link = f"tls/127.0.0.1:{free_port()}"
-        ca = ["--tls-root-ca", str(tls / "ca.pem"), "--tls-mtls"]
-        routers.append(
-            spawn(
-                *CLI,
-                "router",
-                "--listen",
-                link,
-                "--listen",
-                f"tcp/127.0.0.1:{port_out}",
-                *ca,
-                "--tls-cert",
-                str(tls / "server.pem"),
-                "--tls-key",
-                str(tls / "server.key"),
-                log=log,
-            )
-        )
-        routers.append(
-            spawn(
-                *CLI,
-                "router",
-                "--connect",
-                link,
-                "--listen",
-                f"tcp/127.0.0.1:{port_in}",
-                *ca,
-                "--tls-cert",
-                str(tls / "router-a.pem"),
-                "--tls-key",
-                str(tls / "router-a.key"),
-                log=log,
-            )
-        )
+        ca = [*base, "--tls-root-ca", str(tls / "ca.pem"), "--tls-mtls"]
+        b_side = ["--listen", link, "--listen", f"tcp/127.0.0.1:{port_out}", *ca]
+        a_side = ["--connect", link, "--listen", f"tcp/127.0.0.1:{port_in}", *ca]
+        b_pair = ["--tls-cert", str(tls / "server.pem"), "--tls-key", str(tls / "server.key")]
+        a_pair = ["--tls-cert", str(tls / "router-a.pem"), "--tls-key", str(tls / "router-a.key")]
+        routers.append(spawn(*CLI, "router", *b_side, *b_pair, log=log))
+        routers.append(spawn(*CLI, "router", *a_side, *a_pair, log=log))
     else:
         port_out = port_in
-        routers.append(spawn(*CLI, "router", "--listen", f"tcp/127.0.0.1:{port_in}", log=log))  # fmt: skip
-    helper = [sys.executable, "-m", "bench.capacity", "--rows", str(rows), "--endpoint"]
+        routers.append(spawn(*CLI, "router", *base, "--listen", f"tcp/127.0.0.1:{port_in}", log=log))
+    helper = [sys.executable, "-m", "bench.capacity", "--rows", str(rows), *base, "--endpoint"]
     subscriber = spawn(*helper, f"tcp/127.0.0.1:{port_out}", "--role", "subscriber")
     publisher = spawn(*helper, f"tcp/127.0.0.1:{port_in}", "--role", "publisher")
     try:
@@ -394,7 +378,9 @@ def bench_router(rows: int, seconds: float, two: bool, workdir: Path) -> dict:
     cpu = [b - a for a, b in zip(c0, c1, strict=True)]
     return {
         "routers": len(routers),
-        "link": "mutual TLS, router to router" if two else "one router, TCP",
+        "link": ("two routers, mutual TLS between them" if two else "one router, TCP")
+        + ("" if shm else ", no shared memory"),
+        "shared_memory": shm,
         "rows": rows,
         "messages_per_s": round(messages / (t1 - t0)),
         "transitions_per_s": round(messages * rows / (t1 - t0)),
@@ -446,6 +432,7 @@ def main() -> None:
     )
     parser.add_argument("--role", choices=("sink", "publisher", "subscriber"), help=argparse.SUPPRESS)
     parser.add_argument("--endpoint", help=argparse.SUPPRESS)
+    parser.add_argument("--zenoh-config", help=argparse.SUPPRESS)
     parser.add_argument("--rows", type=int, default=1024, help=argparse.SUPPRESS)
     parser.add_argument("--envs", type=int, nargs="+", default=[8, 64], help="actor --envs to measure")
     parser.add_argument("--seconds", type=float, default=8.0, help="length of each measurement window")
@@ -465,9 +452,9 @@ def main() -> None:
     if args.role == "sink":
         return sink_main(args.endpoint)
     if args.role == "publisher":
-        return publisher_main(args.endpoint, args.rows)
+        return publisher_main(args.endpoint, args.rows, args.zenoh_config)
     if args.role == "subscriber":
-        return subscriber_main(args.endpoint)
+        return subscriber_main(args.endpoint, args.zenoh_config)
 
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
@@ -491,7 +478,10 @@ def main() -> None:
             f"with an fsync per batch {learner['wal_fsync_always_transitions_per_s']:,} transitions/s",
             flush=True,
         )
-        routers = [bench_router(best["batch_rows"], args.seconds, two, workdir) for two in (False, True)]
+        routers = [
+            bench_router(best["batch_rows"], args.seconds, two, shm, workdir)
+            for two, shm in ((False, True), (False, False), (True, False))
+        ]
         for r in routers:
             print(
                 f"(d) {r['link']}: {r['messages_per_s']:,} msgs/s = {r['transitions_per_s']:,} "
@@ -507,7 +497,9 @@ def main() -> None:
         "learner_updates_measured": not args.learner_updates_per_s,
         "learner_ingest_per_cpu_s": learner["ingest_transitions_per_cpu_s"],
         "batch_size": learner["batch_size"],
-        "router_transitions_per_cpu_s": min(r["router_transitions_per_cpu_s"] for r in routers),
+        "router_transitions_per_cpu_s": min(
+            r["router_transitions_per_cpu_s"] for r in routers if not r["shared_memory"]
+        ),
         "replay_bytes_per_transition": learner["replay_bytes_per_transition"],
         "wal_fsync_always_transitions_per_s": learner["wal_fsync_always_transitions_per_s"],
     }
