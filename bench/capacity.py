@@ -27,7 +27,7 @@ learner host consumes D(r) = 1 / (r/u + 1/i + 1/w) transitions/s, fed by
 D(r) / (a * cores) actor hosts. The network carries D(r) * b bytes/s; a router core forwards
 rows/m transitions/s (m router CPU-seconds per message); one actor host of C cores makes
 a * C. Each limit is reported as the transitions/s it allows; the smallest saturates first, and
-r * a * C is the update rate a learner needs before one actor host is its bottleneck.
+r / (1/(a*C) - 1/i - 1/w) is the update rate a learner needs to take one actor host's output.
 --learner-updates-per-s projects a faster learner (a GPU, or a later learner) without
 re-measuring the rest.
 
@@ -400,6 +400,13 @@ def model(inputs: dict, utds: list[float], actor_host_cores: int, nic_gbps: floa
     w = inputs["wal_fsync_always_transitions_per_s"]
     nic = nic_gbps * 1e9 / 8 / b
     rows = []
+
+    def updates_for(rate: float) -> int | None:
+        """Updates/s the learner needs to take ``rate`` transitions/s at ratio r (None: ingest
+        and the log alone stop it below that rate, however fast its updates)."""
+        left = 1.0 / rate - 1.0 / i - 1.0 / w
+        return round(r / left) if left > 0 else None
+
     for r in utds:
         seconds = {"updates": r / u, "decode and insert": 1.0 / i, "write-ahead log": 1.0 / w}
         learner = 1.0 / sum(seconds.values())  # the learner's main thread does all three in turn
@@ -419,7 +426,9 @@ def model(inputs: dict, utds: list[float], actor_host_cores: int, nic_gbps: floa
             "actor_cores_fed": round(learner / a, 4),
             "actor_hosts_fed": round(learner / (a * actor_host_cores), 5),
             "wire_mb_per_s": round(learner * b / 1e6, 3),
-            "updates_per_s_to_take_one_actor_host": round(r * a * actor_host_cores),
+            "updates_per_s_to_take_one_actor_core": updates_for(a),
+            "updates_per_s_to_take_one_actor_host": updates_for(a * actor_host_cores),
+            "learner_ceiling_transitions_per_s": round(1.0 / (1.0 / i + 1.0 / w)),
             "limits_transitions_per_s": {k: round(v) for k, v in limits.items()},
             "saturates_first": min(limits, key=limits.get),
         })  # fmt: skip
@@ -509,8 +518,13 @@ def main() -> None:
             f"UTD {row['utd_ratio']:g}: the learner takes {row['learner_transitions_per_s']:,} "
             f"transitions/s ({row['learner_bound_by']}-bound) = {row['actor_cores_fed']} actor cores = "
             f"{row['actor_hosts_fed']} hosts of {args.actor_host_cores} cores, {row['wire_mb_per_s']} MB/s;"
-            f" saturates first: {row['saturates_first']}; to take one actor host it needs "
-            f"{row['updates_per_s_to_take_one_actor_host']:,} updates/s"
+            f" saturates first: {row['saturates_first']}; to take one actor core it needs "
+            + (
+                f"{row['updates_per_s_to_take_one_actor_core']:,} updates/s"
+                if row["updates_per_s_to_take_one_actor_core"]
+                else f"more than faster updates (ingest and the log stop it at "
+                f"{row['learner_ceiling_transitions_per_s']:,} transitions/s)"
+            )
         )
     print(json.dumps({
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_before": round(load_before, 2),

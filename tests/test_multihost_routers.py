@@ -3,11 +3,13 @@
     host A (namespace): actor ──► router A: listens on its loopback,
                         connects to router B at tls/10.213.8.2:7447 (veth 10.213.8.1/30, mutual TLS)
     host B (namespace): learner ──► router B: listens on its loopback, tls/10.213.8.2:7447 and
-                        tcp/10.213.9.1:7447
-    host C (namespace): evaluator ──► tcp/10.213.9.1:7447 (veth 10.213.9.2/30)
+                        tls/10.213.9.1:7447
+    host C (namespace): evaluator ──► tls/10.213.9.1:7447 (veth 10.213.9.2/30, mutual TLS)
 
 The learner host's router listens and each actor host's router connects to it: more actor
-hosts are more routers connecting to the same listener.
+hosts are more routers connecting to the same listener. The routers run without Zenoh's shared
+memory, which would otherwise carry messages between processes of this one machine past the
+TLS link (it is on by default; across real hosts it cannot be used).
 Real processes run in the namespaces with ``ip netns exec``. Batches cross both routers and
 the TLS link to the learner, acknowledgements and weights cross back to the actor, and the
 evaluator (reaching router B only) evaluates the learner's weights and its report arrives. The
@@ -116,10 +118,12 @@ def test_actor_and_learner_behind_two_routers_linked_by_mutual_tls(tmp_path: Pat
     run = f"hosts{tag}"
     tls = tmp_path / "tls"
     made = subprocess.run(
-        [*CLI, "certs", "--out", str(tls), "--hosts", LINK_B, "--clients", "router-a"],
+        [*CLI, "certs", "--out", str(tls), "--hosts", LINK_B, EVAL_B, "--clients", "router-a", "evaluator"],
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert made.returncode == 0, made.stderr
+    no_shm = tmp_path / "no-shm.json5"
+    no_shm.write_text("{ transport: { shared_memory: { enabled: false } } }\n")
     hosts = Hosts(tmp_path)
     codes: dict[str, int] = {}
     with ExitStack() as stack:
@@ -128,15 +132,16 @@ def test_actor_and_learner_behind_two_routers_linked_by_mutual_tls(tmp_path: Pat
         ]))  # fmt: skip
         try:
             local = f"tcp/127.0.0.1:{PORT}"
+            ca = ["--zenoh-config", str(no_shm), "--tls-root-ca", str(tls / "ca.pem"), "--tls-mtls"]
             hosts.start(
-                "router-b", ns_b, "router", "--listen", f"tls/{LINK_B}:{PORT}", "--listen", local,
-                "--listen", f"tcp/{EVAL_B}:{PORT}", "--tls-root-ca", str(tls / "ca.pem"),
-                "--tls-cert", str(tls / "server.pem"), "--tls-key", str(tls / "server.key"), "--tls-mtls",
+                "router-b", ns_b, "router", "--listen", f"tls/{LINK_B}:{PORT}",
+                "--listen", local, "--listen", f"tls/{EVAL_B}:{PORT}", *ca,
+                "--tls-cert", str(tls / "server.pem"), "--tls-key", str(tls / "server.key"),
             )  # fmt: skip
             hosts.start(
-                "router-a", ns_a, "router", "--connect", f"tls/{LINK_B}:{PORT}", "--listen", local,
-                "--tls-root-ca", str(tls / "ca.pem"), "--tls-cert", str(tls / "router-a.pem"),
-                "--tls-key", str(tls / "router-a.key"), "--tls-mtls",
+                "router-a", ns_a, "router", "--connect", f"tls/{LINK_B}:{PORT}",
+                "--listen", local, *ca, "--tls-cert", str(tls / "router-a.pem"),
+                "--tls-key", str(tls / "router-a.key"),
             )  # fmt: skip
             zenoh = ["--run", run, "--connect-timeout", "120"]
             hosts.start(
@@ -149,8 +154,10 @@ def test_actor_and_learner_behind_two_routers_linked_by_mutual_tls(tmp_path: Pat
                 "--maps", "rooms:16", "--log-every", "2",
             )  # fmt: skip
             hosts.start(
-                "evaluator", ns_c, "evaluator", "--connect", f"tcp/{EVAL_B}:{PORT}", *zenoh, "--families",
-                "unseen", "--episodes", "3", "--out", str(tmp_path / "eval"),
+                "evaluator", ns_c, "evaluator", "--connect", f"tls/{EVAL_B}:{PORT}", *zenoh, "--families",
+                "unseen", "--episodes", "3", "--out", str(tmp_path / "eval"), "--tls-root-ca",
+                str(tls / "ca.pem"), "--tls-cert", str(tls / "evaluator.pem"), "--tls-key",
+                str(tls / "evaluator.key"), "--tls-mtls",
             )  # fmt: skip
             view: dict = {}
             deadline = time.monotonic() + 300
