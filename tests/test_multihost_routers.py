@@ -45,11 +45,13 @@ def _ip(*args: str) -> subprocess.CompletedProcess:
 
 
 @contextmanager
-def namespaces(names: list[str], links: list[tuple[str, str, str, str]]) -> Iterator[None]:
-    """Make ``names`` and a veth pair per (ns1, addr1/prefix, ns2, addr2/prefix); remove them all after."""
+def namespaces(names: list[str], links: list[tuple[str, str, str, str]]) -> Iterator[list[tuple[str, str]]]:
+    """Make ``names`` and a veth pair per (ns1, addr1/prefix, ns2, addr2/prefix); remove them all after.
+    Yields the pairs' interface names (ns1's end, ns2's end)."""
     if shutil.which("ip") is None:
         pytest.skip("the ip command (iproute2) is not installed")
     made: list[str] = []
+    ends: list[tuple[str, str]] = []
     try:
         for ns in names:
             done = _ip("netns", "add", ns)
@@ -59,6 +61,7 @@ def namespaces(names: list[str], links: list[tuple[str, str, str, str]]) -> Iter
             _ip("-n", ns, "link", "set", "lo", "up")
         for i, (ns1, addr1, ns2, addr2) in enumerate(links):
             end1, end2 = f"nlv{os.getpid() % 100000}{i}a", f"nlv{os.getpid() % 100000}{i}b"
+            ends.append((end1, end2))
             for args in (
                 ("link", "add", end1, "netns", ns1, "type", "veth", "peer", "name", end2, "netns", ns2),
                 ("-n", ns1, "addr", "add", addr1, "dev", end1),
@@ -69,7 +72,7 @@ def namespaces(names: list[str], links: list[tuple[str, str, str, str]]) -> Iter
                 done = _ip(*args)
                 if done.returncode != 0:
                     pytest.skip(f"cannot set up the veth pair (ip {' '.join(args)}): {done.stderr.strip()}")
-        yield
+        yield ends
     finally:
         for ns in made:  # deleting a namespace deletes the veth ends inside it, and so their peers
             _ip("netns", "del", ns)
@@ -95,8 +98,8 @@ class Hosts:
             timeout=timeout,
         )  # fmt: skip
 
-    def log(self, name: str) -> str:
-        return (self.logs / f"{name}.log").read_text(errors="replace")[-3000:]
+    def log(self, name: str, tail: int = 3000) -> str:
+        return (self.logs / f"{name}.log").read_text(errors="replace")[-tail:]
 
     def stop(self) -> dict[str, int]:
         for process in reversed(self.processes.values()):
@@ -127,7 +130,7 @@ def test_actor_and_learner_behind_two_routers_linked_by_mutual_tls(tmp_path: Pat
     hosts = Hosts(tmp_path)
     codes: dict[str, int] = {}
     with ExitStack() as stack:
-        stack.enter_context(namespaces([ns_a, ns_b, ns_c], [
+        (_, link_b), _ = stack.enter_context(namespaces([ns_a, ns_b, ns_c], [
             (ns_a, f"{LINK_A}/30", ns_b, f"{LINK_B}/30"), (ns_b, f"{EVAL_B}/30", ns_c, f"{EVAL_C}/30"),
         ]))  # fmt: skip
         try:
@@ -182,7 +185,11 @@ def test_actor_and_learner_behind_two_routers_linked_by_mutual_tls(tmp_path: Pat
             assert actor.get("weights_applied", 0) >= 1, (actor, context)
             assert learner["last_eval"] and learner["last_eval"]["policy_version"] >= 1, context
             assert view["alive"].get("evaluator") == ["evaluator"], view["alive"]
-            joined = hosts.log("router-b").split("listening", 1)[1]
+            # the transitions' bytes crossed the veth between the routers (the TLS link)
+            link = json.loads(_ip("-j", "-s", "-n", ns_b, "link", "show", "dev", link_b).stdout)[0]
+            transitions = learner["actors"]["far1"]["transitions"]
+            assert link["stats64"]["rx"]["bytes"] > 100 * transitions, (link["stats64"], transitions)
+            joined = hosts.log("router-b", tail=10**7).split("listening", 1)[1]
             assert "INFO router " in joined, joined  # router A joined router B over the TLS link
         finally:
             codes = hosts.stop()
