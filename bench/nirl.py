@@ -14,7 +14,7 @@ and NIRL's environment steps against NNQL learning from scratch.
     Figure: robot-steps NIRL needs to reach the validation success NNQL reaches, divided by
     the robot-steps NNQL needs for it (aim <= 1/3). Demonstration steps are reported apart.
 
-    python bench/nirl.py            # human lines, then one JSON object on the last line
+    python -m bench.nirl            # human lines, then one JSON object on the last line
 """
 
 from __future__ import annotations
@@ -27,8 +27,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.evaluation import evaluate, make_eval_set
 from agents.imitation.config import ImitationConfig

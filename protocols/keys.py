@@ -8,6 +8,7 @@ key                        from -> to                  payload
 ``weights/<model>``        learner -> actors, eval     WeightsUpdate
 ``eval/<evaluator>``       evaluator -> learner        EvalReport
 ``status/learner``         queryable                   LearnerStatus
+``status/actor:<actor>``   queryable (each actor)      LearnerStatus (the actor's figures)
 ``acks/<actor>``           learner -> actor            acknowledgements
 ``alive/<role>/<id>``      liveliness tokens           (none)
 =========================  ==========================  =================
@@ -82,6 +83,14 @@ def evaluation(run: str, evaluator: str) -> str:
 
 def status(run: str) -> str:
     return _key(run, "status", "learner")
+
+
+ACTOR_STATUS_PREFIX = "actor:"
+"""An actor answers its status on ``status/actor:<id>`` (the ``status`` channel has one name)."""
+
+
+def actor_status(run: str, actor: str) -> str:
+    return _key(run, "status", ACTOR_STATUS_PREFIX + check_name(actor, "actor id"))
 
 
 def acks(run: str, actor: str) -> str:

@@ -29,6 +29,7 @@ from agents.nnql.config import NNQLConfig
 from agents.nnql.losses import PRIORITY_KEY, make_loss
 from agents.nnql.networks import QNetwork, make_q_actor
 from agents.nnql.policy import NNQLPolicy, save_policy_dir
+from agents.replay_files import load_replay, save_replay
 
 TRANSITION_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "truncated")
 """Flat transition batch (the field names of protocols' TransitionBatch): float32 (N, obs_dim), int (N,),
@@ -262,14 +263,15 @@ class NNQLLearner:
         torch.set_rng_state(state["torch_rng"])
 
     def save_replay(self, path: str | Path) -> None:
-        """The replay buffer (storage, sampler priorities, writer, rng) via TorchRL's dumps."""
+        """The replay buffer (storage, sampler priorities, writer, rng), nothing pickled
+        (agents.replay_files)."""
         if len(self.replay):
-            self.replay.dumps(path)
+            save_replay(self.replay, path)
 
     def load_replay(self, path: str | Path) -> None:
-        """Inverse of save_replay (TorchRL's loads); a missing directory means an empty buffer."""
+        """Inverse of save_replay; a missing directory means an empty buffer."""
         if Path(path).exists():
-            self.replay.loads(path)
+            load_replay(self.replay, path)
 
     def save_checkpoint(self, path: str | Path) -> Path:
         """A directory with learner.pt, replay/ and policy/, replaced atomically."""

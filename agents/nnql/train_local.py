@@ -18,10 +18,12 @@ from typing import Any
 
 import numpy as np
 
+from agents.evaluation.runner import evaluate, make_eval_set
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
+from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
 CURVE_EVERY = 2_000
@@ -87,8 +89,6 @@ TEST_SEED = 0
 
 def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None) -> Any:
     """Greedy evaluation on the shared held-out "unseen" set (agents.evaluation) -> EvalResult."""
-    from agents.evaluation.runner import evaluate, make_eval_set
-
     return evaluate(policy.greedy(), make_eval_set("unseen", episodes, seed=seed), config=nav)
 
 
@@ -98,8 +98,6 @@ def train_local(
     nav: Any = None,
 ) -> TrainResult:
     """Train NNQL for ``run.steps`` robot-steps; writes the outputs to ``run.out`` if set."""
-    from worlds.vector_env import NavigationVectorEnv
-
     nnql = nnql or NNQLConfig(seed=run.seed)
     env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
     obs_dim = int(env.single_observation_space.shape[0])

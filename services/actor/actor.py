@@ -13,7 +13,6 @@ back-pressure, robot-steps and weights version.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import os
 import re
@@ -24,18 +23,22 @@ import zlib
 from collections import deque
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
+from agents.nnql.config import NNQLConfig
+from agents.nnql.policy import NNQLPolicy
+from agents.nnql.rollout import VectorRollout
 from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
-from protocols.messages import TransitionBatch
+from protocols.messages import ExplorationSchedule, TransitionBatch
 from services.actor.config import ActorConfig
-from services.actor.status import BACKPRESSURE_SHARE, BlockedShare, actor_status
+from services.actor.status import BACKPRESSURE_SHARE, ActorView, BlockedShare, actor_status
 from services.common.outbox import Outbox, decode_ack
 from services.common.process import connect
 from services.common.transport import ZenohSettings, declare_alive
-from services.common.weights import WeightsReceiver, split_architecture
-from services.ops.acl import actor_status_key
+from services.common.weights import WeightsReceiver
+from worlds.vector_env import NavigationVectorEnv
 
 log = logging.getLogger("navlearn.actor")
 SUCCESS = 1  # worlds.outcomes.Outcome.GOAL
@@ -65,8 +68,6 @@ class Actor:
     def __init__(self, config: ActorConfig, env, session, run: str, seed: int, limits: Limits) -> None:
         import zenoh
 
-        from agents.nnql.rollout import VectorRollout
-
         self.config = config
         self.run_name = run
         self.seed = seed
@@ -74,7 +75,7 @@ class Actor:
         self.n_actions = int(env.single_action_space.n)
         self.policy = None
         self.version = 0
-        self.exploration = None
+        self.exploration: ExplorationSchedule | None = None
         self.rollout = VectorRollout(env, self.act)
         self.receiver = WeightsReceiver(session, run, config.model, limits)
         self.publisher = session.declare_publisher(
@@ -91,7 +92,7 @@ class Actor:
         self.blocked = BlockedShare()
         """share of time waiting for the learner (back-pressure), for the status and the log"""
         self.status_seq = 0
-        self.status_key = actor_status_key(run, config.id)
+        self.status_key = keys.actor_status(run, config.id)
         self._status = session.declare_queryable(self.status_key, self._on_status, complete=True)
         self._steps_window: deque[tuple[float, int]] = deque(maxlen=64)
         self.learner_version = 0
@@ -105,7 +106,19 @@ class Actor:
 
     def _on_status(self, query) -> None:
         self.status_seq += 1
-        query.reply(self.status_key, encode(actor_status(self, self.status_seq)))
+        view = ActorView(
+            sender=self.sender,
+            model=self.config.model,
+            version=self.version,
+            learner_version=self.learner_version,
+            reachable=self.reachable,
+            robot_steps=self.rollout.steps,
+            episodes=self.episodes_done,
+            weights_applied=self.weights_applied,
+            recent_successes=tuple(self.episodes),
+            steps_per_s=self.steps_rate(),
+        )
+        query.reply(self.status_key, encode(actor_status(view, self.outbox, self.blocked, self.status_seq)))
 
     def steps_rate(self) -> float:
         """Robot-steps per second over the last ticks."""
@@ -127,24 +140,20 @@ class Actor:
 
     def apply_weights(self) -> bool:
         """Swap in the newest weights if any arrived; True if the policy changed."""
-        from agents.nnql.config import NNQLConfig
-        from agents.nnql.policy import NNQLPolicy
-
         received = self.receiver.take()
         if received is None:
             return False
         message = received.message
-        network, exploration = split_architecture(message.architecture)
+        network = message.architecture
         try:
             if self.policy is None or self.policy.architecture != network:
                 self.policy = NNQLPolicy(message.tensors, network, version=message.version, seed=self.seed)
             else:
                 self.policy.set_weights(message.tensors, message.version)
-            known = {f.name for f in dataclasses.fields(NNQLConfig)}  # a newer learner may send more
-            self.exploration = NNQLConfig(**{k: v for k, v in exploration.items() if k in known})
         except (ValueError, TypeError, KeyError) as exc:
             log.warning("ignoring weights version %d: %s", message.version, exc)
             return False
+        self.exploration = message.exploration or ExplorationSchedule.of(NNQLConfig())  # none sent: defaults
         self.policy.explore_as(self.exploration, message.version)
         self.version = message.version
         self.weights_applied += 1
@@ -242,8 +251,6 @@ class Actor:
 
 def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
     """Process set-up: env (from the config), Zenoh session (retried until a router answers), loop."""
-    from worlds.vector_env import NavigationVectorEnv
-
     if not config.id:
         config.id = default_actor_id()
     keys.check_name(config.id, "actor id")
@@ -264,7 +271,11 @@ def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Even
         settings.run,
     )
     try:
-        return actor.run(stop)
+        # The policy multiplies a few dozen rows per step: OpenBLAS split that over every core and
+        # its threads spun between calls, 15-18x the CPU per robot-step at 64-256 robots on a busy
+        # machine (bench/RESULTS.md, capacity model). One BLAS thread, as agents.evaluation does.
+        with threadpool_limits(limits=1, user_api="blas"):
+            return actor.run(stop)
     finally:
         token.undeclare()
         actor.close()

@@ -40,11 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     import sys
 
-    from services.common.process import one_blas_thread, setup_logging, stop_on_signals
-
-    one_blas_thread()  # before numpy loads
     from services.actor.actor import run_actor
     from services.common.options import OptionError, options_from_args
+    from services.common.process import setup_logging, stop_on_signals
     from services.common.transport import TransportError, settings_from_args
 
     try:

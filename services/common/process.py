@@ -22,15 +22,6 @@ from services.common.transport import TransportError, ZenohSettings, open_sessio
 log = logging.getLogger("navlearn.process")
 
 
-def one_blas_thread() -> None:
-    """Keep numpy's BLAS (OpenBLAS) on one thread in this process, unless OPENBLAS_NUM_THREADS says
-    otherwise; call it before numpy is imported. The actor's policy multiplies a few dozen rows
-    per step: OpenBLAS splits that over every core and its threads spin between calls, which cost
-    an actor of 64 robots 20x its CPU per robot-step on a shared machine (bench/RESULTS.md,
-    capacity model)."""
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-
 def setup_logging(verbose: bool = False) -> None:
     """Log lines to stdout (what supervisord and systemd collect); quiet third-party loggers."""
     sys.stdout.reconfigure(line_buffering=True)  # a pipe or file otherwise holds lines back

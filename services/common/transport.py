@@ -16,6 +16,7 @@ import argparse
 import json
 import logging
 import os
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -351,3 +352,10 @@ class Presence:
 
     def __exit__(self, *_exc: object) -> None:
         self.close()
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago (for a loopback endpoint)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])

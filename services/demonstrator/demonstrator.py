@@ -7,6 +7,7 @@ Three sources, one publishing path:
   ones with probability ``noise`` (injected sub-optimality; the action taken is recorded);
 * ``human``: a person drives the robot from the terminal (``services.demonstrator.teleop``), and each
   finished episode is published;
+  (the astar and file sources are in ``services.demonstrator.episodes``)
 * ``file``: a demonstration dataset (Minari, ``navlearn demos generate``) is imported
   and published once.
 
@@ -26,11 +27,11 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 
 import numpy as np
 
-from agents.demos import Demo
+from agents.demos import Demo, load_demos
 from protocols import keys
 from protocols.codec import encode
 from protocols.messages import DemoBatch, EpisodeMeta
@@ -38,6 +39,8 @@ from services.common.outbox import Outbox, decode_ack
 from services.common.process import connect
 from services.common.transport import Presence, ZenohSettings, declare_alive
 from services.demonstrator.config import DemonstratorConfig
+from services.demonstrator.episodes import expert_episodes, file_episodes
+from services.demonstrator.teleop import drive
 
 log = logging.getLogger("navlearn.demonstrator")
 
@@ -68,46 +71,6 @@ def demo_batch(demos: list[Demo], source: str, sender: str, seq: int) -> DemoBat
             for d in demos
         ],
     )
-
-
-def nav_config(config: DemonstratorConfig):
-    from dataclasses import replace
-
-    from worlds.config import NavConfig, ObstacleConfig
-
-    return replace(NavConfig(), obstacles=ObstacleConfig(count=config.obstacles))
-
-
-def expert_episodes(config: DemonstratorConfig, stop: threading.Event) -> Iterator[Demo]:
-    """Expert demonstrations, one per ``1 / rate`` seconds, until ``stop`` (failures skipped unless kept)."""
-    from agents.planning.demonstrate import record_episode
-    from agents.planning.expert import Expert
-    from worlds.env import NavigationEnv
-    from worlds.outcomes import Outcome
-
-    nav = nav_config(config)
-    env = NavigationEnv(nav, maps=config.maps)
-    expert = Expert(nav)
-    rng = np.random.default_rng([config.seed, 1013])
-    index = 0
-    next_time = time.monotonic()
-    while not stop.is_set():
-        demo, _ = record_episode(env, expert, config.seed + index, config.noise, rng)
-        index += 1
-        if config.keep_failures or demo.metadata["outcome"] == Outcome.GOAL:
-            yield demo
-        if config.rate > 0:
-            next_time += 1.0 / config.rate
-            stop.wait(max(0.0, next_time - time.monotonic()))
-
-
-def file_episodes(config: DemonstratorConfig) -> Iterator[Demo]:
-    from agents.demos import load_demos
-    from worlds.outcomes import Outcome
-
-    for demo in load_demos(config.file):
-        if config.keep_failures or demo.metadata["outcome"] == Outcome.GOAL:
-            yield demo
 
 
 class DemoPublisher:
@@ -205,8 +168,6 @@ class DemoPublisher:
 def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
     """Process set-up: Zenoh session, liveliness, the source, the publisher."""
     if config.source == "file":
-        from agents.demos import load_demos
-
         load_demos(config.file)  # a bad dataset fails here, before joining the network
     if not config.id:
         config.id = f"{config.source}-{os.getpid()}"
@@ -223,8 +184,6 @@ def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: 
         elif config.source == "file":
             publisher.publish_all(file_episodes(config))
         else:
-            from services.demonstrator.teleop import drive
-
             drive(config, publisher, stop)
         publisher.drain()
         log.info(

@@ -18,20 +18,23 @@ import time
 from pathlib import Path
 from typing import Any
 
+from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation.plots import REFERENCE, plot_evaluations
+from agents.evaluation.policies import load_policy
+from agents.nnql.policy import NNQLPolicy
 from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
 from protocols.messages import EvalReport
 from services.common.process import Scalars, connect
 from services.common.transport import ZenohSettings, declare_alive
-from services.common.weights import WeightsReceiver, split_architecture
+from services.common.weights import WeightsReceiver
 from services.evaluator.config import EvaluatorConfig
+from worlds.config import NavConfig
 
 log = logging.getLogger("navlearn.evaluator")
 CURVE_FILE = "learning_curve.png"
 LINES_FILE = "evaluations.jsonl"
-REFERENCE = "reference"
-"""model field of points that evaluate a fixed saved policy (the imitation policy) once"""
 
 
 def summary_scalars(metrics: dict[str, Any]) -> dict[str, float]:
@@ -45,67 +48,6 @@ def summary_scalars(metrics: dict[str, Any]) -> dict[str, float]:
             if m.get(name) is not None:
                 scalars[f"eval/{family}/{name}"] = m[name]
     return scalars
-
-
-def plot_curve(points: list[dict[str, Any]], path: Path) -> Path:
-    """Success rate (95% band) and path ratio to A* per family, against policy version and wall time."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    start = min(p["time"] for p in points)
-    families = sorted({f for p in points for f in p["metrics"]})
-    models = sorted({p.get("model", "") for p in points if p.get("model") != REFERENCE})
-    series = [(m, f) for m in models for f in families]
-    references = [p for p in points if p.get("model") == REFERENCE]
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), sharey="row")
-    for col, (xlabel, xof) in enumerate(
-        (
-            ("policy version (updates)", lambda p: p["policy_version"]),
-            ("wall time (min)", lambda p: (p["time"] - start) / 60),
-        )
-    ):
-        for model, family in series:
-            rows = sorted(
-                (xof(p), p["metrics"][family])
-                for p in points
-                if family in p["metrics"] and p.get("model", "") == model
-            )
-            if not rows:
-                continue
-            label = f"{model} {family}".strip() if len(models) > 1 else family
-            xs = [x for x, _ in rows]
-            success = [m["success"] for _, m in rows]
-            (line,) = axes[0, col].plot(xs, [s["value"] for s in success], "o-", ms=3, label=label)
-            axes[0, col].fill_between(
-                xs,
-                [s["low"] for s in success],
-                [s["high"] for s in success],
-                color=line.get_color(),
-                alpha=0.2,
-            )
-            ratio = [(x, m["path_ratio"]) for x, m in rows if m.get("path_ratio") is not None]
-            if ratio:
-                axes[1, col].plot(*zip(*ratio, strict=True), "o-", ms=3, color=line.get_color(), label=label)
-        for reference in references:  # a fixed policy (imitation): one horizontal line per family
-            for family, metrics in reference["metrics"].items():
-                label = f"{reference.get('name', REFERENCE)} {family}"
-                axes[0, col].axhline(metrics["success"]["value"], ls="--", lw=1, color="gray", label=label)
-                if metrics.get("path_ratio") is not None:
-                    axes[1, col].axhline(metrics["path_ratio"], ls="--", lw=1, color="gray")
-        axes[0, col].set(ylim=(0, 1.02), ylabel="success rate" if col == 0 else None)
-        axes[1, col].set(xlabel=xlabel, ylabel="path length / A*" if col == 0 else None)
-        for ax in axes[:, col]:
-            ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=8, loc="upper left")
-    fig.suptitle(f"{', '.join(models).upper() or 'policies'} on held-out maps (greedy policy)")
-    fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    tmp.replace(path)
-    return path
 
 
 class Evaluator:
@@ -143,11 +85,7 @@ class Evaluator:
         return version > last[1] and version - last[1] >= self.config.every_versions
 
     def evaluate(self, weights: dict, architecture: dict, version: int) -> dict[str, Any]:
-        from agents.evaluation import evaluate
-        from agents.nnql.policy import NNQLPolicy
-
-        network, _exploration = split_architecture(architecture)
-        policy = NNQLPolicy(weights, network, mode="greedy", version=version)
+        policy = NNQLPolicy(weights, architecture, mode="greedy", version=version)
         start = time.perf_counter()
         result = evaluate(policy, self.eval_sets)
         metrics = result.to_dict(with_episodes=False)["metrics"]
@@ -175,15 +113,12 @@ class Evaluator:
         self.points.append(point)
         with open(self.out / LINES_FILE, "a") as fh:
             fh.write(json.dumps(point) + "\n")
-        plot_curve(self.points, self.out / CURVE_FILE)
+        plot_evaluations(self.points, self.out / CURVE_FILE)
         prefix = "" if model == self.config.model else f"{model}/"
         self.scalars.add({prefix + k: v for k, v in summary_scalars(metrics).items()}, version)
 
     def evaluate_reference(self, path: str) -> None:
         """Evaluate a saved policy (the imitation one) once; it is drawn as a horizontal line."""
-        from agents.evaluation import evaluate
-        from agents.evaluation.policies import load_policy
-
         policy = load_policy(path)
         result = evaluate(policy, self.eval_sets)
         log.info("reference policy %s evaluated\n%s", path, result.table())
@@ -228,9 +163,6 @@ class Evaluator:
 
 def run_evaluator(config: EvaluatorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
     """Process set-up: the fixed evaluation sets, the Zenoh session, the loop."""
-    from agents.evaluation import make_eval_set
-    from worlds.config import NavConfig
-
     start = time.perf_counter()
     eval_sets = [make_eval_set(family, config.episodes, seed=config.eval_seed) for family in config.families]
     log.info("evaluation sets %s ready in %.1f s", ", ".join(config.families), time.perf_counter() - start)

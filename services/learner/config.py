@@ -4,16 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-EXPLORATION_FIELDS = (
-    "exploration",
-    "temperature_start",
-    "temperature_end",
-    "temperature_decay_updates",
-    "epsilon_start",
-    "epsilon_end",
-    "epsilon_decay_updates",
-)
-
 
 @dataclass
 class LearnerConfig:

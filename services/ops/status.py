@@ -118,6 +118,8 @@ def progress_line(view: dict) -> str:
         f" | lag {rates.get('policy_lag', 0):.1f} | actors {len(view['alive'].get('actor', []))}"
         f" | rejected {counters.get('transitions_rejected', 0)}"
     )
+    if counters.get("storage_error"):
+        line += " | STORAGE ERROR: not acknowledging (see the learner's log)"
     evaluation = learner.get("last_eval")
     if evaluation:
         parts = [

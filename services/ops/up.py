@@ -28,6 +28,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from services.common.transport import TransportError, ZenohSettings, free_port, open_session
+from services.learner.checkpoint import CheckpointDir
+from services.ops.status import query_alive, query_status, status_dict
+
 log = logging.getLogger("navlearn.up")
 PR_SET_PDEATHSIG = 1
 MODEL = "nnql"
@@ -64,14 +68,6 @@ class UpConfig:
     listen_all: bool = False
     """the learner's router listens on 0.0.0.0 (all interfaces), so actors on other hosts can join
     with --connect tcp/<this host>:<port> (give --port); default: 127.0.0.1 only"""
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def _die_with_parent() -> None:
@@ -207,9 +203,6 @@ class Up:
 
     def watch(self, stop: threading.Event, show) -> dict[str, Any] | None:
         """Follow the learner's status until the budget is spent, ``stop`` is set or a child dies."""
-        from services.common.transport import TransportError, ZenohSettings, open_session
-        from services.ops.status import query_alive, query_status, status_dict
-
         cfg = self.config
         settings = ZenohSettings(mode="client", connect=[self.endpoint], run=cfg.run)
         session = None
@@ -269,8 +262,6 @@ class Up:
         return json.loads((policy / "config.json").read_text())["version"] if policy else None
 
     def latest_policy(self) -> Path | None:
-        from services.learner.checkpoint import CheckpointDir
-
         latest = CheckpointDir(self.out / "checkpoints").latest()
         policy = latest / "nnql" / "policy" if latest else None
         return policy if policy and (policy / "config.json").exists() else None
