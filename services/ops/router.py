@@ -29,6 +29,11 @@ def run_router(settings: ZenohSettings, stop: threading.Event) -> int:
             log.info("%s %s %s", event.transport.whatami, event.transport.zid, verb)
 
         with session.info.declare_transport_events_listener(on_transport):
-            stop.wait()
+            # Wake up now and then: a SIGTERM delivered to one of Zenoh's threads runs the handler
+            # only when the main thread next runs Python, and an untimed wait never returned then
+            # (1 in 5 routers stopped together with the router they were linked to hung until
+            # SIGKILL).
+            while not stop.wait(0.5):
+                pass
     log.info("router stopped")
     return 0
