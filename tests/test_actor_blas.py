@@ -26,24 +26,26 @@ def test_the_actor_loop_runs_on_one_blas_thread(monkeypatch) -> None:
         def __init__(self, *args, **kwargs) -> None:
             pass
 
+        def __enter__(self) -> FakeActor:
+            return self
+
+        def __exit__(self, *exc: object) -> None:
+            pass
+
         def run(self, stop: threading.Event) -> int:
             seen.append(blas_threads())
             return 0
 
-        def close(self) -> None:
-            pass
+    class Closable:  # stands in for the Zenoh session and the liveliness token
+        def __enter__(self) -> Closable:
+            return self
 
-    class Session:
-        def close(self) -> None:
-            pass
-
-    class Token:
-        def undeclare(self) -> None:
+        def __exit__(self, *exc: object) -> None:
             pass
 
     monkeypatch.setattr(actor_module, "Actor", FakeActor)
-    monkeypatch.setattr(actor_module, "connect", lambda settings, stop: Session())
-    monkeypatch.setattr(actor_module, "declare_alive", lambda *args: Token())
+    monkeypatch.setattr(actor_module, "open_session", lambda settings, stop: Closable())
+    monkeypatch.setattr(actor_module, "declare_alive", lambda *args: Closable())
     config = ActorConfig(id="blas1", envs=2, maps="rooms:10", seed=0)
     assert actor_module.run_actor(config, ZenohSettings(), threading.Event()) == 0
     assert seen == [{1}], seen
