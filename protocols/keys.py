@@ -113,6 +113,11 @@ def alive_role(run: str, role: str) -> str:
     return f"{prefix(run)}/alive/{check_name(role, 'role')}/*"
 
 
+def alive_in_every_run(role: str) -> str:
+    """Every liveliness token of one role in any run: ``navlearn/*/alive/<role>/*`` (who is where)."""
+    return f"{ROOT}/*/alive/{check_name(role, 'role')}/*"
+
+
 @dataclass(frozen=True)
 class ParsedKey:
     """A key split into its run, channel and names (``names`` has one entry, two for ``alive``)."""

@@ -54,6 +54,8 @@ class LocalTrainConfig:
     """episodes of the final evaluation (test set, seed 0: generated maps never trained on)"""
     progress: bool = True
     """show a progress bar"""
+    device: str = "cpu"
+    """where the learner's networks, loss and sampled batches live: cpu, cuda or auto (agents.device)"""
 
 
 @dataclass
@@ -102,7 +104,7 @@ def train_local(
     env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
     obs_dim = int(env.single_observation_space.shape[0])
     n_actions = int(env.single_action_space.n)
-    learner = NNQLLearner(nnql, obs_dim, n_actions)
+    learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device)
     policy = learner.policy(seed=run.seed)
     policy.explore_as(nnql, learner.version)
     rollout = VectorRollout(env, policy, with_next_action=nnql.sarsa)
@@ -123,8 +125,7 @@ def train_local(
         due = learner.updates_due()
         if due:
             t0 = time.perf_counter()
-            for _ in range(due):
-                metrics = learner.update()
+            metrics = learner.update(due)
             update_time += time.perf_counter() - t0
             policy.set_weights(learner.get_weights(), learner.version)
             policy.explore_as(nnql, learner.version)

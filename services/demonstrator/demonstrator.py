@@ -23,6 +23,7 @@ the acknowledgement of everything it published. It declares ``alive/demonstrator
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import threading
@@ -36,8 +37,8 @@ from protocols import keys
 from protocols.codec import encode
 from protocols.messages import DemoBatch, EpisodeMeta
 from services.common.outbox import Outbox, decode_ack
-from services.common.process import connect
-from services.common.transport import Presence, ZenohSettings, declare_alive
+from services.common.transport import Presence, ZenohSettings, declare_alive, open_session
+from services.common.waiting import WaitLog
 from services.demonstrator.config import DemonstratorConfig
 from services.demonstrator.episodes import expert_episodes, file_episodes
 from services.demonstrator.teleop import drive
@@ -76,10 +77,19 @@ def demo_batch(demos: list[Demo], source: str, sender: str, seq: int) -> DemoBat
 class DemoPublisher:
     """Publishes batches of episodes on ``demos/<source>``, waiting for a learner if told to."""
 
-    def __init__(self, session, run: str, config: DemonstratorConfig, stop: threading.Event):
+    def __init__(
+        self, session, run: str, config: DemonstratorConfig, stop: threading.Event, where: str = ""
+    ) -> None:
+        """``where``: the router endpoints, named while waiting for a learner."""
         import zenoh
 
         self.config = config
+        self.waiting = WaitLog(
+            log,
+            "waiting for a learner on run %r via %s to publish demonstrations to (%.0f s so far)",
+            run,
+            where,
+        )
         self.stop = stop
         self.sender = f"{config.id}#{int(time.time())}"
         self.publisher = session.declare_publisher(
@@ -111,13 +121,11 @@ class DemoPublisher:
         """Block until a learner is alive (or stop); True when one is."""
         if self.learners is None:
             return True
-        warned = False
+        self.waiting.reset()
         while not self.stop.is_set():
             if self.learners.wait_for(bool, timeout=0.5):
                 return True
-            if not warned:
-                log.info("waiting for a learner to publish demonstrations to")
-                warned = True
+            self.waiting.tick()
         return False
 
     def publish(self, demos: list[Demo]) -> bool:
@@ -172,13 +180,17 @@ def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: 
     if not config.id:
         config.id = f"{config.source}-{os.getpid()}"
     keys.check_name(config.id, "demonstrator id")
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
-    publisher = DemoPublisher(session, settings.run, config, stop)
-    token = declare_alive(session, settings.run, "demonstrator", config.id)
-    log.info("demonstrator %s (%s) up, run %s", config.id, config.source, settings.run)
-    try:
+    with (
+        session,
+        contextlib.closing(DemoPublisher(session, settings.run, config, stop, settings.where())) as publisher,
+        declare_alive(session, settings.run, "demonstrator", config.id),
+    ):
+        log.info(
+            "demonstrator %s (%s) up, run %s via %s", config.id, config.source, settings.run, settings.where()
+        )
         if config.source == "astar":
             publisher.publish_all(expert_episodes(config, stop))
         elif config.source == "file":
@@ -193,7 +205,3 @@ def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: 
             publisher.steps,
         )
         return 0
-    finally:
-        token.undeclare()
-        publisher.close()
-        session.close()

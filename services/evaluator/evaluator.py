@@ -5,12 +5,14 @@ the newest weights on start), runs the shared evaluation (agents.evaluation) on
 fixed, seeded sets - unseen generated maps, the same with moving obstacles - with
 the greedy policy, publishes an EvalReport on ``eval/<id>``, appends a JSON line
 to ``evaluations.jsonl`` and redraws ``learning_curve.png`` (success and path
-ratio to A* against policy version and wall time). Evaluation takes seconds, so
+ratio to A* against policy version and wall time since the run's first launch; a
+resumed run starts a new segment, marked, with no line across the gap). Evaluation takes seconds, so
 versions that arrive meanwhile are skipped: it always takes the newest.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import threading
@@ -26,8 +28,10 @@ from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
 from protocols.messages import EvalReport
-from services.common.process import Scalars, connect
-from services.common.transport import ZenohSettings, declare_alive
+from services.common.process import Scalars
+from services.common.transport import ZenohSettings, declare_alive, open_session
+from services.common.waiting import WaitLog
+from services.common.warmup import COMPILE_NOTE
 from services.common.weights import WeightsReceiver
 from services.evaluator.config import EvaluatorConfig
 from worlds.config import NavConfig
@@ -53,13 +57,23 @@ def summary_scalars(metrics: dict[str, Any]) -> dict[str, float]:
 class Evaluator:
     """Takes the newest weights, evaluates them, reports, records and plots."""
 
-    def __init__(self, config: EvaluatorConfig, session, run: str, eval_sets: list, limits: Limits) -> None:
+    def __init__(
+        self, config: EvaluatorConfig, session, run: str, eval_sets: list, limits: Limits, where: str = ""
+    ) -> None:
+        """``where``: the router endpoints, named while waiting for the first weights."""
         self.config = config
         self.session = session
         self.run_name = run
         self.eval_sets = eval_sets
         self.receiver = WeightsReceiver(session, run, config.model, limits)
         self.receivers = {config.model: self.receiver}
+        self.first_weights = WaitLog(
+            log,
+            "waiting for the first weights of %s from the learner on run %r via %s (%.0f s so far)",
+            config.model,
+            run,
+            where,
+        )
         for model in config.compare:
             if model not in self.receivers:
                 self.receivers[model] = WeightsReceiver(session, run, model, limits)
@@ -71,6 +85,8 @@ class Evaluator:
         self.scalars = Scalars(config.tensorboard)
         self.seq = 0
         self.last: tuple[str, int] | None = None  # (learner sender, version) last evaluated
+        self.launch = config.launched or time.time()
+        """time zero of this launch's segment of the learning curve"""
 
     def _load_points(self) -> list[dict[str, Any]]:
         path = self.out / LINES_FILE
@@ -106,6 +122,7 @@ class Evaluator:
         point = {
             "policy_version": version,
             "time": time.time(),
+            "launch": self.launch,
             "learner": sender,
             "model": model,
             "metrics": metrics,
@@ -123,7 +140,8 @@ class Evaluator:
         result = evaluate(policy, self.eval_sets)
         log.info("reference policy %s evaluated\n%s", path, result.table())
         metrics = result.to_dict(with_episodes=False)["metrics"]
-        point = {"policy_version": policy.version, "time": time.time(), "learner": "", "model": REFERENCE,
+        point = {"policy_version": policy.version, "time": time.time(), "launch": self.launch,
+                 "learner": "", "model": REFERENCE,
                  "name": policy.model or Path(path).name, "metrics": metrics}  # fmt: skip
         self.points = [p for p in self.points if p.get("model") != REFERENCE] + [point]
         with open(self.out / LINES_FILE, "a") as fh:
@@ -152,6 +170,8 @@ class Evaluator:
                 self.report(message.sender, message.version, metrics, model)
                 done += 1
             if idle:
+                if self.last is None:
+                    self.first_weights.tick()
                 stop.wait(0.2)
         return 0
 
@@ -164,20 +184,26 @@ class Evaluator:
 def run_evaluator(config: EvaluatorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
     """Process set-up: the fixed evaluation sets, the Zenoh session, the loop."""
     start = time.perf_counter()
+    log.info("evaluator %s: building the evaluation sets (%s)", config.id, COMPILE_NOTE)
     eval_sets = [make_eval_set(family, config.episodes, seed=config.eval_seed) for family in config.families]
     log.info("evaluation sets %s ready in %.1f s", ", ".join(config.families), time.perf_counter() - start)
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
-    evaluator = Evaluator(
-        config, session, settings.run, eval_sets, Limits(n_actions=NavConfig().robot.n_actions)
-    )
-    token = declare_alive(session, settings.run, "evaluator", config.id)
-    log.info("evaluator %s up: %d episodes per family, run %s", config.id, config.episodes, settings.run)
-    try:
-        return evaluator.run(stop)
-    finally:
-        token.undeclare()
-        evaluator.close()
-        session.close()
-        log.info("evaluator stopped")
+    where = settings.where()
+    limits = Limits(n_actions=NavConfig().robot.n_actions)
+    with (
+        session,
+        contextlib.closing(Evaluator(config, session, settings.run, eval_sets, limits, where)) as evaluator,
+        declare_alive(session, settings.run, "evaluator", config.id),
+    ):
+        log.info(
+            "evaluator %s up: %d episodes per family, run %s via %s",
+            config.id,
+            config.episodes,
+            settings.run,
+            where,
+        )
+        code = evaluator.run(stop)
+    log.info("evaluator stopped")
+    return code

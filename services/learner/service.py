@@ -22,6 +22,7 @@ import threading
 import time
 from pathlib import Path
 
+import agents.evaluation.policies  # noqa: F401 - save_policy_dir imports it lazily (~2.5 s): not in a checkpoint
 from agents.nirl.config import NIRLConfig
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
@@ -31,8 +32,8 @@ from protocols.codec import encode
 from protocols.flow import Ack
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, LearnerStatus
-from services.common.process import Scalars, connect
-from services.common.transport import ZenohSettings, declare_alive
+from services.common.process import Scalars
+from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.common.weights import WeightsBroadcaster
 from services.learner.checkpoint import CheckpointDir
 from services.learner.config import LearnerConfig
@@ -51,6 +52,10 @@ from worlds.config import NavConfig
 from worlds.env import observation_space
 
 log = logging.getLogger("navlearn.learner")
+
+# Updates per NNQLLearner.update call: several amortise the call (bench/learner.py: 1.25 of a bare
+# update with 16, 1.08 with one) while a slice of them stays near 20 ms.
+UPDATES_PER_CALL = 8
 
 
 class LearnerService:
@@ -301,21 +306,23 @@ class LearnerService:
         self._unacked.clear()
 
     def _train(self, max_updates: int, max_seconds: float = 0.02) -> bool:
-        """Up to ``max_updates`` updates the rate limiter allows, for at most about ``max_seconds``
-        (so a batch waiting in the inbox waits one slice, not a burst of updates, before it goes in)."""
-        ran = 0
+        """Up to ``max_updates`` updates the rate limiter allows, for about ``max_seconds`` (a batch
+        waiting in the inbox waits one slice, not a burst of updates, before it goes in), several per
+        ``update`` call: each call runs up to the next broadcast, at most ``UPDATES_PER_CALL``."""
+        every = self.config.broadcast_every
         replay_size = len(self.learner.replay)
         until = time.monotonic() + max_seconds
-        while (
-            ran < max_updates
-            and self.limiter.can_update(replay_size)
-            and (ran == 0 or time.monotonic() < until)
-        ):
-            self.tally.metrics = self.learner.update()
-            self.limiter.updated()
-            self.tally.update_rate.add()
-            ran += 1
-            if self.learner.version % self.config.broadcast_every == 0:
+        ran = 0
+        while ran == 0 or time.monotonic() < until:
+            allowed = min(max_updates - ran, self.limiter.updates_allowed(replay_size))
+            if allowed <= 0:
+                break
+            count = min(allowed, UPDATES_PER_CALL, every - self.learner.version % every)
+            self.tally.metrics = self.learner.update(count)
+            self.limiter.updated(count)
+            self.tally.update_rate.add(count)
+            ran += count
+            if self.learner.version % every == 0:
                 self.broadcast()
         self.nnql_ran = ran
         return ran > 0
@@ -407,13 +414,13 @@ def run_learner(
     ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
     nav = NavConfig()
     obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
-    learner = NNQLLearner(nnql, obs_dim, n_actions)
+    learner = NNQLLearner(nnql, obs_dim, n_actions, device=config.device, replay_dir=config.replay_dir)
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
     inbox = learner_inbox(config, nnql, limits, settings.run, (config.acl_names, settings.acl_file))
     if settings.mode == "router" and (warning := exposure_warning(settings)):
         log.warning("%s", warning)  # the learner hosts the router
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
     sender = f"{config.id}#{int(time.time())}"

@@ -12,17 +12,9 @@ import logging
 import threading
 from dataclasses import replace
 
-from services.common.transport import ZenohSettings, build_config, open_session
+from services.common.transport import ZenohSettings, build_config, config_endpoints, open_session
 
 log = logging.getLogger("navlearn.router")
-
-
-def listen_endpoints(settings: ZenohSettings) -> list[str]:
-    """The endpoints a router with ``settings`` listens on."""
-    listen = json.loads(build_config(settings).get_json("listen/endpoints"))
-    if isinstance(listen, dict):  # a config file may give endpoints per mode
-        listen = listen.get("router", [])
-    return list(listen or [])
 
 
 def _loopback(endpoint: str) -> bool:
@@ -40,7 +32,7 @@ def exposure_warning(settings: ZenohSettings) -> str | None:
     user/password authentication (anyone who reaches it may then publish and read everything,
     in the clear); None otherwise."""
     config = build_config(replace(settings, mode="router"))
-    exposed = [e for e in listen_endpoints(settings) if not _loopback(e)]
+    exposed = [e for e in config_endpoints(config, "listen") if not _loopback(e)]
     if not exposed:
         return None
     plain = [e for e in exposed if not e.startswith(("tls/", "quic/"))]
@@ -63,7 +55,7 @@ def run_router(settings: ZenohSettings, stop: threading.Event) -> int:
     import zenoh
 
     settings = replace(settings, mode="router")
-    listen = listen_endpoints(settings)
+    listen = config_endpoints(build_config(settings), "listen")
     warning = exposure_warning(settings)
     if warning:
         log.warning("%s", warning)
@@ -74,8 +66,12 @@ def run_router(settings: ZenohSettings, stop: threading.Event) -> int:
             verb = "joined" if event.kind == zenoh.SampleKind.PUT else "left"
             log.info("%s %s %s", event.transport.whatami, event.transport.zid, verb)
 
-        listener = session.info.declare_transport_events_listener(on_transport)
-        stop.wait()
-        listener.undeclare()
+        with session.info.declare_transport_events_listener(on_transport):
+            # Wake up now and then: a SIGTERM delivered to one of Zenoh's threads runs the handler
+            # only when the main thread next runs Python, and an untimed wait never returned then
+            # (1 in 5 routers stopped together with the router they were linked to hung until
+            # SIGKILL).
+            while not stop.wait(0.5):
+                pass
     log.info("router stopped")
     return 0
