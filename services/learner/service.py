@@ -8,7 +8,7 @@ drained together share one write-ahead-log fsync before their acks go out), keep
 status snapshot that the ``status/learner`` queryable serves, writes TensorBoard
 scalars and checkpoints. A failing disk write (write-ahead log or checkpoint) stops intake and
 acknowledgements until a retry works (services.learner.storage); the loop, status and SIGTERM
-go on. ``run_learner`` does the process set-up around it. Its settings
+go on. ``services.learner.run.run_learner`` does the process set-up around it. Its settings
 are in services.learner.config, what a checkpoint holds besides the networks in
 services.learner.state, the status snapshot in services.learner.status.
 """
@@ -23,33 +23,26 @@ import time
 from pathlib import Path
 
 import agents.evaluation.policies  # noqa: F401 - save_policy_dir imports it lazily (~2.5 s): not in a checkpoint
-from agents.nirl.config import NIRLConfig
-from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.replay_files import stored_bytes
 from protocols import keys
 from protocols.codec import encode
 from protocols.flow import Ack
-from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, LearnerStatus
 from services.common.process import Scalars
-from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.common.weights import WeightsBroadcaster
 from services.learner.checkpoint import CheckpointDir
 from services.learner.config import LearnerConfig
 from services.learner.demo_buffer import DemoBuffer
 from services.learner.durable import DurableIngest
-from services.learner.inbox import Inbox, Received, learner_inbox
+from services.learner.inbox import Inbox, Received
 from services.learner.nirl import NIRLTrainer
 from services.learner.ratelimit import RateLimiter
 from services.learner.state import LearnerParts, checkpoint_wal_seq
 from services.learner.stats import LearnerTally
 from services.learner.status import build_status, progress_line, status_charts
 from services.learner.storage import StorageGuard
-from services.ops.router import exposure_warning
 from services.ops.status import eval_summary
-from worlds.config import NavConfig
-from worlds.env import observation_space
 
 log = logging.getLogger("navlearn.learner")
 
@@ -59,7 +52,8 @@ UPDATES_PER_CALL = 8
 
 
 class LearnerService:
-    """One NNQL learner behind Zenoh. Built by ``run_learner``; ``run(stop)`` is the main loop."""
+    """One NNQL learner behind Zenoh. Built by ``run_learner`` (services.learner.run); ``run(stop)`` is
+    the main loop; a context manager that closes what it declared."""
 
     def __init__(
         self,
@@ -397,6 +391,12 @@ class LearnerService:
     def _log_progress(self) -> None:
         log.info("%s", progress_line(self.status(), self.tally))
 
+    def __enter__(self) -> LearnerService:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
     def close(self) -> None:
         self._status_queryable.undeclare()
         if self.durable is not None:
@@ -405,54 +405,3 @@ class LearnerService:
         if self.nirl is not None:
             self.nirl.close()
         self.scalars.close()
-
-
-def run_learner(
-    config: LearnerConfig, nnql: NNQLConfig, settings: ZenohSettings, stop: threading.Event, nirl=None
-) -> int:
-    """Process set-up: learner, Zenoh session (hosting the router unless told to connect), the loop.
-    ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
-    nav = NavConfig()
-    obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
-    learner = NNQLLearner(nnql, obs_dim, n_actions, device=config.device, replay_dir=config.replay_dir)
-    demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
-    limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
-    inbox = learner_inbox(config, nnql, limits, settings.run, (config.acl_names, settings.acl_file))
-    if settings.mode == "router" and (warning := exposure_warning(settings)):
-        log.warning("%s", warning)  # the learner hosts the router
-    session = open_session(settings, stop=stop)
-    if session is None:
-        return 0
-    sender = f"{config.id}#{int(time.time())}"
-    trainer = None
-    if config.nirl:
-        nirl = nirl or NIRLConfig(seed=nnql.seed)
-        trainer = NIRLTrainer(
-            nirl, learner.replay, demos.replay, session, settings.run, sender, config.broadcast_every
-        )
-    service = LearnerService(config, learner, session, settings.run, inbox, demos, sender, nirl=trainer)
-    try:
-        latest = service.checkpoints.newest_intact() if config.resume and service.checkpoints else None
-        if latest is not None:
-            service.resume(latest)
-        service.replay_log()
-        subscribers = inbox.subscribe(session)
-        token = declare_alive(session, settings.run, "learner", config.id)
-        log.info(
-            "learner %s up (%s mode), run %s, version %d",
-            config.id,
-            settings.mode,
-            settings.run,
-            learner.version,
-        )
-        code = service.run(stop)
-        token.undeclare()
-        for subscriber in subscribers:
-            subscriber.undeclare()
-        return code
-    finally:
-        try:
-            service.close()
-        finally:
-            session.close()  # even if closing the service failed: a held session keeps the process alive
-            log.info("learner stopped")
