@@ -142,6 +142,8 @@ def test_demonstrators_learner_actor_evaluator_train_and_compare_nirl(tmp_path):
         assert any(k.startswith("nirl/") for k in status.losses), status.losses
         assert models >= {"nnql", "nirl"}, models
         subscriber.undeclare()
+        for name in ("astar", "file"):  # finite sources: they stop on their own once acknowledged
+            processes[name].wait(60)  # (a SIGTERM while Python finalises would end them with -15)
     finally:
         if session is not None:
             session.close()
