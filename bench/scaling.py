@@ -39,6 +39,8 @@ from services.ops.up_config import UpConfig
 
 POLL_S = 2.0
 """seconds between two looks at the learner's status, the processes' CPU and the evaluations"""
+FIRST_POLL_S = 0.2
+"""the same until the first transition arrives (it is time zero)"""
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -191,7 +193,7 @@ class ScalingRun:
                     points = curve(read_lines(self.out / "eval" / LINES_FILE), a.family)
                     if mono - first["mono"] >= a.cap or any(p["success"] >= a.target for p in points):
                         break
-                time.sleep(POLL_S)
+                time.sleep(POLL_S if first else FIRST_POLL_S)
         wall = mono - first["mono"]
         used = {k: round((cpu[k] - first["cpu"][k]) / wall, 3) for k in cpu}
         reached = crossings(points, first["time"], a.thresholds)
