@@ -10,9 +10,11 @@ robot world is compiled once before the first run (services.common.warmup), so n
 for it.
 
 Time zero of a run is the first transition the learner receives (as `navlearn up` counts its
-budget). A run stops when an evaluation reaches --target or after --cap seconds. From the
-evaluator's evaluations.jsonl: the seconds (and updates) to the first evaluation at or above
-each --thresholds value; from the learner's status and /proc: its updates/s and its
+budget). From the evaluator's evaluations.jsonl: the seconds (and updates) until the success
+pooled over the last --window evaluations first reaches each --thresholds value (one evaluation
+of 500 episodes has a 95% interval of about +-4 points, so near a plateau a single one crosses
+a threshold by chance). A run stops when that pooled success reaches --target, or after --cap
+seconds. from the learner's status and /proc: its updates/s and its
 utilisation (CPU seconds / wall seconds over the run), and the CPU share of the actors and the
 evaluator, i.e. where the 2 cores went.
 
@@ -29,6 +31,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from agents.evaluation.metrics import wilson_interval
 from bench._common import machine_load, process_cpu, settings
 from services.common.transport import TransportError, free_port, open_session
 from services.common.warmup import compile_world
@@ -59,24 +62,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--episodes", type=int, default=500, help="evaluation episodes per version")
     p.add_argument("--eval-seed", type=int, default=1, help="evaluation set seed (1: validation)")
     p.add_argument("--eval-every", type=int, default=1000, help="updates between evaluated versions")
+    p.add_argument("--window", type=int, default=3, help="evaluations pooled to judge a threshold")
     p.add_argument("--out", default="", help="keep the runs' directories here (default: a temporary one)")
     return p.parse_args(argv)
 
 
-def crossings(points: list[dict[str, Any]], start: float, thresholds: list[float]) -> dict[str, Any]:
-    """For each threshold, the first evaluation (in report order) whose success reaches it:
-    seconds since ``start`` (unix time), policy version (updates) and its success with the 95%
-    Wilson interval; None where no evaluation reached it. ``points``: (time, version, success,
-    low, high) dicts as :func:`curve` makes them."""
-    out: dict[str, Any] = {}
-    for threshold in thresholds:
-        hit = next((p for p in points if p["success"] >= threshold), None)
-        out[f"{threshold:g}"] = None if hit is None else {**hit, "s": round(hit["time"] - start, 1)}
-    return out
-
-
 def curve(lines: list[dict[str, Any]], family: str) -> list[dict[str, Any]]:
-    """The evaluator's points (evaluations.jsonl rows) as (time, version, success, low, high)."""
+    """The evaluator's points (evaluations.jsonl rows of the NNQL model), in report order: time,
+    version, successes ``count`` of ``n`` episodes, ``success`` with its 95% Wilson interval."""
     points = []
     for line in lines:
         metrics = line.get("metrics", {}).get(family)
@@ -87,12 +80,41 @@ def curve(lines: list[dict[str, Any]], family: str) -> list[dict[str, Any]]:
             {
                 "time": line["time"],
                 "version": line["policy_version"],
+                "count": success["count"],
+                "n": success["n"],
                 "success": success["value"],
                 "low": round(success["low"], 3),
                 "high": round(success["high"], 3),
             }
         )
     return sorted(points, key=lambda p: p["time"])
+
+
+def pooled(points: list[dict[str, Any]]) -> dict[str, float]:
+    """Success over all the episodes of ``points`` with its 95% Wilson interval."""
+    count, n = sum(p["count"] for p in points), sum(p["n"] for p in points)
+    low, high = wilson_interval(count, n)
+    return {"success": round(count / n, 4), "low": round(low, 3), "high": round(high, 3)}
+
+
+def crossings(
+    points: list[dict[str, Any]], start: float, thresholds: list[float], window: int
+) -> dict[str, Any]:
+    """For each threshold, the first evaluation (report order) at which the success pooled over it
+    and the ``window - 1`` evaluations before it reaches the threshold: seconds since ``start``
+    (unix time), policy version (updates), the pooled success and its 95% Wilson interval. A
+    single evaluation near a plateau crosses a threshold by chance; pooling a few holds it to the
+    level the policy keeps. None where it was never reached."""
+    out: dict[str, Any] = {}
+    for threshold in thresholds:
+        hit = None
+        for i, point in enumerate(points):
+            mean = pooled(points[max(0, i + 1 - window) : i + 1])
+            if i + 1 >= window and mean["success"] >= threshold:
+                hit = {"s": round(point["time"] - start, 1), "version": point["version"], **mean}
+                break
+        out[f"{threshold:g}"] = hit
+    return out
 
 
 def highest_common(runs: list[dict[str, Any]], thresholds: list[float]) -> float | None:
@@ -191,26 +213,34 @@ class ScalingRun:
                         {"s": round(mono - first["mono"], 1), "updates": updates, "updates_per_s": rate}
                     )
                     points = curve(read_lines(self.out / "eval" / LINES_FILE), a.family)
-                    if mono - first["mono"] >= a.cap or any(p["success"] >= a.target for p in points):
+                    there = crossings(points, first["time"], [a.target], a.window)[f"{a.target:g}"]
+                    if mono - first["mono"] >= a.cap or there is not None:
                         break
                 time.sleep(POLL_S if first else FIRST_POLL_S)
         wall = mono - first["mono"]
         used = {k: round((cpu[k] - first["cpu"][k]) / wall, 3) for k in cpu}
-        reached = crossings(points, first["time"], a.thresholds)
+        reached = crossings(points, first["time"], a.thresholds, a.window)
         return {
             "actors": self.n_actors,
             "training_s": round(wall, 1),
             "first_transition_s": round(first["time"] - self.launched, 1),
             "target_reached": reached[f"{a.target:g}"] is not None,
             "reached": reached,
-            "best_success": max((p["success"] for p in points), default=None),
+            "best_single_success": max((p["success"] for p in points), default=None),
+            "best_pooled_success": max(
+                (pooled(points[i : i + a.window])["success"] for i in range(len(points) - a.window + 1)),
+                default=None,
+            ),
             "updates": updates - first["updates"],
             "updates_per_s": round((updates - first["updates"]) / wall, 1),
             "transitions_per_s": round((received - first["received"]) / wall, 1),
             "learner_utilisation": used["learner"],
             "cores_used": {**used, "total": round(sum(used.values()), 3)},
             "evaluations": len(points),
-            "curve": [{**p, "s": round(p["time"] - first["time"], 1)} for p in points],
+            "curve": [
+                {"s": round(p["time"] - first["time"], 1), "version": p["version"], "success": p["success"]}
+                for p in points
+            ],
             "status_samples": samples[:: max(1, len(samples) // 60)],
         }
 
@@ -241,7 +271,8 @@ def report_line(run: dict[str, Any]) -> str:
         for t, hit in run["reached"].items()
     )
     return (
-        f"{run['actors']} actor(s): {run['training_s']:.0f} s trained, best success {run['best_success']}, "
+        f"{run['actors']} actor(s): {run['training_s']:.0f} s trained, "
+        f"best pooled success {run['best_pooled_success']}, "
         f"{run['updates_per_s']} updates/s, learner utilisation {run['learner_utilisation']:.2f}, "
         f"cores used {run['cores_used']['total']:.2f} (load {run['load_start'][0]}->{run['load_end'][0]}); "
         f"to threshold {hits}"

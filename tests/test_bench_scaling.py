@@ -1,23 +1,44 @@
-"""bench/scaling.py's reading of a learning curve: thresholds crossed, and the highest every run reached."""
+"""bench/scaling.py's reading of a learning curve: thresholds crossed by the success pooled over a
+few evaluations, and the highest threshold every run reached."""
 
 from __future__ import annotations
 
 from bench.scaling import crossings, curve, highest_common
 
 
-def line(t: float, version: int, success: float, model: str = "nnql") -> dict:
-    metrics = {"unseen": {"success": {"value": success, "low": success - 0.04, "high": success + 0.04}}}
-    return {"time": t, "policy_version": version, "model": model, "metrics": metrics}
+def line(t: float, version: int, count: int, n: int = 100, model: str = "nnql") -> dict:
+    success = {"value": count / n, "low": 0.0, "high": 1.0, "count": count, "n": n}
+    return {"time": t, "policy_version": version, "model": model, "metrics": {"unseen": {"success": success}}}
 
 
-def test_first_evaluation_at_or_above_each_threshold_counts_from_the_start():
-    lines = [line(110, 1000, 0.42), line(130, 2000, 0.71), line(120, 1500, 0.65), line(140, 3000, 0.69)]
-    points = curve([*lines, line(105, 0, 0.99, model="reference")], "unseen")
-    assert [p["version"] for p in points] == [1000, 1500, 2000, 3000]  # report order; reference dropped
-    hits = crossings(points, start=100.0, thresholds=[0.6, 0.7, 0.8])
-    assert hits["0.6"]["s"] == 20.0 and hits["0.6"]["version"] == 1500
-    assert hits["0.7"]["s"] == 30.0 and hits["0.7"]["success"] == 0.71
-    assert hits["0.8"] is None
+def test_a_threshold_is_reached_when_the_pooled_success_reaches_it():
+    counts = [
+        (110, 1000, 42),
+        (120, 1500, 65),
+        (130, 2000, 71),
+        (140, 3000, 69),
+        (150, 3500, 81),
+        (160, 4000, 70),
+    ]
+    lines = [line(t, v, c) for t, v, c in reversed(counts)]
+    points = curve([*lines, line(105, 0, 99, model="reference")], "unseen")
+    assert [p["version"] for p in points] == [
+        1000,
+        1500,
+        2000,
+        3000,
+        3500,
+        4000,
+    ]  # report order, no reference
+    single = crossings(points, start=100.0, thresholds=[0.6, 0.7, 0.8], window=1)
+    assert (
+        single["0.6"]["s"] == 20.0 and single["0.7"]["version"] == 2000 and single["0.8"]["version"] == 3500
+    )
+    hits = crossings(points, start=100.0, thresholds=[0.6, 0.7, 0.8], window=3)
+    assert hits["0.6"]["s"] == 40.0 and hits["0.6"]["version"] == 3000  # 59% pooled at version 2000
+    assert hits["0.7"]["version"] == 3500 and hits["0.7"]["success"] == round(221 / 300, 4)
+    assert hits["0.7"]["low"] < 221 / 300 < hits["0.7"]["high"]
+    assert hits["0.8"] is None  # one evaluation at 81% among 69-71% is not a policy at 80%
 
 
 def test_highest_common_threshold_is_the_one_every_run_reached():
@@ -28,4 +49,4 @@ def test_highest_common_threshold_is_the_one_every_run_reached():
 
 
 def test_a_curve_without_the_family_is_empty():
-    assert curve([line(1, 10, 0.5)], "dynamic") == []
+    assert curve([line(1, 10, 50)], "dynamic") == []
