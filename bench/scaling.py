@@ -63,6 +63,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--eval-seed", type=int, default=1, help="evaluation set seed (1: validation)")
     p.add_argument("--eval-every", type=int, default=1000, help="updates between evaluated versions")
     p.add_argument("--window", type=int, default=3, help="evaluations pooled to judge a threshold")
+    p.add_argument(
+        "--recorded", default="", help="run nothing: judge --thresholds again on this earlier output's curves"
+    )
     p.add_argument("--out", default="", help="keep the runs' directories here (default: a temporary one)")
     return p.parse_args(argv)
 
@@ -121,6 +124,37 @@ def highest_common(runs: list[dict[str, Any]], thresholds: list[float]) -> float
     """The highest threshold that every run reached (None if some run reached none)."""
     common = [t for t in thresholds if all(run["reached"][f"{t:g}"] is not None for run in runs)]
     return max(common) if common else None
+
+
+def common_summary(runs: list[dict[str, Any]], thresholds: list[float]) -> dict[str, Any]:
+    """The highest threshold all runs reached, and each run's seconds and updates to it."""
+    common = highest_common(runs, thresholds)
+    hits = {str(r["actors"]): r["reached"][f"{common:g}"] if common is not None else None for r in runs}
+    return {
+        "highest_common_threshold": common,
+        "time_to_common_s": {k: hit and hit["s"] for k, hit in hits.items()},
+        "updates_to_common": {k: hit and hit["version"] for k, hit in hits.items()},
+    }
+
+
+def rejudge(recorded: dict[str, Any], thresholds: list[float], window: int) -> dict[str, Any]:
+    """The thresholds judged again on the curves a finished run printed (``--recorded``): a level
+    no run was stopped at can be timed without training again."""
+    n = recorded["settings"]["episodes"]
+    runs = []
+    for run in recorded["runs"]:
+        points = [
+            {"time": p["s"], "version": p["version"], "count": round(p["success"] * n), "n": n}
+            for p in run["curve"]
+        ]
+        runs.append({"actors": run["actors"], "reached": crossings(points, 0.0, thresholds, window)})
+    return {
+        "bench": "scaling",
+        "rejudged": True,
+        "window": window,
+        "runs": runs,
+        **common_summary(runs, thresholds),
+    }
 
 
 def learner_counts(status) -> tuple[int, int, float]:
@@ -281,6 +315,10 @@ def report_line(run: dict[str, Any]) -> str:
 
 def main() -> None:
     args = parse_args()
+    if args.recorded:
+        recorded = json.loads(Path(args.recorded).read_text().strip().splitlines()[-1])
+        print(json.dumps(rejudge(recorded, args.thresholds, args.window)))
+        return
     seconds, compiled = compile_world(args.maps)
     print(f"robot world {'compiled' if compiled else 'loaded'} in {seconds:.0f} s")
     with tempfile.TemporaryDirectory(prefix="navlearn-scaling-") as tmp:
@@ -289,14 +327,10 @@ def main() -> None:
         for n_actors in args.actors:
             runs.append(one_run(n_actors, args, root))
             print(report_line(runs[-1]), flush=True)
-    common = highest_common(runs, args.thresholds)
     result = {
         "bench": "scaling",
-        "settings": {k: v for k, v in vars(args).items() if k != "out"},
-        "highest_common_threshold": common,
-        "time_to_common_s": {
-            str(r["actors"]): r["reached"][f"{common:g}"]["s"] if common is not None else None for r in runs
-        },
+        "settings": {k: v for k, v in vars(args).items() if k not in ("out", "recorded")},
+        **common_summary(runs, args.thresholds),
         "target_reached": {str(r["actors"]): r["target_reached"] for r in runs},
         "runs": runs,
         "load_average_1min": machine_load()[0],

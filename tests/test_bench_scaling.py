@@ -3,7 +3,7 @@ few evaluations, and the highest threshold every run reached."""
 
 from __future__ import annotations
 
-from bench.scaling import crossings, curve, highest_common
+from bench.scaling import crossings, curve, highest_common, rejudge
 
 
 def line(t: float, version: int, count: int, n: int = 100, model: str = "nnql") -> dict:
@@ -50,3 +50,21 @@ def test_highest_common_threshold_is_the_one_every_run_reached():
 
 def test_a_curve_without_the_family_is_empty():
     assert curve([line(1, 10, 50)], "dynamic") == []
+
+
+def test_a_recorded_output_is_judged_again_at_other_thresholds():
+    curve_1 = [
+        {"s": 10.0 * i, "version": 1000 * i, "success": x} for i, x in enumerate([0.0, 0.7, 0.74, 0.76, 0.75])
+    ]
+    curve_2 = [
+        {"s": 5.0 * i, "version": 1000 * i, "success": x} for i, x in enumerate([0.0, 0.72, 0.78, 0.76, 0.74])
+    ]
+    recorded = {
+        "settings": {"episodes": 500},
+        "runs": [{"actors": 1, "curve": curve_1}, {"actors": 2, "curve": curve_2}],
+    }
+    again = rejudge(recorded, [0.7, 0.75], window=2)
+    assert again["highest_common_threshold"] == 0.75
+    assert again["time_to_common_s"] == {"1": 30.0, "2": 10.0}  # pooled (370+380)/1000, (360+390)/1000
+    assert again["updates_to_common"] == {"1": 3000, "2": 2000}
+    assert again["runs"][0]["reached"]["0.7"]["version"] == 2000  # 0.0 and 0.7 pool to 35%
