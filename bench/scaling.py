@@ -49,7 +49,11 @@ FIRST_POLL_S = 0.2
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument(
-        "--actors", type=int, nargs="+", default=[1, 2, 4], help="actor process counts, one run each"
+        "--actors",
+        type=int,
+        nargs="+",
+        default=[1, 2, 4],
+        help="actor process counts, one run each, in order",
     )
     p.add_argument("--envs", type=int, default=UpConfig.envs, help="robots per actor")
     p.add_argument("--maps", default=UpConfig.maps, help="training map spec of the actors")
@@ -180,10 +184,11 @@ def read_lines(path: Path) -> list[dict[str, Any]]:
 class ScalingRun:
     """Learner, ``n_actors`` actors and the evaluator of one run, with their CPU bookkeeping."""
 
-    def __init__(self, n_actors: int, args: argparse.Namespace, root: Path) -> None:
+    def __init__(self, n_actors: int, args: argparse.Namespace, root: Path, index: int = 0) -> None:
+        """``index``: the run's place in the bench (an actor count may be run more than once)."""
         self.n_actors, self.args = n_actors, args
-        self.run = f"scaling{n_actors}x{os.getpid()}"
-        self.out = root / f"actors-{n_actors}"
+        self.run = f"scaling{index}x{n_actors}x{os.getpid()}"
+        self.out = root / f"run-{index}-actors-{n_actors}"  # a fresh learner: no checkpoint to resume
         (self.out / "logs").mkdir(parents=True, exist_ok=True)
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.env = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
@@ -287,9 +292,9 @@ class ScalingRun:
             self.children[name].wait(60)
 
 
-def one_run(n_actors: int, args: argparse.Namespace, root: Path) -> dict[str, Any]:
+def one_run(n_actors: int, args: argparse.Namespace, root: Path, index: int) -> dict[str, Any]:
     load_start = machine_load()
-    run = ScalingRun(n_actors, args, root)
+    run = ScalingRun(n_actors, args, root, index)
     run.start()
     try:
         result = run.watch()
@@ -324,8 +329,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="navlearn-scaling-") as tmp:
         root = Path(args.out or tmp)
         runs = []
-        for n_actors in args.actors:
-            runs.append(one_run(n_actors, args, root))
+        for index, n_actors in enumerate(args.actors):
+            runs.append(one_run(n_actors, args, root, index))
             print(report_line(runs[-1]), flush=True)
     result = {
         "bench": "scaling",
