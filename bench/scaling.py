@@ -131,14 +131,14 @@ def highest_common(runs: list[dict[str, Any]], thresholds: list[float]) -> float
 
 
 def common_summary(runs: list[dict[str, Any]], thresholds: list[float]) -> dict[str, Any]:
-    """The highest threshold all runs reached, and each run's seconds and updates to it."""
+    """The highest threshold all runs reached, and each run's seconds and updates to it (in run
+    order: an actor count may appear more than once)."""
     common = highest_common(runs, thresholds)
-    hits = {str(r["actors"]): r["reached"][f"{common:g}"] if common is not None else None for r in runs}
-    return {
-        "highest_common_threshold": common,
-        "time_to_common_s": {k: hit and hit["s"] for k, hit in hits.items()},
-        "updates_to_common": {k: hit and hit["version"] for k, hit in hits.items()},
-    }
+    to_common = []
+    for run in runs:
+        hit = run["reached"][f"{common:g}"] if common is not None else None
+        to_common.append({"actors": run["actors"], "s": hit and hit["s"], "updates": hit and hit["version"]})
+    return {"highest_common_threshold": common, "to_common": to_common}
 
 
 def rejudge(recorded: dict[str, Any], thresholds: list[float], window: int) -> dict[str, Any]:
@@ -336,7 +336,6 @@ def main() -> None:
         "bench": "scaling",
         "settings": {k: v for k, v in vars(args).items() if k not in ("out", "recorded")},
         **common_summary(runs, args.thresholds),
-        "target_reached": {str(r["actors"]): r["target_reached"] for r in runs},
         "runs": runs,
         "load_average_1min": machine_load()[0],
         "cpus": os.cpu_count(),

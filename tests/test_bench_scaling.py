@@ -65,6 +65,9 @@ def test_a_recorded_output_is_judged_again_at_other_thresholds():
     }
     again = rejudge(recorded, [0.7, 0.75], window=2)
     assert again["highest_common_threshold"] == 0.75
-    assert again["time_to_common_s"] == {"1": 30.0, "2": 10.0}  # pooled (370+380)/1000, (360+390)/1000
-    assert again["updates_to_common"] == {"1": 3000, "2": 2000}
+    # pooled (370 + 380) / 1000 and (360 + 390) / 1000
+    assert again["to_common"] == [
+        {"actors": 1, "s": 30.0, "updates": 3000},
+        {"actors": 2, "s": 10.0, "updates": 2000},
+    ]
     assert again["runs"][0]["reached"]["0.7"]["version"] == 2000  # 0.0 and 0.7 pool to 35%
