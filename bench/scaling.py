@@ -14,11 +14,13 @@ budget). From the evaluator's evaluations.jsonl: the seconds (and updates) until
 pooled over the last --window evaluations first reaches each --thresholds value (one evaluation
 of 500 episodes has a 95% interval of about +-4 points, so near a plateau a single one crosses
 a threshold by chance). A run stops when that pooled success reaches --target, or after --cap
-seconds. from the learner's status and /proc: its updates/s and its
-utilisation (CPU seconds / wall seconds over the run), and the CPU share of the actors and the
-evaluator, i.e. where the 2 cores went.
+seconds. From the learner's status and /proc: its updates/s and its utilisation (CPU seconds /
+wall seconds over the run), and the CPU share of the actors and the evaluator, i.e. where the
+2 cores went. ``--recorded FILE`` runs nothing: it judges other --thresholds on the curves an
+earlier run printed.
 
     python -m bench.scaling --actors 1 2 4 --cap 480   # human lines, one JSON object on the last line
+    python -m bench.scaling --actors 1 4 1 4 --cap 60  # interleaved rounds
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ POLL_S = 2.0
 """seconds between two looks at the learner's status, the processes' CPU and the evaluations"""
 FIRST_POLL_S = 0.2
 """the same until the first transition arrives (it is time zero)"""
+START_TIMEOUT_S = 600.0
+"""a run whose learner has received nothing by then has failed to start"""
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -225,12 +229,19 @@ class ScalingRun:
             if not child.alive():
                 raise SystemExit(f"{child.name} exited with {child.process.returncode}:\n{child.tail()}")
 
+    def check_started(self, deadline: float) -> None:
+        self.check_alive()
+        if time.monotonic() > deadline:
+            raise SystemExit(
+                f"no transition reached the learner in {START_TIMEOUT_S:.0f} s; see {self.out}/logs"
+            )
+
     def watch(self) -> dict[str, Any]:
         """Polls until the target is reached or the cap is spent; the run's figures."""
         a = self.args
-        session = None
+        session, deadline = None, time.monotonic() + START_TIMEOUT_S
         while session is None:
-            self.check_alive()
+            self.check_started(deadline)
             try:
                 session = open_session(settings(self.endpoint, self.run), connect_timeout=1.0)
             except TransportError:
@@ -239,6 +250,8 @@ class ScalingRun:
         samples, points, received, updates, rate = [], [], 0, 0, 0.0
         with session:
             while True:
+                if first is None:
+                    self.check_started(deadline)
                 self.check_alive()
                 status = query_status(session, self.run, timeout=2.0)
                 now, mono, cpu = time.time(), time.monotonic(), self.cpu()
