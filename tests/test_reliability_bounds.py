@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from agents.nnql.config import NNQLConfig
+from agents.nnql.ratelimit import RateLimiter
 from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
@@ -20,7 +21,6 @@ from protocols.messages import TransitionBatch
 from services.learner.config import LearnerConfig
 from services.learner.fairqueue import MESSAGE_WORK, FairQueue, SenderFull
 from services.learner.inbox import Inbox, max_batch_rows, transition_bytes_bound
-from services.learner.ratelimit import RateLimiter
 from services.ops.acl import Deployment, acl_publishers, write_deployment
 from tests.reliability_helpers import N_ACTIONS, OBS_DIM
 

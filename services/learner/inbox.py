@@ -32,6 +32,7 @@ from collections import Counter
 from dataclasses import dataclass
 
 from agents.nnql.config import NNQLConfig
+from agents.nnql.ratelimit import RateLimiter
 from protocols import keys
 from protocols.codec import decode
 from protocols.errors import ProtocolError
@@ -39,7 +40,6 @@ from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, Message, TransitionBatch
 from services.learner.config import LearnerConfig
 from services.learner.fairqueue import FairQueue, SenderFull
-from services.learner.ratelimit import RateLimiter
 from services.ops.acl import acl_publishers
 
 log = logging.getLogger("navlearn.inbox")

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import agents.evaluation.policies  # noqa: F401 - save_policy_dir imports it lazily (~2.5 s): not in a checkpoint
 from agents.nnql.learner import NNQLLearner
+from agents.nnql.ratelimit import RateLimiter
 from agents.replay_files import stored_bytes
 from protocols import keys
 from protocols.codec import encode
@@ -37,7 +38,6 @@ from services.learner.demo_buffer import DemoBuffer
 from services.learner.durable import DurableIngest
 from services.learner.inbox import Inbox, Received
 from services.learner.nirl import NIRLTrainer
-from services.learner.ratelimit import RateLimiter
 from services.learner.state import LearnerParts, checkpoint_wal_seq
 from services.learner.stats import LearnerTally
 from services.learner.status import build_status, progress_line, status_charts

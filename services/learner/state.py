@@ -13,11 +13,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agents.nnql.learner import NNQLLearner
+from agents.nnql.ratelimit import RateLimiter
 from services.learner.demo_buffer import DemoBuffer
 from services.learner.durable import DurableIngest
 from services.learner.inbox import Inbox
 from services.learner.nirl import NIRLTrainer
-from services.learner.ratelimit import RateLimiter
 from services.learner.stats import LearnerTally
 from services.learner.storage import StorageGuard
 

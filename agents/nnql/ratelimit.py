@@ -1,4 +1,5 @@
-"""The learner's update-to-data rate limiter (Reverb's ``SampleToInsertRatio``, counted in updates).
+"""The update-to-data rate limiter (Reverb's ``SampleToInsertRatio``, counted in updates): the one
+rate logic of ``train --local`` (agents.nnql.train_local) and the learner service.
 
 Reverb keeps ``diff = samples_per_insert * inserts - samples`` inside a band
 ``[min_diff, max_diff]`` around ``samples_per_insert * min_size_to_sample`` of
