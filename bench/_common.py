@@ -18,9 +18,13 @@ from pathlib import Path
 import numpy as np
 
 from services.common.transport import ZenohSettings
+from worlds.config import LEARNING_NAV
+from worlds.perception import observation_dim
 
 OBS_DIM, N_ACTIONS = 11, 5
 """The default navigation observation (8 beams + goal features) and action count."""
+LEARNER_OBS_DIM = observation_dim(LEARNING_NAV)
+"""what ``navlearn learner`` takes: the actors' observation (:data:`worlds.config.LEARNING_NAV`)"""
 
 
 def free_port() -> int:
@@ -64,13 +68,13 @@ def wait_ready(process: subprocess.Popen, timeout: float = 120) -> None:
     raise RuntimeError("helper process did not start")
 
 
-def random_transitions(n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+def random_transitions(n: int, rng: np.random.Generator, obs_dim: int = OBS_DIM) -> dict[str, np.ndarray]:
     """``n`` transitions in the flat layout ``NNQLLearner.add`` takes."""
     return {
-        "obs": rng.random((n, OBS_DIM), dtype=np.float32),
+        "obs": rng.random((n, obs_dim), dtype=np.float32),
         "action": rng.integers(0, N_ACTIONS, n),
         "reward": rng.normal(size=n).astype(np.float32),
-        "next_obs": rng.random((n, OBS_DIM), dtype=np.float32),
+        "next_obs": rng.random((n, obs_dim), dtype=np.float32),
         "terminated": rng.random(n) < 0.02,
         "truncated": np.zeros(n, bool),
     }

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from agents.nnql.policy import NNQLPolicy
-from bench._common import random_transitions, settings
+from bench._common import LEARNER_OBS_DIM, random_transitions, settings
 from protocols import keys
 from protocols.codec import decode, encode
 from protocols.flow import Ack
@@ -47,7 +47,7 @@ def feeder_main(endpoint: str, batch: int) -> None:
             model="nnql",
             policy_version=0,
             env_ids=np.zeros(batch, np.int32),
-            **random_transitions(batch, rng),
+            **random_transitions(batch, rng, LEARNER_OBS_DIM),
         )
         for _ in range(16)
     ]

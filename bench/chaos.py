@@ -8,7 +8,15 @@ Outbox, one Zenoh session each) and a flooder publishing the same big batch with
 At the end the learner is stopped with SIGTERM and its final checkpoint is read back:
 every acknowledged id must be stored exactly once.
 
+Then the flood and large-batch phases (issue #19): a fresh learner, one normal traced actor
+offering 25 batches/s (``--normal-rate``), and bench/flooder.py in its own process, in
+interleaved rounds: alone; with valid batches of the largest accepted size (1000 rows) on the
+flooder's own key; with ~60 MB valid batches on 4 more keys; with both. Reported:
+the normal actor's acknowledged batches/s per phase, its slowdown under each, the learner's
+peak RSS (VmHWM) and what it refused.
+
     python -m bench.chaos --actors 3 --kills 3 --seconds 45
+    python -m bench.chaos --only-flood --flood-rounds 3 --flood-seconds 10
 """
 
 from __future__ import annotations
@@ -30,7 +38,8 @@ from protocols.codec import encode
 from services.common.transport import ZenohSettings, free_port, open_session
 from services.learner.checkpoint import CheckpointDir
 from services.ops.status import query_status
-from tests.reliability_helpers import TracedActor, start_learner, stop_process, stored_ids
+from tests.reliability_helpers import TracedActor, caught_up, settle, start_learner, stop_process, stored_ids
+from tests.reliability_helpers import learner_argv as hosting_learner_argv
 
 
 def parse_args() -> argparse.Namespace:
@@ -44,6 +53,21 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--ingest-rounds", type=int, default=4, help="ingest rounds after the warm-up")
     p.add_argument("--wal-fsync", default="always", help="learner --wal-fsync in the ingest comparison")
     p.add_argument("--only-ingest", action="store_true", help="skip the chaos phase, measure ingest only")
+    p.add_argument("--only-flood", action="store_true", help="run only the flood and large-batch phases")
+    p.add_argument("--flood-rounds", type=int, default=3, help="interleaved rounds of the flood phases")
+    p.add_argument("--flood-seconds", type=float, default=10.0, help="each flood-phase measurement")
+    p.add_argument("--flooder-nice", type=int, default=19, help="nice of the flooder process (0: none)")
+    p.add_argument(
+        "--normal-rate", type=float, default=25.0, help="batches/s the normal actor offers (0: all it can)"
+    )
+    p.add_argument(
+        "--phases", nargs="+", default=list(FLOOD_PHASES), choices=list(FLOOD_PHASES), help="flood phases run"
+    )
+    p.add_argument(
+        "--learner-code",
+        default="",
+        help="run the flood phases' learner from this checkout (PYTHONPATH), e.g. a worktree of main",
+    )
     return p.parse_args()
 
 
@@ -82,17 +106,22 @@ def start_router(endpoint: str, log: Path) -> subprocess.Popen:
 class ActorThread:
     """One traceable actor with its own session, sending until stopped."""
 
-    def __init__(self, endpoint: str, run: str, name: str, first_id: int) -> None:
+    def __init__(self, endpoint: str, run: str, name: str, first_id: int, rate: float = 0.0) -> None:
+        """``rate``: batches/s offered (0: as fast as acknowledgements allow, 5 ms apart)."""
         self.session = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
         self.actor = TracedActor(self.session, run, name, per_batch=16, first_id=first_id)
+        self.rate = rate
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._loop, daemon=True)
         self.thread.start()
 
     def _loop(self) -> None:
+        due = time.monotonic()
         while not self.stop.is_set():
             self.actor.send_one(self.stop)
-            time.sleep(0.005)
+            # held back by the learner, a real actor's robots stop too: no burst to make up for it
+            due = max(due + 1.0 / self.rate, time.monotonic()) if self.rate else time.monotonic() + 0.005
+            self.stop.wait(max(0.0, due - time.monotonic()))
 
     def drain(self, timeout: float) -> None:
         self.stop.set()
@@ -208,11 +237,93 @@ def chaos(args, root: Path) -> dict:
     return result
 
 
+FLOOD_PHASES = {
+    "alone": None,
+    "rows": ["--rows", "1000"],
+    "large": ["--rows", "0", "--big-mb", "60", "--big-keys", "4"],
+    "flood": ["--rows", "1000", "--big-mb", "60", "--big-keys", "4"],
+}
+"""flooder.py arguments per phase (1000 rows: the learner's default row limit, 1% of its 100k replay)"""
+
+
+def flood(args, root: Path) -> dict:
+    """The normal actor's acknowledged rate alone, under a flood and under large batches."""
+    endpoint, run = f"tcp/127.0.0.1:{free_port()}", "flood"
+    # hosts the router; 100k replay; checkpoints only on stop (a periodic one would stall every phase alike)
+    argv = hosting_learner_argv(endpoint, run, root / "flood-ckpt", "--checkpoint-every", "0")
+    if args.learner_code:
+        argv = ["env", f"PYTHONPATH={args.learner_code}", *argv]
+    learner = start_learner(argv, root / "flood-learner.log")
+    normal = ActorThread(endpoint, run, "normal", first_id=1, rate=args.normal_rate)
+    watcher = open_session(ZenohSettings(connect=[endpoint], run=run, connect_timeout=120))
+    deadline = time.monotonic() + 180
+    while len(normal.actor.acked_seqs) < 50 and time.monotonic() < deadline:
+        time.sleep(0.2)
+    rates: dict[str, list[float]] = {phase: [] for phase in args.phases}
+    settle(watcher, run)
+    rss_before = peak_rss_mb(learner.pid)
+    nice = ["nice", "-n", str(args.flooder_nice)] if args.flooder_nice else []
+    flooder_cmd = [
+        sys.executable,
+        str(Path(__file__).with_name("flooder.py")),
+        "--connect",
+        endpoint,
+        "--run",
+        run,
+    ]
+    for _ in range(args.flood_rounds):
+        for phase in args.phases:
+            extra = FLOOD_PHASES[phase]
+            proc = (
+                None
+                if extra is None
+                else subprocess.Popen([*nice, *flooder_cmd, *extra], stdout=subprocess.PIPE)
+            )
+            if proc is not None:
+                time.sleep(3.0)  # its session up and flooding
+            start, acked = time.monotonic(), len(normal.actor.acked_seqs)
+            time.sleep(args.flood_seconds)
+            rates[phase].append((len(normal.actor.acked_seqs) - acked) / (time.monotonic() - start))
+            if proc is not None:
+                stop_process(proc, timeout=30)
+                settle(watcher, run)  # what the router still held of the flood is through
+            caught_up(normal.actor)  # the next phase starts without a backlog to catch up on
+            print(f"{phase}: normal actor {rates[phase][-1]:.1f} acknowledged batches/s")
+    status = query_status(watcher, run, timeout=5.0)
+    peak = peak_rss_mb(learner.pid)
+    normal.drain(60)
+    lost = len(normal.actor.outbox)
+    normal.close()
+    watcher.close()
+    stop_process(learner)
+    counters = status.counters if status else {}
+    alone = float(np.median(rates["alone"]))
+    return {
+        "flood/normal_batches_per_s": {k: [round(r, 1) for r in v] for k, v in rates.items()},
+        **{
+            f"flood/slowdown/{k}": round(1 - float(np.median(v)) / alone, 3)
+            for k, v in rates.items()
+            if k != "alone"
+        },
+        "flood/learner_rss_mb_before": round(rss_before, 1),
+        "flood/learner_peak_rss_mb": round(peak, 1),
+        "flood/rejected_batch_too_large": int(counters.get("rejected/batch_too_large", 0)),
+        "flood/dropped_sender_full_flood": int(counters.get("dropped/sender_full/flood", 0)),
+        "flood/flood_transitions_stored": int(counters.get("transitions/flood", 0)),
+        "flood/normal_unacknowledged_at_end": lost,
+    }
+
+
 def main() -> None:
     args = parse_args()
     with tempfile.TemporaryDirectory(prefix="navlearn-chaos-") as tmp:
         root = Path(tmp)
+        if args.only_flood:
+            print(json.dumps(flood(args, root)))
+            return
         result = {} if args.only_ingest else chaos(args, root)
+        if not args.only_ingest:
+            result.update(flood(args, root))
         if not args.only_ingest:
             print(
                 f"sent {result['transitions_sent']}, acknowledged {result['transitions_acknowledged']}, "

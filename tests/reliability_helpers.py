@@ -24,6 +24,7 @@ from protocols.codec import decode, encode
 from protocols.flow import Ack
 from protocols.messages import TransitionBatch
 from services.common.outbox import Outbox
+from services.ops.status import query_status
 from worlds.config import LEARNING_NAV
 from worlds.perception import observation_dim
 
@@ -100,6 +101,32 @@ class TracedActor:
     def close(self) -> None:
         self.acks.undeclare()
         self.publisher.undeclare()
+
+
+def settle(session, run: str, timeout: float = 60.0) -> None:
+    """Wait until the learner's flood counters stop moving (the router may still be delivering a
+    flood after the flooder stopped)."""
+    watched = (
+        "rejected/batch_too_large",
+        "dropped/sender_full/flood",
+        "transitions/flood",
+        "batches_received",
+    )
+    last, deadline = None, time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        status = query_status(session, run, timeout=5.0)
+        now = status and tuple(status.counters.get(k, 0) for k in watched)
+        if now is not None and now == last:
+            return
+        last = now
+        time.sleep(1.5)
+
+
+def caught_up(actor: TracedActor, timeout: float = 60.0) -> None:
+    """Wait until ``actor``'s outbox holds no more than its window (no backlog of unsent batches)."""
+    deadline = time.monotonic() + timeout
+    while len(actor.outbox) > actor.outbox.window and time.monotonic() < deadline:
+        time.sleep(0.1)
 
 
 def learner_argv(endpoint: str, run: str, checkpoint_dir: Path, *extra: str) -> list[str]:

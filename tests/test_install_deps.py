@@ -21,6 +21,7 @@ CHECKER = ROOT.parent / "shared" / "tools" / "check_deps.py"
 def test_every_import_is_declared_in_pyproject() -> None:
     if not CHECKER.exists():
         pytest.skip(f"the dependency checker is not beside the project ({CHECKER} missing)")
-    run = subprocess.run([sys.executable, str(CHECKER)], cwd=ROOT, capture_output=True, text=True,
-                         timeout=120)
+    run = subprocess.run(
+        [sys.executable, str(CHECKER)], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
     assert run.returncode == 0, f"undeclared imports:\n{run.stdout}{run.stderr}"

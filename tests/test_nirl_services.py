@@ -144,9 +144,9 @@ def test_demonstrators_learner_actor_evaluator_train_and_compare_nirl(tmp_path):
         assert status.versions["nirl"] > SMALL_NIRL["warmstart_updates"], status.versions
         assert any(k.startswith("nirl/") for k in status.losses), status.losses
         assert models >= {"nnql", "nirl"}, models
-        for name in ("astar", "file"):  # they stop by themselves, all acknowledged: no SIGTERM mid-exit
-            processes[name].wait(60)
         subscriber.undeclare()
+        for name in ("astar", "file"):  # finite sources: they stop on their own once acknowledged
+            processes[name].wait(60)  # (a SIGTERM while Python finalises would end them with -15)
     finally:
         if session is not None:
             session.close()

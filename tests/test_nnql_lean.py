@@ -51,7 +51,6 @@ def plain_updates(learner: NNQLLearner, n: int) -> None:
         index, _ = replay.sampler.sample(replay.storage, n * size)
         for i in range(n):
             learner.train_step(replay.storage.get(index[i * size : (i + 1) * size]))
-    learner.update_credit = max(learner.update_credit - n, 0.0)
 
 
 def assert_same_state(a: NNQLLearner, b: NNQLLearner) -> None:
@@ -66,7 +65,7 @@ def assert_same_state(a: NNQLLearner, b: NNQLLearner) -> None:
         for name in ("exp_avg", "exp_avg_sq", "step"):
             torch.testing.assert_close(opt_a[key][name], opt_b[key][name], rtol=1e-5, atol=1e-7)
     assert a.target_updater.state_dict() == b.target_updater.state_dict()
-    assert (a.updates, a.update_credit) == (b.updates, b.update_credit)
+    assert a.updates == b.updates
 
 
 @pytest.mark.parametrize("variant", sorted(VARIANTS))
@@ -110,8 +109,7 @@ def test_target_network_shares_the_loss_modules_storage():
 
 def test_update_counts_and_validates():
     lean, _ = twins({})
-    credit = lean.update_credit
     lean.update(3)
-    assert lean.version == 3 and lean.update_credit == max(credit - 3, 0.0)
+    assert lean.version == 3
     with pytest.raises(ValueError, match="n must be >= 1"):
         lean.update(0)

@@ -8,6 +8,7 @@ import torch
 
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
+from agents.nnql.ratelimit import RateLimiter
 
 OBS_DIM, N_ACTIONS = 6, 3
 
@@ -65,14 +66,21 @@ def test_insert_wraps_at_capacity_and_sample_has_batch_size():
 
 
 def test_update_to_data_ratio_bounds_updates():
-    learner = NNQLLearner(small_config(learning_starts=64, utd_ratio=0.25), OBS_DIM, N_ACTIONS)
+    """The pacing of train --local: the service's RateLimiter with no slack around the learner."""
+    config = small_config(learning_starts=64, utd_ratio=0.25)
+    learner = NNQLLearner(config, OBS_DIM, N_ACTIONS)
+    limiter = RateLimiter(config.utd_ratio, max(config.learning_starts, config.batch_size), tolerance=1.0)
     rng = np.random.default_rng(2)
-    learner.add(random_batch(rng, 32))
-    assert learner.updates_due() == 0  # below learning_starts
-    learner.add(random_batch(rng, 40))  # 72 >= 64: credit 40 * 0.25
-    assert learner.updates_due() == 10
-    learner.train_due()
-    assert learner.updates == 10 and learner.updates_due() == 0
+    limiter.inserted(learner.add(random_batch(rng, 32)))
+    assert limiter.updates_allowed(len(learner.replay)) == 0  # below learning_starts
+    limiter.inserted(learner.add(random_batch(rng, 40)))  # 72 >= 64: 8 past the start * 0.25 + 1
+    due = limiter.updates_allowed(len(learner.replay))
+    assert due == 3
+    learner.update(due)
+    limiter.updated(due)
+    assert learner.updates == 3 and limiter.updates_allowed(len(learner.replay)) == 0
+    limiter.inserted(learner.add(random_batch(rng, 40)))
+    assert limiter.updates_allowed(len(learner.replay)) == 10  # then one update per 4 transitions
 
 
 def test_prioritized_sampler_follows_td_errors():

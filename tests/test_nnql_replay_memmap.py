@@ -33,7 +33,8 @@ def test_checkpoint_holds_state_not_transitions_and_resumes_in_place(tmp_path):
     rng = np.random.default_rng(0)
     for _ in range(4):
         learner.add(random_batch(rng, 50))
-        learner.train_due()
+        if learner.ready():
+            learner.update(4)
     path = learner.save_checkpoint(tmp_path / "ckpt")
     assert sorted(p.name for p in (path / "replay").iterdir()) == ["memmap.json"]
 

@@ -83,7 +83,8 @@ def test_oversized_messages_and_a_stuck_evaluator_leave_the_learner_training(tmp
                 session.put(keys.transitions(run, "wide"), encode(wide_batch()))
             wait_for(
                 lambda n=4 * round_: (
-                    (s := query_status(session, run)).counters.get("rejected/oversize", 0) >= n
+                    # refused by its size before decoding: larger than the learner's row limit could be
+                    (s := query_status(session, run)).counters.get("rejected/batch_too_large", 0) >= n
                     and s.counters.get("rejected/shape", 0) >= n
                 ),
                 60,

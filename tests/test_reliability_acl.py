@@ -125,3 +125,51 @@ def test_an_actor_publishes_only_its_own_transitions(tmp_path: Path) -> None:
         assert answers == {own_status: b"a1 status"}  # an actor answers its own status, not the learner's
     finally:
         stop(proc)
+
+
+@pytest.mark.integration
+@pytest.mark.timeout(90)
+def test_each_publisher_sees_the_learners_subscription_under_the_acl(tmp_path: Path) -> None:
+    """The outbox sends while its publisher matches a subscriber: under the generated ACL the
+    actor's, demonstrator's and evaluator's publishers must see the learner's ``<channel>/*``
+    subscription (they did not: the actor never sent), and their puts must arrive."""
+    files = credentials(tmp_path)
+    endpoint, proc, _ = start_router("--auth-dictionary", files["users.txt"], "--acl", files["acl.json5"])
+
+    def session(user: str):
+        return open_session(
+            ZenohSettings(
+                connect=[endpoint], connect_timeout=10, run=RUN, credentials_file=files[f"{user}.credentials"]
+            )
+        )
+
+    own = {
+        "a1": keys.transitions(RUN, "a1"),
+        "d1": keys.demos(RUN, "astar"),
+        "ev1": keys.evaluation(RUN, "ev1"),
+    }
+    arrived: list[str] = []
+    try:
+        with session("learner") as learner, session("a1") as a1, session("d1") as d1, session("ev1") as ev1:
+            for channel in ("transitions", "demos", "eval"):
+                learner.declare_subscriber(
+                    keys.everything(RUN, channel), lambda s: arrived.append(str(s.key_expr))
+                )
+            publishers = {
+                user: s.declare_publisher(own[user]) for user, s in (("a1", a1), ("d1", d1), ("ev1", ev1))
+            }
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline and not all(
+                p.matching_status.matching for p in publishers.values()
+            ):
+                time.sleep(0.1)
+            matching = {user: p.matching_status.matching for user, p in publishers.items()}
+            for p in publishers.values():
+                p.put(b"x")
+            deadline = time.monotonic() + 5
+            while time.monotonic() < deadline and len(set(arrived)) < 3:
+                time.sleep(0.1)
+    finally:
+        stop(proc)
+    assert matching == {"a1": True, "d1": True, "ev1": True}
+    assert set(arrived) == set(own.values())

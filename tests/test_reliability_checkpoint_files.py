@@ -36,7 +36,8 @@ def _learner(prioritized: bool = False) -> NNQLLearner:
     rng = np.random.default_rng(0)
     for _ in range(3):
         learner.add(random_batch(rng, 60))
-        learner.train_due()
+        if learner.ready():
+            learner.update(4)
     return learner
 
 

@@ -55,6 +55,9 @@ class _Sample:
     def to_bytes(self) -> bytes:
         return self._data
 
+    def __len__(self) -> int:
+        return len(self._data)
+
 
 def test_a_full_share_drops_before_decoding():
     inbox = Inbox(Limits(n_actions=N_ACTIONS), capacity=16, run="r", per_sender=2)

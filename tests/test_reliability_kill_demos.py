@@ -41,8 +41,8 @@ def episode(first_id: int) -> Demo:
 
 
 def stored_demo_ids(checkpoint) -> np.ndarray:
+    from services.learner.config import LearnerConfig
     from services.learner.demo_buffer import DemoBuffer
-    from services.learner.service import LearnerConfig
 
     demos = DemoBuffer(LearnerConfig().demo_capacity, OBS_DIM)
     demos.load(checkpoint / "demos", 0)

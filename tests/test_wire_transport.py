@@ -18,6 +18,7 @@ from services.common.transport import (
     read_credentials,
     settings_from_args,
 )
+from services.ops.router import exposure_warning
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 ENV_VARS = [
@@ -169,3 +170,24 @@ def test_router_command_has_no_mode_or_run_flags() -> None:
     assert settings.mode == "router" and settings.listen == ["tcp/127.0.0.1:1"]
     with pytest.raises(SystemExit):
         build_parser().parse_args(["router", "--mode", "client"])
+
+
+def test_shipped_defaults_listen_on_loopback_unless_tls_and_auth(tmp_path: Path) -> None:
+    """The shipped supervisord, systemd and plain-router settings listen on loopback; a router told to
+    listen beyond it without TLS and authentication says so (issue #19: they listened on 0.0.0.0)."""
+    env = (DEPLOY / "systemd" / "navlearn.env").read_text()
+    assert "NAVLEARN_ROUTER_LISTEN=tcp/127.0.0.1:7447" in env.splitlines()
+    assert "export NAVLEARN_ROUTER_LISTEN=tcp/127.0.0.1:7447" in (DEPLOY / "supervisord.conf").read_text()
+    plain = build_config(ZenohSettings(mode=None, config_file=str(DEPLOY / "router.json5")))
+    assert get(plain, "listen/endpoints") == ["tcp/127.0.0.1:7447"]
+    assert exposure_warning(ZenohSettings(mode="router", listen=["tcp/127.0.0.1:7447"])) is None
+    open_ = exposure_warning(ZenohSettings(mode="router", listen=["tcp/0.0.0.0:7447"]))
+    assert open_ is not None and "WITHOUT TLS and authentication" in open_
+    users = tmp_path / "users.txt"
+    users.write_text("a:b\n")
+    no_tls = exposure_warning(
+        ZenohSettings(mode="router", listen=["tcp/0.0.0.0:7447"], auth_dictionary=str(users))
+    )
+    assert no_tls is not None and "WITHOUT TLS:" in no_tls
+    secure = ZenohSettings(mode=None, config_file=str(DEPLOY / "router-secure.json5"))
+    assert exposure_warning(secure) is None  # tls/0.0.0.0 with a user dictionary

@@ -115,8 +115,8 @@ def transitions_to_tensordict(batch: Any, obs_dim: int) -> TensorDict:
 class NNQLLearner:
     """Q-learning (or SARSA) over a TorchRL replay buffer.
 
-    ``add(batch)`` inserts transitions; ``updates_due()`` says how many updates the
-    update-to-data ratio allows; ``update(n)`` runs n; ``version`` counts updates. ``device``:
+    ``add(batch)`` inserts transitions; ``update(n)`` runs n updates (how many, the caller's
+    agents.nnql.ratelimit.RateLimiter says); ``version`` counts updates. ``device``:
     cpu, cuda or auto (see ``agents.device``); ``replay_dir``: keep the replay in memory-mapped
     files there instead of RAM (uniform sampling only).
     """
@@ -155,7 +155,6 @@ class NNQLLearner:
         self._stored: Batch | None = None
         self.updates = 0
         self.transitions_added = 0
-        self.update_credit = 0.0
 
     def _make_replay(self, replay_dir: str | Path | None) -> TensorDictReplayBuffer:
         cfg = self.config
@@ -199,16 +198,10 @@ class NNQLLearner:
             return 0
         self.replay.extend(td)
         self.transitions_added += n
-        if len(self.replay) >= self.config.learning_starts:
-            self.update_credit += n * self.config.utd_ratio
         return n
 
     def ready(self) -> bool:
         return len(self.replay) >= max(self.config.learning_starts, self.config.batch_size)
-
-    def updates_due(self) -> int:
-        """Updates the update-to-data ratio allows now (0 before learning_starts)."""
-        return int(self.update_credit) if self.ready() else 0
 
     # ------------------------------------------------------------ learning
 
@@ -236,7 +229,6 @@ class NNQLLearner:
             for i in range(n):
                 step = self.lean(batches.slice(i * size, (i + 1) * size))
         self.updates += n
-        self.update_credit = max(self.update_credit - n, 0.0)
         return self._metrics(step)
 
     def _sample(self, size: int) -> tuple[torch.Tensor, Batch]:
@@ -266,11 +258,6 @@ class NNQLLearner:
             "losses/grad_norm": float(step.grad_norm),
             "charts/version": float(self.updates),
         }
-
-    def train_due(self) -> dict[str, float] | None:
-        """Run every update that is due; metrics of the last one (None if none ran)."""
-        due = self.updates_due()
-        return self.update(due) if due else None
 
     def train_step(self, batch: TensorDictBase) -> dict[str, float]:
         """One update on a sampled TensorDict through TorchRL's loss module and target updater.
@@ -344,7 +331,6 @@ class NNQLLearner:
             "counters": {
                 "updates": self.updates,
                 "transitions_added": self.transitions_added,
-                "update_credit": self.update_credit,
             },
             "torch_rng": torch.get_rng_state(),
         }
@@ -360,7 +346,6 @@ class NNQLLearner:
         counters = state["counters"]
         self.updates = int(counters["updates"])
         self.transitions_added = int(counters["transitions_added"])
-        self.update_credit = float(counters["update_credit"])
         torch.set_rng_state(state["torch_rng"])
 
     def save_replay(self, path: str | Path) -> None:

@@ -22,6 +22,7 @@ from agents.evaluation.runner import evaluate, make_eval_set
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
+from agents.nnql.ratelimit import RateLimiter
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
 from worlds.config import LEARNING_NAV, NavConfig, observation_settings
 from worlds.vector_env import NavigationVectorEnv
@@ -112,6 +113,9 @@ def train_local(
     policy.explore_as(nnql, learner.version)
     rollout = VectorRollout(env, policy, with_next_action=nnql.sarsa)
     rollout.reset(seed=run.seed)
+    # The learner service's rate logic, with no slack: one update per 1 / utd_ratio transitions once
+    # the replay holds learning_starts (and a batch).
+    limiter = RateLimiter(nnql.utd_ratio, max(nnql.learning_starts, nnql.batch_size), tolerance=1.0)
 
     recent: deque[EpisodeEnd] = deque(maxlen=200)
     curve: list[dict[str, float]] = []
@@ -124,11 +128,12 @@ def train_local(
     while rollout.steps < run.steps:
         batch, ended = rollout.step()
         recent.extend(ended)
-        learner.add(batch)
-        due = learner.updates_due()
+        limiter.inserted(learner.add(batch))
+        due = limiter.updates_allowed(len(learner.replay))
         if due:
             t0 = time.perf_counter()
             metrics = learner.update(due)
+            limiter.updated(due)
             update_time += time.perf_counter() - t0
             policy.set_weights(learner.get_weights(), learner.version)
             policy.explore_as(nnql, learner.version)

@@ -25,6 +25,7 @@ import zlib
 from collections import deque
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
@@ -300,4 +301,9 @@ def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Even
                 settings.run,
                 where,
             )
-            return actor.run(stop)
+            # The policy multiplies a few dozen rows per step: OpenBLAS split that over every core
+            # and its threads spun between calls, 15-18x the CPU per robot-step at 64-256 robots on
+            # a busy machine (bench/RESULTS.md, capacity model). One BLAS thread, as
+            # agents.evaluation does.
+            with threadpool_limits(limits=1, user_api="blas"):
+                return actor.run(stop)

@@ -59,7 +59,7 @@ def main(args: argparse.Namespace) -> int:
     from services.common.options import OptionError, options_from_args
     from services.common.process import setup_logging, stop_on_signals
     from services.common.transport import TransportError, settings_from_args
-    from services.learner.service import run_learner
+    from services.learner.run import run_learner
 
     try:
         config = options_from_args(LearnerConfig, args, "NAVLEARN_LEARNER")

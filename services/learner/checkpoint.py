@@ -31,6 +31,8 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
+from services.learner.storage import fsync_dir
+
 log = logging.getLogger("navlearn.checkpoint")
 _NAME = re.compile(r"ckpt-(\d{8})")
 _TMP_PREFIX = ".tmp-ckpt-"
@@ -72,7 +74,7 @@ def write_manifest(path: Path) -> int:
     with open(path / MANIFEST, "rb") as fh:
         os.fsync(fh.fileno())
     for directory in sorted({p.parent for p in _files(path)} | {path}, key=lambda p: -len(p.parts)):
-        _fsync_dir(directory)
+        fsync_dir(directory)
     return sum(f["size"] for f in files.values())
 
 
@@ -99,14 +101,6 @@ def verify(path: Path) -> int:
         if _digest(file) != entry.get("sha256"):
             raise CheckpointDamaged(f"{file}: checksum differs from the manifest")
     return sum(int(e["size"]) for e in listed.values())
-
-
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 class CheckpointDir:
@@ -191,7 +185,7 @@ class CheckpointDir:
             write(tmp)
             self.last_size = write_manifest(tmp)
             os.rename(tmp, final)
-            _fsync_dir(self.root)
+            fsync_dir(self.root)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise

@@ -31,6 +31,18 @@ class LearnerConfig:
     """updates the learner may run ahead of or fall behind the update-to-data ratio before waiting"""
     inbox_size: int = 256
     """transition batches waiting to be inserted; more are dropped and counted (dropped/inbox_full)"""
+    inbox_mb: int = 256
+    """megabytes of transition batches waiting (and as many of demos and evaluation reports); one
+    actor may fill a quarter (dropped/sender_full beyond)"""
+    max_batch_fraction: float = 0.01
+    """largest transition batch accepted, as a fraction of the replay capacity (also at most
+    rate_tolerance / utd_ratio rows); larger ones are refused and counted (rejected/batch_too_large)"""
+    max_names: int = 256
+    """distinct sender names (actors, demo sources, evaluators) accepted besides an ACL's; messages of
+    new names beyond are refused and counted (rejected/too_many_names)"""
+    acl_names: str = ""
+    """an ACL file (navlearn credentials' acl.json5) whose process ids are always accepted; the
+    learner's own --acl (when it hosts the router) counts too"""
     demo_capacity: int = 200_000
     """demonstration steps kept (a separate buffer: actor transitions never evict demonstrations)"""
     tensorboard: str = ""

@@ -8,7 +8,7 @@ drained together share one write-ahead-log fsync before their acks go out), keep
 status snapshot that the ``status/learner`` queryable serves, writes TensorBoard
 scalars and checkpoints. A failing disk write (write-ahead log or checkpoint) stops intake and
 acknowledgements until a retry works (services.learner.storage); the loop, status and SIGTERM
-go on. ``run_learner`` does the process set-up around it. Its settings
+go on. ``services.learner.run.run_learner`` does the process set-up around it. Its settings
 are in services.learner.config, what a checkpoint holds besides the networks in
 services.learner.state, the status snapshot in services.learner.status.
 """
@@ -23,17 +23,14 @@ import time
 from pathlib import Path
 
 import agents.evaluation.policies  # noqa: F401 - save_policy_dir imports it lazily (~2.5 s): not in a checkpoint
-from agents.nirl.config import NIRLConfig
-from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
+from agents.nnql.ratelimit import RateLimiter
 from agents.replay_files import stored_bytes
 from protocols import keys
 from protocols.codec import encode
 from protocols.flow import Ack
-from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, LearnerStatus
 from services.common.process import Scalars
-from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.common.weights import WeightsBroadcaster
 from services.learner.checkpoint import CheckpointDir
 from services.learner.config import LearnerConfig
@@ -41,20 +38,22 @@ from services.learner.demo_buffer import DemoBuffer
 from services.learner.durable import DurableIngest
 from services.learner.inbox import Inbox, Received
 from services.learner.nirl import NIRLTrainer
-from services.learner.ratelimit import RateLimiter
 from services.learner.state import LearnerParts, checkpoint_wal_seq
 from services.learner.stats import LearnerTally
 from services.learner.status import build_status, progress_line, status_charts
 from services.learner.storage import StorageGuard
 from services.ops.status import eval_summary
-from worlds.config import LEARNING_NAV, observation_settings
-from worlds.env import observation_space
 
 log = logging.getLogger("navlearn.learner")
 
+# Updates per NNQLLearner.update call: several amortise the call (bench/learner.py: 1.25 of a bare
+# update with 16, 1.08 with one) while a slice of them stays near 20 ms.
+UPDATES_PER_CALL = 8
+
 
 class LearnerService:
-    """One NNQL learner behind Zenoh. Built by ``run_learner``; ``run(stop)`` is the main loop."""
+    """One NNQL learner behind Zenoh. Built by ``run_learner`` (services.learner.run); ``run(stop)`` is
+    the main loop; a context manager that closes what it declared."""
 
     def __init__(
         self,
@@ -201,24 +200,24 @@ class LearnerService:
         return 0
 
     def _wait_for_data(self, timeout: float) -> None:
-        if not self.limiter.can_insert():
-            time.sleep(timeout)  # cannot happen with tolerance >= 1, kept as a guard against a busy loop
-            return
-        try:
-            item = self.inbox.transitions.get(timeout=timeout)
-        except queue.Empty:
-            return
-        self._insert(item)
-        self._commit()
+        """Idle: wait for a batch, or sleep when the next one waits for the rate limiter (cannot
+        happen while updates are possible: kept as a guard against a busy loop)."""
+        if self.inbox.transitions.qsize():
+            time.sleep(timeout)
+        elif self.inbox.transitions.wait(timeout):
+            self._ingest(max_batches=1)
 
     def _ingest(self, max_batches: int) -> bool:
+        """Insert up to ``max_batches`` batches, in the inbox's fair order, each once the rate limiter
+        has room for its rows (a batch waits for the updates it owes; it never jumps ahead)."""
         done = 0
-        while done < max_batches and self.limiter.can_insert() and not self.storage.blocked(time.monotonic()):
-            try:
-                item = self.inbox.transitions.get_nowait()
-            except queue.Empty:
+        admitted = 0  # rows taken in this call: they reach the limiter at the commit
+        while done < max_batches and not self.storage.blocked(time.monotonic()):
+            item = self.inbox.transitions.peek()
+            if item is None or not self.limiter.can_insert(admitted + len(item.message)):
                 break
-            self._insert(item)
+            self._insert(self.inbox.transitions.get_nowait())
+            admitted += len(item.message)
             done += 1
         self._commit()
         return done > 0
@@ -300,14 +299,19 @@ class LearnerService:
             self.session.put(keys.acks(self.run_name, actor), encode(ack))
         self._unacked.clear()
 
-    def _train(self, max_updates: int) -> bool:
-        """The updates the limiter allows (at most ``max_updates``), several per ``update`` call:
-        each call runs up to the next version a broadcast is due at."""
-        allowed = min(max_updates, self.limiter.updates_allowed(len(self.learner.replay)))
+    def _train(self, max_updates: int, max_seconds: float = 0.02) -> bool:
+        """Up to ``max_updates`` updates the rate limiter allows, for about ``max_seconds`` (a batch
+        waiting in the inbox waits one slice, not a burst of updates, before it goes in), several per
+        ``update`` call: each call runs up to the next broadcast, at most ``UPDATES_PER_CALL``."""
         every = self.config.broadcast_every
+        replay_size = len(self.learner.replay)
+        until = time.monotonic() + max_seconds
         ran = 0
-        while ran < allowed:
-            count = min(allowed - ran, every - self.learner.version % every)
+        while ran == 0 or time.monotonic() < until:
+            allowed = min(max_updates - ran, self.limiter.updates_allowed(replay_size))
+            if allowed <= 0:
+                break
+            count = min(allowed, UPDATES_PER_CALL, every - self.learner.version % every)
             self.tally.metrics = self.learner.update(count)
             self.limiter.updated(count)
             self.tally.update_rate.add(count)
@@ -387,6 +391,12 @@ class LearnerService:
     def _log_progress(self) -> None:
         log.info("%s", progress_line(self.status(), self.tally))
 
+    def __enter__(self) -> LearnerService:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
     def close(self) -> None:
         self._status_queryable.undeclare()
         if self.durable is not None:
@@ -395,59 +405,3 @@ class LearnerService:
         if self.nirl is not None:
             self.nirl.close()
         self.scalars.close()
-
-
-def run_learner(
-    config: LearnerConfig, nnql: NNQLConfig, settings: ZenohSettings, stop: threading.Event, nirl=None
-) -> int:
-    """Process set-up: learner, Zenoh session (hosting the router unless told to connect), the loop.
-    ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
-    nav = LEARNING_NAV
-    obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
-    learner = NNQLLearner(
-        nnql,
-        obs_dim,
-        n_actions,
-        device=config.device,
-        replay_dir=config.replay_dir,
-        observation=observation_settings(nav),
-    )
-    demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
-    limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
-    inbox = Inbox(limits, config.inbox_size, settings.run, log_every=config.log_every)
-    session = open_session(settings, stop=stop)
-    if session is None:
-        return 0
-    sender = f"{config.id}#{int(time.time())}"
-    trainer = None
-    if config.nirl:
-        nirl = nirl or NIRLConfig(seed=nnql.seed)
-        trainer = NIRLTrainer(
-            nirl, nav, learner.replay, demos.replay, session, settings.run, sender, config.broadcast_every
-        )
-    service = LearnerService(config, learner, session, settings.run, inbox, demos, sender, nirl=trainer)
-    try:
-        latest = service.checkpoints.newest_intact() if config.resume and service.checkpoints else None
-        if latest is not None:
-            service.resume(latest)
-        service.replay_log()
-        subscribers = inbox.subscribe(session)
-        token = declare_alive(session, settings.run, "learner", config.id)
-        log.info(
-            "learner %s up (%s mode), run %s, version %d",
-            config.id,
-            settings.mode,
-            settings.run,
-            learner.version,
-        )
-        code = service.run(stop)
-        token.undeclare()
-        for subscriber in subscribers:
-            subscriber.undeclare()
-        return code
-    finally:
-        try:
-            service.close()
-        finally:
-            session.close()  # even if closing the service failed: a held session keeps the process alive
-            log.info("learner stopped")

@@ -13,11 +13,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agents.nnql.learner import NNQLLearner
+from agents.nnql.ratelimit import RateLimiter
 from services.learner.demo_buffer import DemoBuffer
 from services.learner.durable import DurableIngest
 from services.learner.inbox import Inbox
 from services.learner.nirl import NIRLTrainer
-from services.learner.ratelimit import RateLimiter
 from services.learner.stats import LearnerTally
 from services.learner.storage import StorageGuard
 
@@ -60,8 +60,19 @@ class LearnerParts:
         self.learner.load_checkpoint(path / "nnql")
         state = json.loads((path / "service.json").read_text())
         self.limiter.load_state(state["limiter"])
-        self.tally.load_state(state)
-        self.inbox.load_counts(state["inbox_counts"])
+        # names beyond the inbox's bound (a checkpoint of a learner without one) are dropped, busiest kept
+        busiest = sorted(state["actors"].items(), key=lambda kv: -int(kv[1]["transitions"]))
+        self.inbox.remember(name for name, _ in busiest)
+        kept = self.inbox.names() | self.inbox.known_names
+        self.tally.load_state({**state, "actors": {a: saved for a, saved in busiest if a in kept}})
+        per_name = "dropped/sender_full/"
+        self.inbox.load_counts(
+            {
+                k: v
+                for k, v in state["inbox_counts"].items()
+                if not k.startswith(per_name) or k[len(per_name) :] in kept
+            }
+        )
         self.demos.load(path / "demos", state["demo_episodes"])
         if self.nirl is not None:
             self.nirl.load(path / "nirl")

@@ -13,6 +13,8 @@ No clocks or threads of its own: the caller passes ``now`` (``time.monotonic()``
 from __future__ import annotations
 
 import logging
+import os
+from pathlib import Path
 
 log = logging.getLogger("navlearn.storage")
 
@@ -63,3 +65,12 @@ class StorageGuard:
 
     def counters(self) -> dict[str, int]:
         return {"storage_error": int(self.error is not None), "storage_failures": self.failures}
+
+
+def fsync_dir(path: Path) -> None:
+    """Make a directory's entries durable (a file created or renamed in it survives a crash)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

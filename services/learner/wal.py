@@ -44,6 +44,8 @@ import zlib
 from collections.abc import Iterator
 from pathlib import Path
 
+from services.learner.storage import fsync_dir
+
 log = logging.getLogger("navlearn.wal")
 MAGIC = b"NLW1"
 HEADER = struct.Struct("<4sIQI")
@@ -165,7 +167,7 @@ class WriteAheadLog:
         path = self.dir / f"wal-{self.last_seq + 1:016d}.log"
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
         try:
-            _fsync_dir(self.dir)
+            fsync_dir(self.dir)
         except OSError:
             os.close(fd)
             raise
@@ -278,11 +280,3 @@ def _resync(data: bytes, start: int) -> int | None:
             return offset
         offset = data.find(MAGIC, offset + 1)
     return None
-
-
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)

@@ -16,6 +16,13 @@ for ``navlearn router --acl``). A process's user name is its id:
 * evaluator ``e`` publishes ``eval/e`` and its token, receives and asks for ``weights/*``;
 * operators (``status``) query ``status/*`` and see who is alive.
 
+Each publisher is also told of the learner's subscription to its channel (``declare_subscriber``
+in egress on ``transitions/*``, ``demos/*``, ``eval/*``: the key expression the learner
+subscribes with, which a rule on the publisher's own key does not include). Without it the
+publisher's ``matching_status`` stays False and a Zenoh client drops its publisher's puts for
+want of a known subscriber (writer-side filtering), so the outbox, which sends while a
+subscriber matches, would never send. The declaration carries no data and names nobody.
+
 With ``cert_names`` a subject also requires the TLS client certificate's common name
 to be the id (Zenoh ANDs a subject's attributes): user/password *and* mutual TLS.
 """
@@ -27,7 +34,10 @@ import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import zenoh
+
 from protocols import keys
+from protocols.errors import ProtocolError
 from services.ops.secret_files import write_private
 
 
@@ -77,6 +87,11 @@ def _rule(ident: str, messages: list[str], flow: str, key_exprs: list[str]) -> d
     return {"id": ident, "messages": messages, "flows": [flow], "permission": "allow", "key_exprs": key_exprs}
 
 
+def _learner_subscribes(ident: str, run: str, channel: str) -> dict:
+    """Let a publisher see the learner's ``<channel>/*`` subscription (its matching status)."""
+    return _rule(f"{ident}-matching", ["declare_subscriber"], "egress", [keys.everything(run, channel)])
+
+
 def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
     """subject id -> (user name, its rules)."""
     p = keys.prefix(d.run)
@@ -100,6 +115,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
             a,
             [
                 _rule(f"actor-{a}-publish", ["put", "liveliness_token"], "ingress", own),
+                _learner_subscribes(f"actor-{a}", d.run, "transitions"),
                 _rule(
                     f"actor-{a}-follow",
                     ["declare_subscriber"],
@@ -121,6 +137,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
             ident,
             [
                 _rule(f"demonstrator-{ident}-publish", ["put", "liveliness_token"], "ingress", own),
+                _learner_subscribes(f"demonstrator-{ident}", d.run, "demos"),
                 _rule(
                     f"demonstrator-{ident}-follow",
                     ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
@@ -137,6 +154,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
             e,
             [
                 _rule(f"evaluator-{e}-publish", ["put", "liveliness_token"], "ingress", own),
+                _learner_subscribes(f"evaluator-{e}", d.run, "eval"),
                 _rule(
                     f"evaluator-{e}-follow", ["declare_subscriber", "query"], "ingress", [f"{p}/weights/*"]
                 ),
@@ -178,6 +196,30 @@ def access_control(d: Deployment) -> dict:
         "subjects": subjects,
         "policies": policies,
     }
+
+
+def acl_publishers(path: str | Path, run: str) -> set[str]:
+    """The names an ACL file lets publish ``transitions/<name>``, ``demos/<name>`` or ``eval/<name>``
+    in ``run`` (what a learner accepts however many other names it has seen)."""
+    section = json.loads(zenoh.Config.from_file(str(path)).get_json("access_control")) or {}
+    names = set()
+    for rule in section.get("rules") or []:
+        if rule.get("permission") != "allow" or "put" not in rule.get("messages", []):
+            continue
+        if "ingress" not in rule.get("flows", []):
+            continue
+        for expr in rule.get("key_exprs", []):
+            try:
+                parsed = keys.parse(expr)
+            except ProtocolError:
+                continue  # a wildcard or another run's key: names nobody
+            if (
+                parsed.run == run
+                and parsed.channel in ("transitions", "demos", "eval")
+                and "*" not in parsed.name
+            ):
+                names.add(parsed.name)
+    return names
 
 
 def write_deployment(out: str | Path, d: Deployment) -> dict[str, Path]:

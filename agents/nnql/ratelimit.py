@@ -1,4 +1,5 @@
-"""The learner's update-to-data rate limiter (Reverb's ``SampleToInsertRatio``, counted in updates).
+"""The update-to-data rate limiter (Reverb's ``SampleToInsertRatio``, counted in updates): the one
+rate logic of ``train --local`` (agents.nnql.train_local) and the learner service.
 
 Reverb keeps ``diff = samples_per_insert * inserts - samples`` inside a band
 ``[min_diff, max_diff]`` around ``samples_per_insert * min_size_to_sample`` of
@@ -9,6 +10,11 @@ exceeded above (the learner would drown in data it never trains on). Here a
 update-to-data ratio (updates per inserted transition). The learner stops
 draining its inbox while inserts are blocked; actors wait for the learner's
 acknowledgements, so the back-pressure reaches them as it does in Reverb.
+
+A batch owes ``rows * updates_per_insert`` updates; it goes in only when they fit under the
+band (:meth:`can_insert` with its rows), so one batch holds every other actor's inserts back
+by at most ``tolerance`` updates, and batches larger than :meth:`max_rows` are refused
+before they get here (the learner's inbox).
 
 Pure bookkeeping, no clocks and no threads: the learner's main loop asks
 :meth:`can_update` / :meth:`can_insert` and reports with :meth:`inserted` /
@@ -68,13 +74,20 @@ class RateLimiter:
             return 0
         return max(int(self.diff - self.min_diff), 0)
 
-    def can_insert(self) -> bool:
-        """Inserts are open until the learner is ``tolerance`` updates behind the ratio.
+    def can_insert(self, count: int = 0) -> bool:
+        """Inserting ``count`` more transitions keeps the learner within ``tolerance`` updates of the ratio.
 
-        Checked before a whole batch goes in, so ``diff`` may overshoot ``max_diff`` by one
-        batch; what matters is that the overshoot is bounded.
+        Checked with the batch's own size, so ``diff`` never exceeds ``max_diff``: a batch waits
+        until the updates it owes fit, and a small batch fits sooner than a large one. A batch of
+        :meth:`max_rows` transitions or fewer always fits once the learner has caught up, and
+        holds the inserts of everyone else back by at most the updates it owes,
+        ``count * updates_per_insert <= tolerance``.
         """
-        return self.diff <= self.max_diff
+        return self.diff + self.updates_per_insert * count <= self.max_diff
+
+    def max_rows(self) -> int:
+        """The largest batch whose owed updates fit in the band's upper half (``tolerance`` updates)."""
+        return int(self.tolerance / self.updates_per_insert)
 
     def inserted(self, count: int) -> None:
         self.inserts += int(count)

@@ -1,0 +1,92 @@
+"""The learner process: builds the NNQL learner, its buffers and inbox, opens the Zenoh session
+(hosting the router unless told to connect), resumes from the newest intact checkpoint, replays
+the write-ahead log, then runs services.learner.service.LearnerService until ``stop``."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+import time
+
+from agents.nirl.config import NIRLConfig
+from agents.nnql.config import NNQLConfig
+from agents.nnql.learner import NNQLLearner
+from protocols.limits import Limits
+from services.common.transport import ZenohSettings, declare_alive, open_session
+from services.learner.config import LearnerConfig
+from services.learner.demo_buffer import DemoBuffer
+from services.learner.inbox import learner_inbox
+from services.learner.nirl import NIRLTrainer
+from services.learner.service import LearnerService
+from services.ops.router import exposure_warning
+from worlds.config import LEARNING_NAV, observation_settings
+from worlds.env import observation_space
+
+log = logging.getLogger("navlearn.learner")
+
+
+def run_learner(
+    config: LearnerConfig,
+    nnql: NNQLConfig,
+    settings: ZenohSettings,
+    stop: threading.Event,
+    nirl: NIRLConfig | None = None,
+) -> int:
+    """Process set-up around the learner loop; returns the exit code. ``nirl`` configures NIRL
+    when ``config.nirl`` is on (its defaults otherwise)."""
+    nav = LEARNING_NAV  # what the actors observe
+    obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
+    learner = NNQLLearner(
+        nnql,
+        obs_dim,
+        n_actions,
+        device=config.device,
+        replay_dir=config.replay_dir,
+        observation=observation_settings(nav),
+    )
+    demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
+    limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
+    inbox = learner_inbox(config, nnql, limits, settings.run, (config.acl_names, settings.acl_file))
+    if settings.mode == "router" and (warning := exposure_warning(settings)):
+        log.warning("%s", warning)  # the learner hosts the router
+    session = open_session(settings, stop=stop)
+    if session is None:
+        return 0
+    sender = f"{config.id}#{int(time.time())}"
+    trainer = None
+    if config.nirl:
+        trainer = NIRLTrainer(
+            nirl or NIRLConfig(seed=nnql.seed),
+            nav,
+            learner.replay,
+            demos.replay,
+            session,
+            settings.run,
+            sender,
+            config.broadcast_every,
+        )
+    # The session closes last, even if closing the service fails: a held session keeps the
+    # process alive.
+    with (
+        session,
+        LearnerService(config, learner, session, settings.run, inbox, demos, sender, trainer) as service,
+    ):
+        latest = service.checkpoints.newest_intact() if config.resume and service.checkpoints else None
+        if latest is not None:
+            service.resume(latest)
+        service.replay_log()
+        with contextlib.ExitStack() as declared:
+            for subscriber in inbox.subscribe(session):
+                declared.enter_context(subscriber)
+            declared.enter_context(declare_alive(session, settings.run, "learner", config.id))
+            log.info(
+                "learner %s up (%s mode), run %s, version %d",
+                config.id,
+                settings.mode,
+                settings.run,
+                learner.version,
+            )
+            code = service.run(stop)
+    log.info("learner stopped")
+    return code
