@@ -20,13 +20,17 @@ import time
 import numpy as np
 import zenoh
 
-from bench._common import LEARNER_OBS_DIM, N_ACTIONS
 from protocols import keys
 from protocols.codec import encode
 from protocols.messages import TransitionBatch
 from services.common.transport import ZenohSettings, open_session
+from worlds.config import LEARNING_NAV
+from worlds.perception import observation_dim
 
-OBS_DIM = LEARNER_OBS_DIM  # what the learner takes
+OBS_DIM, N_ACTIONS = (
+    observation_dim(LEARNING_NAV),
+    5,
+)  # what the learner takes (run as a script: no bench._common)
 
 
 def make_batch(actor: str, rows: int, seq: int) -> TransitionBatch:
