@@ -207,16 +207,19 @@ def test_file_source_refuses_demonstrations_in_another_observation_than_the_lear
 
     from agents.demos import DemoFormatError, write_demos
     from agents.planning.demonstrate import generate_demos
+    from services.cli import main
     from services.demonstrator.config import DemonstratorConfig
     from services.demonstrator.episodes import check_file
     from worlds.config import LEARNING_NAV, NavConfig
     from worlds.env import observation_space
     from worlds.perception import observation_dim
 
-    for name, nav in (("plain", NavConfig()), ("learning", LEARNING_NAV)):
-        demos, _ = generate_demos("rooms:10", 1, seed=3, config=nav)
-        write_demos(tmp_path / name / "expert-v0", demos, observation_space(nav), spaces.Discrete(5))
-    check_file(DemonstratorConfig(source="file", file=str(tmp_path / "learning" / "expert-v0")))
+    demos, _ = generate_demos("rooms:10", 1, seed=3, config=NavConfig())
+    write_demos(tmp_path / "plain" / "expert-v0", demos, observation_space(NavConfig()), spaces.Discrete(5))
+    learning = tmp_path / "learning" / "expert-v0"  # as the README says to make one
+    argv = ["demos", "generate", "--maps", "rooms:10", "--episodes", "1", "--observation", "learning"]
+    assert main([*argv, "--out", str(learning)]) == 0
+    check_file(DemonstratorConfig(source="file", file=str(learning)))
     with pytest.raises(
         DemoFormatError, match=f"width \\[11\\], the learner takes {observation_dim(LEARNING_NAV)}"
     ):

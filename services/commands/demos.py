@@ -42,6 +42,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     gen.add_argument(
         "--keep-failures", action="store_true", help="also keep episodes that did not reach the goal"
     )
+    gen.add_argument(
+        "--observation",
+        choices=("plain", "learning"),
+        default="plain",
+        help="what the recorded robot observes: plain (8 beams + goal; imitation learning) or learning "
+        "(worlds.config.LEARNING_NAV, what `navlearn learner` takes from `demonstrator --source file`); "
+        "default %(default)s",
+    )
     gen.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
     gen.set_defaults(func=generate)
 
@@ -63,7 +71,7 @@ def generate(args: argparse.Namespace) -> int:
 
     from agents.demos import dataset_location, write_demos
     from agents.planning.demonstrate import generate_demos
-    from worlds.config import NavConfig, ObstacleConfig
+    from worlds.config import LEARNING_NAV, NavConfig, ObstacleConfig, observation_settings
     from worlds.env import observation_space
     from worlds.tasks import parse_map_spec
 
@@ -83,8 +91,10 @@ def generate(args: argparse.Namespace) -> int:
     except ValueError as exc:  # DemoFormatError is a ValueError
         print(f"navlearn demos generate: {exc}", file=sys.stderr)
         return 2
-    config = NavConfig(pool_size=min(NavConfig().pool_size, args.episodes))
-    config = replace(config, obstacles=ObstacleConfig(count=args.obstacles))
+    base = LEARNING_NAV if args.observation == "learning" else NavConfig()
+    config = replace(
+        base, pool_size=min(base.pool_size, args.episodes), obstacles=ObstacleConfig(count=args.obstacles)
+    )
     with Progress() as progress:
         bar = progress.add_task("expert episodes", total=args.episodes)
         demos, stats = generate_demos(
@@ -112,6 +122,7 @@ def generate(args: argparse.Namespace) -> int:
             "seed": args.seed,
             "noise": args.noise,
             "obstacles": args.obstacles,
+            "observation": observation_settings(config),
         },
         overwrite=args.overwrite,
     )
