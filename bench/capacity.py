@@ -292,7 +292,7 @@ def bench_learner(envs: int, seconds: float, wal_dir: Path) -> dict:
                     message = decode(payload, limits)
                     seq += 1
                     message.seq = seq
-                    durable.admit(message)
+                    durable.admit(message, payload)
                     durable.sync()
                     n += len(message)
             rate = n / (time.perf_counter() - start)
