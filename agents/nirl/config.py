@@ -54,10 +54,14 @@ class NIRLConfig:
     """max_margin: weight of the large-margin term on the Q-network's values at demo states"""
     refine: bool = True
     """MAP refinement of demonstrations (False: every demonstrated action kept with weight 1)"""
+    refine_start: int = 250
+    """Q updates fitted to the recorded actions before MAP refinement starts (EM needs a trained prior:
+    an untrained one relabels at random and its own relabels then confirm it)"""
     demo_noise: float = 0.3
     """prior probability that a demonstrated action is a random one (MAP refinement's observation noise)"""
-    prior_temperature: float = 0.05
-    """temperature of the policy prior softmax(Q / T) used by MAP refinement"""
+    prior_temperature: float = 0.02
+    """temperature of the policy prior softmax(Q / T) of MAP refinement: sharper than alpha, as a
+    policy fitted to noisy steps spreads the noise over every action and would explain it away"""
     relabel_threshold: float = 0.9
     """relabel a demonstrated step to the MAP action when that action's posterior reaches this"""
     batch_size: int = 128
@@ -86,8 +90,8 @@ class NIRLConfig:
     """... after temperature_decay_iterations (geometric decay)"""
     temperature_decay_iterations: int = 30
     """iterations over which the temperature decays"""
-    target_tau: float = 0.005
-    """Polyak factor of the Q target network"""
+    target_tau: float = 0.05
+    """Polyak factor of the Q target network (0.005 propagated values along 30-step paths too slowly)"""
     double_q: bool = True
     """max_margin: double Q-learning in policy evaluation"""
     grad_clip: float = 10.0

@@ -173,9 +173,10 @@ class NIRLLearner:
             return torch.softmax(self.q.network(obs) / self.config.prior_temperature, dim=1)
 
     def refine(self, obs: torch.Tensor, actions: torch.Tensor) -> Refinement:
-        """MAP refinement of demonstrated steps under the current policy prior (see losses.refine_steps)."""
+        """MAP refinement of demonstrated steps under the current policy prior (see losses.refine_steps);
+        every step kept with weight 1 while refinement is off or before ``refine_start`` Q updates."""
         actions = actions.long().reshape(-1)
-        if not self.config.refine:
+        if not self.config.refine or self.q.updates < self.config.refine_start:
             ones = torch.ones(len(actions))
             return Refinement(actions, ones, torch.full_like(actions, KEEP))
         posterior = map_posterior(self.prior(obs), actions, self.config.demo_noise)
