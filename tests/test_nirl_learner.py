@@ -74,7 +74,7 @@ def test_map_refinement_relabels_injected_noise_and_keeps_clean_steps():
     injected = rng.random(len(expert)) < 0.3
     shift = rng.integers(1, 5, size=len(expert))
     recorded = np.where(injected, (expert + shift) % 5, expert)
-    learner = NIRLLearner(NIRLConfig(**SMALL, warmstart_updates=600, seed=0))
+    learner = NIRLLearner(NIRLConfig(**SMALL, warmstart_updates=600, demo_noise=0.3, seed=0))
     episodes = [Episode(obs[i : i + 21], recorded[i : i + 20]) for i in range(0, 1580, 20)]
     learner.add_demos(episodes)
     before = refinement_rates(learner, recorded, expert)

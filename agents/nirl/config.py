@@ -57,8 +57,9 @@ class NIRLConfig:
     refine_start: int = 250
     """Q updates fitted to the recorded actions before MAP refinement starts (EM needs a trained prior:
     an untrained one relabels at random and its own relabels then confirm it)"""
-    demo_noise: float = 0.3
-    """prior probability that a demonstrated action is a random one (MAP refinement's observation noise)"""
+    demo_noise: float = 0.1
+    """probability that a demonstrated action is a random one (MAP refinement's observation noise), for
+    demonstrations whose dataset does not record it (a recorded ``noise``, 0 for a clean expert, wins)"""
     prior_temperature: float = 0.02
     """temperature of the policy prior softmax(Q / T) of MAP refinement: sharper than alpha, as a
     policy fitted to noisy steps spreads the noise over every action and would explain it away"""

@@ -172,20 +172,25 @@ class NIRLLearner:
         with torch.no_grad():
             return torch.softmax(self.q.network(obs) / self.config.prior_temperature, dim=1)
 
-    def refine(self, obs: torch.Tensor, actions: torch.Tensor) -> Refinement:
+    def refine(
+        self, obs: torch.Tensor, actions: torch.Tensor, noise: torch.Tensor | None = None
+    ) -> Refinement:
         """MAP refinement of demonstrated steps under the current policy prior (see losses.refine_steps);
-        every step kept with weight 1 while refinement is off or before ``refine_start`` Q updates."""
+        ``noise`` (N,) is each step's random-action probability as its dataset recorded it (None:
+        ``demo_noise``). Every step is kept with weight 1 while refinement is off or before
+        ``refine_start`` Q updates."""
         actions = actions.long().reshape(-1)
         if not self.config.refine or self.q.updates < self.config.refine_start:
             ones = torch.ones(len(actions))
             return Refinement(actions, ones, torch.full_like(actions, KEEP))
-        posterior = map_posterior(self.prior(obs), actions, self.config.demo_noise)
+        noise = self.config.demo_noise if noise is None else noise
+        posterior = map_posterior(self.prior(obs), actions, noise)
         return refine_steps(posterior, actions, self.config.relabel_threshold)
 
     def refine_all(self) -> tuple[TensorDict, Refinement]:
         """Every stored demonstration step and its refinement (for reports and tests)."""
         steps = self.demos.storage.get(torch.arange(len(self.demos)))
-        return steps, self.refine(steps["observation"], steps["action"])
+        return steps, self.refine(steps["observation"], steps["action"], steps.get("noise", None))
 
     # ------------------------------------------------------------ updates
 
@@ -205,10 +210,13 @@ class NIRLLearner:
         if not offline and len(self.experience):
             n_demo = max(1, round(cfg.batch_size * cfg.demo_fraction))
         keys = ("observation", "action", ("next", "observation"), ("next", "terminated"))
-        parts = [sample(self.demos, n_demo).select(*keys)]
+        demos = sample(self.demos, n_demo)
+        noise = demos.get("noise", torch.full((n_demo,), cfg.demo_noise))
+        parts = [demos.select(*keys)]
         if cfg.batch_size > n_demo:
             parts.append(sample(self.experience, cfg.batch_size - n_demo).select(*keys))
         batch = torch.cat(parts) if len(parts) > 1 else parts[0]
+        batch.set("noise", torch.cat([noise, torch.zeros(cfg.batch_size - n_demo)]))
         is_expert = torch.zeros(cfg.batch_size, dtype=torch.bool)
         is_expert[:n_demo] = True
         return batch, is_expert
@@ -227,7 +235,7 @@ class NIRLLearner:
         terminated = batch[("next", "terminated")].reshape(-1)
         labels = batch["action"].long().reshape(-1).clone()
         weights = torch.ones(len(labels))
-        refined = self.refine(obs[is_expert], labels[is_expert])
+        refined = self.refine(obs[is_expert], labels[is_expert], batch["noise"][is_expert])
         labels[is_expert], weights[is_expert] = refined.labels, refined.weights
         q_all = self.q.network(obs)
         q_taken = q_all.gather(1, labels[:, None]).squeeze(1)

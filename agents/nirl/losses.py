@@ -180,17 +180,18 @@ def margin_violations(q_values: torch.Tensor, actions: torch.Tensor, margins: to
     return (augmented.max(dim=1).values > demonstrated + 1e-6).float().mean()
 
 
-def map_posterior(prior: torch.Tensor, observed: torch.Tensor, noise: float) -> torch.Tensor:
+def map_posterior(prior: torch.Tensor, observed: torch.Tensor, noise: float | torch.Tensor) -> torch.Tensor:
     """Posterior over the intended action given the demonstrated one (Bayes' rule), (N, A).
 
     The demonstrator meant action ``a*`` (prior ``prior[i, a*]``, the current policy's
-    probabilities) and recorded it, except with probability ``noise`` a uniformly random
-    action: ``P(observed | a*) = (1 - noise) [observed = a*] + noise / A``.
+    probabilities) and recorded it, except with probability ``noise`` (a number, or (N,) per
+    step) a uniformly random action: ``P(observed | a*) = (1 - noise) [observed = a*] + noise / A``.
     """
     n_actions = prior.shape[1]
     observed = observed.long().reshape(-1)
-    likelihood = torch.full_like(prior, noise / n_actions)
-    likelihood.scatter_add_(1, observed[:, None], torch.full_like(prior[:, :1], 1.0 - noise))
+    noise = torch.as_tensor(noise, dtype=prior.dtype).reshape(-1, 1).expand(len(observed), 1)
+    likelihood = (noise / n_actions).expand_as(prior).clone()
+    likelihood.scatter_add_(1, observed[:, None], 1.0 - noise)
     joint = prior * likelihood
     return joint / joint.sum(dim=1, keepdim=True).clamp_min(1e-12)
 

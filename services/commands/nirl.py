@@ -56,7 +56,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run_train(args: argparse.Namespace) -> int:
     import sys
 
-    from agents.demos import DemoFormatError, load_demos
+    from agents.demos import DemoFormatError
+    from agents.nirl.buffers import load_demonstrations
     from agents.nirl.config import NIRLConfig, NIRLRun
     from agents.nirl.train_local import train_nirl
     from services.options import OptionError, options_from_args
@@ -68,7 +69,7 @@ def run_train(args: argparse.Namespace) -> int:
         if run.envs < 1:
             raise OptionError("--envs must be positive")
         parse_map_spec(run.maps)
-        demos = load_demos(args.demos)
+        demos = load_demonstrations(args.demos)
     except (OptionError, DemoFormatError, ValueError) as exc:
         print(f"navlearn nirl train: {exc}", file=sys.stderr)
         return 2
