@@ -127,18 +127,18 @@ class NIRLLearner:
         steps = 0
         for index, item in enumerate(demos):
             if isinstance(item, tuple):
-                arrays = item[1]
-                fields = (
-                    arrays["observations"],
-                    arrays["actions"],
-                    arrays["terminations"],
-                    arrays["truncations"],
-                )
+                meta, arrays = item
+                keys = ("observations", "actions", "terminations", "truncations")
+                fields = tuple(arrays[key] for key in keys)
             else:
+                meta = getattr(item, "metadata", None)
                 fields = (item.observations, item.actions, item.terminations, item.truncations)
             self._check_episode(index, fields[0], fields[1])
             td = transitions_to_tensordict(demo_steps(*fields), self.obs_dim)
-            td.set("episode", torch.full((td.batch_size[0],), self.demo_episodes, dtype=torch.int64))
+            n = td.batch_size[0]
+            td.set("episode", torch.full((n,), self.demo_episodes, dtype=torch.int64))
+            noise = meta.get("noise") if isinstance(meta, Mapping) else None
+            td.set("noise", torch.full((n,), self.config.demo_noise if noise is None else float(noise)))
             self.demos.extend(td)
             self.demo_episodes += 1
             self.demo_path_steps += td.batch_size[0]
