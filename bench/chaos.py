@@ -29,9 +29,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench import ingest
 from protocols.codec import encode
-from services.checkpoint import CheckpointDir
-from services.status import query_status
-from services.transport import ZenohSettings, open_session
+from services.common.transport import ZenohSettings, open_session
+from services.learner.checkpoint import CheckpointDir
+from services.ops.status import query_status
 from tests.conftest import free_port
 from tests.reliability_helpers import TracedActor, start_learner, stop_process, stored_ids
 

@@ -47,10 +47,10 @@ from protocols import keys
 from protocols.codec import decode, encode
 from protocols.flow import Ack
 from protocols.messages import LearnerStatus, TransitionBatch
-from services.actor_config import ActorConfig
-from services.outbox import Outbox
-from services.status import query_status
-from services.transport import ZenohSettings, open_session
+from services.actor.config import ActorConfig
+from services.common.outbox import Outbox
+from services.common.transport import ZenohSettings, open_session
+from services.ops.status import query_status
 from tests.conftest import free_port
 from tests.reliability_helpers import N_ACTIONS, OBS_DIM, start_learner, stop_process
 

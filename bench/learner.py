@@ -6,11 +6,11 @@
     window, against the update step `train --local` times (NNQLLearner.update on a full
     replay), same network and batch size, measured in this process before and after.
     Target: <= 10% overhead.
-(b) Actor: robot-steps/s of the actor service (services.actor.Actor: vector env, NNQL
+(b) Actor: robot-steps/s of the actor service (services.actor.actor.Actor: vector env, NNQL
     Boltzmann policy, batching, encoding, publishing, acknowledgement window) towards a sink
     that acknowledges every batch, against the same env and policy stepped without any
     publishing, before and after. Target: <= 15% overhead.
-(c) Weight broadcast to 4 receiver processes (services.weights.WeightsReceiver + the actor's
+(c) Weight broadcast to 4 receiver processes (services.common.weights.WeightsReceiver + the actor's
     NNQLPolicy.set_weights): p50/p99 from publish to applied.
 
     python bench/learner.py         # human lines, then one JSON object on the last line
@@ -38,9 +38,9 @@ from protocols import keys
 from protocols.codec import decode, encode
 from protocols.flow import Ack
 from protocols.messages import TransitionBatch
-from services.outbox import Outbox
-from services.status import query_status
-from services.transport import ZenohSettings, open_session
+from services.common.outbox import Outbox
+from services.common.transport import ZenohSettings, open_session
+from services.ops.status import query_status
 
 RUN = "bench"
 OBS_DIM, N_ACTIONS = 11, 5
@@ -167,7 +167,7 @@ def sink_main(endpoint: str) -> None:
 def receiver_main(endpoint: str) -> None:
     """Applies weights as they arrive (as an actor does) and prints version and applied time."""
     from agents.nnql.policy import NNQLPolicy
-    from services.weights import WeightsReceiver, split_architecture
+    from services.common.weights import WeightsReceiver, split_architecture
 
     session = open_session(settings(endpoint))
     receiver = WeightsReceiver(session, RUN, "nnql")
@@ -322,7 +322,7 @@ def bench_actor(args: Args, endpoint: str) -> dict:
     from agents.nnql.learner import NNQLLearner
     from agents.nnql.rollout import VectorRollout
     from protocols.limits import Limits
-    from services.actor import Actor, ActorConfig
+    from services.actor.actor import Actor, ActorConfig
     from worlds.vector_env import NavigationVectorEnv
 
     nnql = NNQLConfig()
@@ -371,7 +371,7 @@ def bench_actor(args: Args, endpoint: str) -> dict:
 def bench_broadcast(args: Args, endpoint: str) -> dict:
     from agents.nnql.config import NNQLConfig
     from agents.nnql.learner import NNQLLearner
-    from services.weights import WeightsBroadcaster
+    from services.common.weights import WeightsBroadcaster
 
     receivers = [spawn(__file__, "--role", "receiver", "--endpoint", endpoint) for _ in range(args.receivers)]
     session = open_session(settings(endpoint))

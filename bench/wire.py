@@ -171,7 +171,7 @@ def peer_main(endpoint: str) -> None:
     """Subscriber and echo side; one JSON line per finished round on stdout."""
     import zenoh
 
-    from services.transport import ZenohSettings, open_session
+    from services.common.transport import ZenohSettings, open_session
 
     session = open_session(ZenohSettings(connect=[endpoint]))
     lock = threading.Lock()
@@ -383,7 +383,7 @@ def bench_latency(args: Args, session, rng: np.random.Generator) -> dict:
 
 
 def main(args: Args) -> dict:
-    from services.transport import ZenohSettings, open_session
+    from services.common.transport import ZenohSettings, open_session
 
     rng = np.random.default_rng(0)
     result: dict = {"bench": "wire", "config": args.__dict__}

@@ -1,1 +1,4 @@
-"""The processes: thin wiring of agents, worlds and protocols to Zenoh, files and signals."""
+"""The process half of navlearn: one folder per runtime role.
+
+Each wires agents/, worlds/ and protocols/ to Zenoh, files and signals.
+"""

@@ -22,7 +22,7 @@ from protocols import keys
 from protocols.codec import decode, encode
 from protocols.flow import Ack
 from protocols.messages import TransitionBatch
-from services.outbox import Outbox
+from services.common.outbox import Outbox
 
 OBS_DIM, N_ACTIONS = 11, 5  # worlds' default robot: 8 beams + 3 goal features, 5 turns
 

@@ -22,9 +22,9 @@ from conftest import free_port
 from protocols import keys
 from protocols.codec import decode, encode
 from protocols.messages import DemoBatch
-from services.demonstrator import demo_batch
-from services.status import query_status
-from services.teleop import heading_glyph, render_frame
+from services.demonstrator.demonstrator import demo_batch
+from services.demonstrator.teleop import heading_glyph, render_frame
+from services.ops.status import query_status
 
 CORRIDOR = """\
 ##########
@@ -71,7 +71,7 @@ def test_render_frame_draws_map_goal_beams_and_robot():
 @pytest.fixture
 def network(tmp_path):
     """A real learner (hosting the router) and this process as a second demos subscriber."""
-    from services.transport import ZenohSettings, open_session
+    from services.common.transport import ZenohSettings, open_session
 
     port = free_port()
     endpoint, run = f"tcp/127.0.0.1:{port}", f"dm{port}"
@@ -134,7 +134,7 @@ def finish(process: subprocess.Popen, timeout: float = 60) -> int:
 def test_human_teleop_through_a_pseudo_terminal(network, tmp_path):
     """Keys go in through a pty, exactly as a person's would; the episode arrives at the subscriber."""
     from agents.planning.expert import Expert
-    from services.demonstrator import DemonstratorConfig, nav_config
+    from services.demonstrator.demonstrator import DemonstratorConfig, nav_config
     from worlds.env import NavigationEnv
 
     endpoint, run, received, session = network

@@ -22,8 +22,8 @@ from conftest import free_port
 from protocols import keys
 from protocols.codec import decode
 from protocols.messages import EvalReport
-from services.status import query_status
-from services.transport import ZenohSettings, open_session
+from services.common.transport import ZenohSettings, open_session
+from services.ops.status import query_status
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(600)]
 SMALL_NIRL = {

@@ -19,8 +19,8 @@ import zenoh
 from protocols import keys
 from protocols.codec import encode
 from protocols.messages import TransitionBatch
-from services.status import query_status
-from services.transport import ZenohSettings, open_session
+from services.common.transport import ZenohSettings, open_session
+from services.ops.status import query_status
 from tests.conftest import free_port
 from tests.reliability_helpers import TracedActor, learner_argv, start_learner, stop_process
 from tests.test_reliability_flood import rss_mb

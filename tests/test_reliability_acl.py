@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from protocols import keys
-from services.acl import Deployment, access_control, actor_status_key
-from services.transport import TransportError, ZenohSettings, open_session
+from services.common.transport import TransportError, ZenohSettings, open_session
+from services.ops.acl import Deployment, access_control, actor_status_key
 from tests.test_wire_zenoh import REPO, start_router, stop
 
 RUN = "acl"

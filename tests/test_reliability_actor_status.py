@@ -13,8 +13,8 @@ import time
 import pytest
 
 from protocols import keys
-from services.actor_status import BlockedShare, query_actor_statuses
-from services.transport import ZenohSettings, open_session
+from services.actor.status import BlockedShare, query_actor_statuses
+from services.common.transport import ZenohSettings, open_session
 from tests.reliability_helpers import stop_process
 from tests.test_wire_zenoh import start_router, stop
 

@@ -14,10 +14,10 @@ from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
 from protocols.messages import TransitionBatch
-from services.fairqueue import FairQueue, SenderFull
-from services.inbox import Inbox
-from services.status import query_status
-from services.transport import ZenohSettings, open_session
+from services.common.transport import ZenohSettings, open_session
+from services.learner.fairqueue import FairQueue, SenderFull
+from services.learner.inbox import Inbox
+from services.ops.status import query_status
 from tests.conftest import free_port
 from tests.reliability_helpers import (
     N_ACTIONS,

@@ -16,9 +16,9 @@ import time
 import numpy as np
 import pytest
 
-from services.checkpoint import CheckpointDir
-from services.status import query_status
-from services.transport import ZenohSettings, open_session
+from services.common.transport import ZenohSettings, open_session
+from services.learner.checkpoint import CheckpointDir
+from services.ops.status import query_status
 from tests.conftest import free_port
 from tests.reliability_helpers import TracedActor, learner_argv, start_learner, stop_process, stored_ids
 

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from agents.demos import Demo
-from services.checkpoint import CheckpointDir
-from services.demonstrator import DemonstratorConfig, DemoPublisher
-from services.status import query_status
-from services.transport import ZenohSettings, open_session
+from services.common.transport import ZenohSettings, open_session
+from services.demonstrator.demonstrator import DemonstratorConfig, DemoPublisher
+from services.learner.checkpoint import CheckpointDir
+from services.ops.status import query_status
 from tests.conftest import free_port
 from tests.reliability_helpers import OBS_DIM, learner_argv, start_learner, stop_process
 from tests.test_reliability_kill import wait_for
@@ -41,8 +41,8 @@ def episode(first_id: int) -> Demo:
 
 
 def stored_demo_ids(checkpoint) -> np.ndarray:
-    from services.demo_buffer import DemoBuffer
-    from services.learner import LearnerConfig
+    from services.learner.demo_buffer import DemoBuffer
+    from services.learner.service import LearnerConfig
 
     demos = DemoBuffer(LearnerConfig().demo_capacity, OBS_DIM)
     demos.load(checkpoint / "demos", 0)

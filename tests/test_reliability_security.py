@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from services.status import query_status
-from services.transport import TransportError, ZenohSettings, open_session
+from services.common.transport import TransportError, ZenohSettings, open_session
+from services.ops.status import query_status
 from tests.conftest import free_port
 from tests.reliability_helpers import learner_argv, start_learner, stop_process
 from tests.test_wire_zenoh import start_router, stop

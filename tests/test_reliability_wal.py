@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from services.dedup import Deduplicator
-from services.wal import HEADER, WriteAheadLog, parse_fsync
+from services.learner.dedup import Deduplicator
+from services.learner.wal import HEADER, WriteAheadLog, parse_fsync
 
 
 def _fill(path, payloads, fsync="always"):

@@ -22,8 +22,8 @@ from protocols import keys
 from protocols.codec import decode, encode
 from protocols.flow import Ack
 from protocols.messages import DemoBatch, EpisodeMeta, EvalReport, TransitionBatch, WeightsUpdate
-from services.status import query_status
-from services.transport import ZenohSettings, open_session
+from services.common.transport import ZenohSettings, open_session
+from services.ops.status import query_status
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(300)]
 OBS_DIM, N_ACTIONS = 11, 5  # worlds' default robot: 8 beams + 3 goal features, 5 turns

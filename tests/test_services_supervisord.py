@@ -24,8 +24,8 @@ from pathlib import Path
 import pytest
 from conftest import free_port
 
-from services.status import query_alive, query_status, status_dict
-from services.transport import Presence, ZenohSettings, open_session
+from services.common.transport import Presence, ZenohSettings, open_session
+from services.ops.status import query_alive, query_status, status_dict
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(600)]
 CONF = Path(__file__).resolve().parents[1] / "deploy" / "supervisord.conf"

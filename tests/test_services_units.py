@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from services.checkpoint import CheckpointDir
-from services.options import OptionError, add_options, field_docs, options_from_args
-from services.outbox import Outbox
-from services.ratelimit import RateLimiter
+from services.common.options import OptionError, add_options, field_docs, options_from_args
+from services.common.outbox import Outbox
+from services.learner.checkpoint import CheckpointDir
+from services.learner.ratelimit import RateLimiter
 
 # ---------------------------------------------------------------- rate limiter
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from services.cli import build_parser
-from services.transport import (
+from services.common.transport import (
     DEFAULT_ENDPOINT,
     TransportError,
     ZenohSettings,

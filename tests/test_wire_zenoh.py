@@ -21,7 +21,7 @@ from protocols import keys
 from protocols.codec import decode, encode
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, EpisodeMeta, EvalReport, LearnerStatus, WeightsUpdate
-from services.transport import Presence, TransportError, ZenohSettings, open_session
+from services.common.transport import Presence, TransportError, ZenohSettings, open_session
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
 RUN = "wiretest"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from services.transport import ZenohSettings, declare_alive, open_session
+from services.common.transport import ZenohSettings, declare_alive, open_session
 
 
 def main(role: str, endpoint: str, *rest: str) -> int:

@@ -12,6 +12,9 @@ A policy directory holds two files (written atomically, temp + rename):
 ``"policy_logits"`` (action logits, imitation and NIRL neural policies). Both are
 evaluated greedily (argmax over actions), with numpy only, so loading a policy
 needs no torch.
+
+``load_policy_or_baseline`` also accepts the name ``heuristic``: the goal-seeking
+baseline of :mod:`worlds.heuristics`, for comparing a learned policy with it.
 """
 
 from __future__ import annotations
@@ -25,12 +28,16 @@ from typing import Any
 import numpy as np
 
 from agents.nnql.policy import mlp_forward, q_layers
+from worlds.config import NavConfig
+from worlds.heuristics import goal_seeking_policy
 
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
 KINDS = ("q_network", "policy_logits")
 ACTIVATIONS = ("relu", "tanh", "elu")
 ARCHITECTURE_KEYS = ("obs_dim", "n_actions", "hidden_sizes", "activation")
+HEURISTIC = "heuristic"
+"""the name that ``load_policy_or_baseline`` reads as the goal-seeking baseline"""
 
 
 class PolicyFormatError(ValueError):
@@ -140,3 +147,15 @@ def load_policy(path: str | Path) -> GreedyMLPPolicy:
         return GreedyMLPPolicy(weights, config)
     except (KeyError, ValueError) as exc:
         raise PolicyFormatError(f"{path}: {exc}") from None
+
+
+def load_policy_or_baseline(spec: str | Path, config: NavConfig | None = None):
+    """``load_policy(spec)``, or the goal-seeking baseline for ``config`` when ``spec`` is
+    ``heuristic`` and no directory of that name exists. A missing directory is a
+    :class:`PolicyFormatError` naming it."""
+    path = Path(spec)
+    if str(spec) == HEURISTIC and not path.exists():
+        return goal_seeking_policy(config)
+    if not path.is_dir():
+        raise PolicyFormatError(f"{path}: no such policy directory (or {HEURISTIC!r} for the baseline)")
+    return load_policy(path)

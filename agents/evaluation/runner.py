@@ -15,11 +15,25 @@ Evaluation sets (``make_eval_set``), all reproducible from ``(family, n_episodes
 Every episode also carries its environment seed (``s * SEED_STRIDE + i``), which fixes
 the start heading, the noise and the moving discs.
 
+Every episode also records its map family (``map_family``: the generator family, ``rects``,
+``discs`` or ``rooms``, or the MovingAI map's name), for per-family splits
+(:mod:`agents.evaluation.compare`). Headline figures use :data:`HEADLINE_EPISODES` episodes
+per set.
+
 ``evaluate(policy, eval_set)`` runs each wave of up to ``max_batch`` episodes as one
 ``NavigationVectorEnv`` batch, robot ``i`` on task ``i`` (robots that finish early keep
 driving auto-reset episodes that are ignored), records each first episode's trajectory
 and returns an :class:`EvalResult`: per-family :class:`~agents.evaluation.metrics.FamilyMetrics`
-and per-episode :class:`EpisodeRecord`. ``EvalResult.to_dict()`` is JSON-ready.
+and per-episode :class:`EpisodeRecord`. ``EvalResult.to_dict()`` is JSON-ready. Robot ``i``'s
+episode depends only on its task and seed, never on the wave it runs in, so ``max_batch``
+changes the speed, not the results (tested).
+
+Speed: the policy is called on one ``(max_batch, obs_dim)`` batch per step with BLAS held to
+one thread. Matrix products this small gain nothing from more threads, and on a machine whose
+cores are busy OpenBLAS's waiting threads made each call of a 128x128 MLP 4-190 times slower
+(0.2-0.3 ms on one thread, 1.4-38 ms on two; bench/RESULTS.md, "issue 14: evaluation"). The limit is
+process-wide (threadpoolctl) and lifted when ``evaluate`` returns, so a thread training with
+torch's BLAS at the same moment in the same process runs on one BLAS thread meanwhile.
 
 A ``Policy`` is any callable mapping an observation batch ``(n, obs_dim)`` float32 to
 actions ``(n,)`` int64, greedy for evaluation (see ``agents.imitation.policy.load_policy``).
@@ -33,6 +47,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from agents.evaluation.metrics import FamilyMetrics, point_clearance, summarize
 from agents.planning.astar import astar
@@ -41,9 +56,12 @@ from worlds.generators import generate_task
 from worlds.maps import Task, clearance, load_movingai, load_scenarios
 from worlds.outcomes import OUTCOME_NAMES
 from worlds.tasks import MIXED_FAMILIES, TRAIN_SEEDS, TaskSampler
+from worlds.vector_env import NavigationVectorEnv
 
 Policy = Callable[[np.ndarray], np.ndarray]
 EVAL_FAMILIES = ("unseen", "dynamic", "movingai")
+HEADLINE_EPISODES = 500
+"""episodes per evaluation set for headline figures (a 95% Wilson interval of about +-1.3 points at 98%)"""
 SEED_STRIDE = 1_000_003
 """seeds of set ``s`` start at ``s * SEED_STRIDE``: sets with different seeds never share an episode"""
 MOVINGAI_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "movingai"
@@ -59,6 +77,12 @@ class EvalSet:
     shortest: np.ndarray
     """grid A* length (m) of each task"""
     obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
+    map_families: tuple[str, ...] = ()
+    """map family of each task (generator family, or the MovingAI map's name)"""
+
+    def __post_init__(self) -> None:
+        if len(self.map_families) != len(self.tasks):
+            raise ValueError(f"map_families has {len(self.map_families)} entries for {len(self.tasks)} tasks")
 
     def __len__(self) -> int:
         return len(self.tasks)
@@ -89,18 +113,17 @@ def make_eval_set(
         if n_episodes > len(scenarios):
             raise ValueError(f"{scen_path} has {len(scenarios)} scenarios, asked for {n_episodes}")
         tasks = [Task(grid, scenarios[k].start, scenarios[k].goal, grid.name) for k in picks[:n_episodes]]
+        map_families = [grid.name] * n_episodes
         discs = ObstacleConfig(count=0)
     else:
-        tasks = [
-            generate_task(families[i % len(families)], size, size, TRAIN_SEEDS + base + i)
-            for i in range(n_episodes)
-        ]
+        map_families = [families[i % len(families)] for i in range(n_episodes)]
+        tasks = [generate_task(f, size, size, TRAIN_SEEDS + base + i) for i, f in enumerate(map_families)]
         discs = (obstacles or ObstacleConfig(count=4)) if family == "dynamic" else ObstacleConfig(count=0)
     shortest = np.array([astar(t.grid, t.start, t.goal).length for t in tasks])
     if not np.isfinite(shortest).all():
         raise ValueError(f"evaluation set {family!r} holds a task without a grid path")
     seeds = tuple(base + i for i in range(n_episodes))
-    return EvalSet(family, tuple(tasks), seeds, shortest, discs)
+    return EvalSet(family, tuple(tasks), seeds, shortest, discs, tuple(map_families))
 
 
 @dataclass
@@ -116,10 +139,13 @@ class EpisodeRecord:
     min_clearance: float
     trajectory: np.ndarray
     """poses ``(steps + 1, 3)``: x, y, theta"""
+    map_family: str = ""
+    """see :attr:`EvalSet.map_families`"""
 
     def to_dict(self, with_trajectory: bool = False) -> dict:
         out = {
             "map_id": self.task.map_id,
+            "map_family": self.map_family,
             "start": list(self.task.start),
             "goal": list(self.task.goal),
             "seed": self.seed,
@@ -180,34 +206,36 @@ def fixed_sampler(tasks: Sequence[Task], key: str) -> TaskSampler:
 
 
 def _run_wave(policy: Policy, config: NavConfig, tasks: list[Task], seeds: list[int], key: str):
-    from worlds.vector_env import NavigationVectorEnv
-
+    """Robot ``i`` drives task ``i`` until its first episode ends. Returns per robot the final
+    (outcome, path length, steps), the poses ``(steps + 1, 3)`` and the closest approach to a
+    moving disc's edge (inf without discs)."""
     n = len(tasks)
     env = NavigationVectorEnv(n, config, maps=fixed_sampler(tasks, key))
     obs, _ = env.reset(seed=list(seeds), options={"tasks": list(tasks)})
-    trajectories = [[pose] for pose in env.poses()]
+    frames = [env.poses()]  # frames[t][i]: robot i's pose after t steps (final pose at its end)
     dynamic = config.obstacles.count > 0
     disc_gap = np.full(n, np.inf)
     if dynamic:
-        disc_gap = np.array([_disc_gap(env, i, trajectories[i][0]) for i in range(n)])
-    finals: dict[int, tuple[int, float, int]] = {}
-    while len(finals) < n:
-        actions = np.asarray(policy(obs), dtype=np.int64).reshape(n)
-        obs, _, _, _, info = env.step(actions)
-        done = info.get("_final_obs", np.zeros(n, bool))
+        disc_gap = np.array([_disc_gap(env, i, frames[0][i]) for i in range(n)])
+    running = np.ones(n, bool)
+    outcome, length, steps = np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64)
+    while running.any():
+        obs, _, _, _, info = env.step(np.asarray(policy(obs), dtype=np.int64).reshape(n))
         poses = env.poses()
-        for i in range(n):
-            if i in finals:
-                continue
-            if done[i]:
-                fi = info["final_info"]
-                trajectories[i].append(fi["pose"][i].copy())
-                finals[i] = (int(fi["outcome"][i]), float(fi["path_length"][i]), int(fi["steps"][i]))
-            else:
-                trajectories[i].append(poses[i].copy())
-                if dynamic:
-                    disc_gap[i] = min(disc_gap[i], _disc_gap(env, i, poses[i]))
-    return finals, [np.asarray(t) for t in trajectories], disc_gap
+        if info:
+            ended = running & info["_final_obs"]
+            final = info["final_info"]
+            poses[ended] = final["pose"][ended]
+            outcome[ended], length[ended] = final["outcome"][ended], final["path_length"][ended]
+            steps[ended] = final["steps"][ended]
+            running &= ~ended
+        frames.append(poses)
+        if dynamic:
+            for i in np.flatnonzero(running):
+                disc_gap[i] = min(disc_gap[i], _disc_gap(env, i, poses[i]))
+    path = np.stack(frames, axis=1)  # (n, T + 1, 3)
+    finals = [(int(outcome[i]), float(length[i]), int(steps[i])) for i in range(n)]
+    return finals, [path[i, : steps[i] + 1] for i in range(n)], disc_gap
 
 
 def _disc_gap(env, i: int, pose: np.ndarray) -> float:
@@ -222,13 +250,18 @@ def evaluate(
     policy: Policy,
     eval_sets: EvalSet | Sequence[EvalSet],
     config: NavConfig | None = None,
-    max_batch: int = 128,
+    max_batch: int = 512,
 ) -> EvalResult:
     """Run ``policy`` on every episode of ``eval_sets`` and compute the metrics. ``config`` is
     the robot/sensor/reward setting the policy was trained with (default ``NavConfig()``);
-    each set's moving-disc settings replace its ``obstacles``."""
+    each set's moving-disc settings replace its ``obstacles``. BLAS runs on one thread meanwhile
+    (see the module docstring)."""
     sets = [eval_sets] if isinstance(eval_sets, EvalSet) else list(eval_sets)
-    base = config or NavConfig()
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _evaluate(policy, sets, config or NavConfig(), max_batch)
+
+
+def _evaluate(policy: Policy, sets: list[EvalSet], base: NavConfig, max_batch: int) -> EvalResult:
     result = EvalResult()
     for es in sets:
         cfg = replace(base, obstacles=es.obstacles)
@@ -253,6 +286,7 @@ def evaluate(
                         float(es.shortest[lo + k]),
                         float(min(static, disc_gap[k])),
                         traj,
+                        es.map_families[lo + k],
                     )
                 )
         result.episodes[es.family] = records

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from services.actor_config import ActorConfig
-from services.options import add_options
-from services.transport import add_zenoh_args
+from services.actor.config import ActorConfig
+from services.common.options import add_options
+from services.common.transport import add_zenoh_args
 
 DESCRIPTION = """\
 Run an actor: it steps --envs robots (a vectorised navigation env on --maps) with the newest
@@ -40,10 +40,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     import sys
 
-    from services.actor import run_actor
-    from services.options import OptionError, options_from_args
-    from services.process import setup_logging, stop_on_signals
-    from services.transport import TransportError, settings_from_args
+    from services.actor.actor import run_actor
+    from services.common.options import OptionError, options_from_args
+    from services.common.process import setup_logging, stop_on_signals
+    from services.common.transport import TransportError, settings_from_args
 
     try:
         config = options_from_args(ActorConfig, args, "NAVLEARN_ACTOR")

@@ -36,7 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from services.certs import make_certs
+    from services.ops.certs import make_certs
 
     if args.days < 1:
         print("navlearn certs: --days must be >= 1", file=sys.stderr)

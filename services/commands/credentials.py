@@ -54,7 +54,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from protocols.errors import ProtocolError
-    from services.acl import Deployment, write_deployment
+    from services.ops.acl import Deployment, write_deployment
 
     deployment = Deployment(
         run=args.run,

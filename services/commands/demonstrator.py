@@ -28,9 +28,9 @@ Examples:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from services.demonstrator_config import DemonstratorConfig
-    from services.options import add_options
-    from services.transport import add_zenoh_args
+    from services.common.options import add_options
+    from services.common.transport import add_zenoh_args
+    from services.demonstrator.config import DemonstratorConfig
 
     parser = subparsers.add_parser(
         "demonstrator",
@@ -48,10 +48,10 @@ def main(args: argparse.Namespace) -> int:
     import sys
 
     from agents.demos import DemoFormatError
-    from services.demonstrator import DemonstratorConfig, run_demonstrator
-    from services.options import OptionError, options_from_args
-    from services.process import setup_logging, stop_on_signals
-    from services.transport import TransportError, settings_from_args
+    from services.common.options import OptionError, options_from_args
+    from services.common.process import setup_logging, stop_on_signals
+    from services.common.transport import TransportError, settings_from_args
+    from services.demonstrator.demonstrator import DemonstratorConfig, run_demonstrator
     from worlds.tasks import parse_map_spec
 
     try:

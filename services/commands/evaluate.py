@@ -1,36 +1,64 @@
-"""`navlearn evaluate`: measure a saved policy on the fixed evaluation sets."""
+"""`navlearn evaluate`: measure a saved policy on the fixed evaluation sets, or compare two policies."""
 
 from __future__ import annotations
 
 import argparse
 
+HEADLINE_HELP = "500, agents.evaluation.HEADLINE_EPISODES"
+"""what --help says the default episode count is (not imported: agents.evaluation takes 2 s to load)"""
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "evaluate",
-        help="evaluate a saved policy (imitation, NNQL, NIRL) on held-out maps",
+        help="evaluate a saved policy (imitation, NNQL, NIRL) on held-out maps, or compare two",
         description="Run a saved policy (a directory with model.safetensors + config.json from `navlearn "
         "imitate train`, NNQL or NIRL) greedily on fixed, seeded evaluation sets and print success, "
         "collision (static/dynamic) and timeout rates with 95% confidence intervals, SPL, path length "
         "ratio to grid A*, time to goal and minimum clearance. With --out, also writes eval.json and a "
-        "PNG per map type with the policy's paths beside A*'s.",
+        "PNG per map type with the policy's paths beside A*'s. With --compare A B, runs both on the same "
+        "episodes and prints, per set and per map family (rects, discs, rooms), both success rates, the "
+        "episodes only one solved with the exact McNemar p-value, SPL, and each one's path length ratio "
+        "to A* on the episodes both solved (--out: compare.json).",
     )
-    parser.add_argument("--policy", required=True, help="policy directory")
+    which = parser.add_mutually_exclusive_group(required=True)
+    which.add_argument("--policy", metavar="DIR", help="policy directory")
+    which.add_argument(
+        "--compare",
+        nargs=2,
+        metavar="DIR",
+        help="two policy directories to compare on the same episodes (either may be 'heuristic', the "
+        "goal-seeking baseline)",
+    )
     parser.add_argument(
         "--maps",
         nargs="+",
         choices=("unseen", "dynamic", "movingai"),
-        default=["unseen", "dynamic", "movingai"],
+        default=["unseen", "dynamic"],
         help="evaluation sets: unseen (held-out generated maps), dynamic (the same with moving discs), "
-        "movingai (the arena map's scenarios)",
+        "movingai (the arena map's 130 scenarios: use --episodes 130 or fewer); default: %(default)s",
     )
-    parser.add_argument("--episodes", type=int, default=100, help="episodes per evaluation set")
-    parser.add_argument("--seed", type=int, default=0, help="evaluation set seed (same seed, same episodes)")
-    parser.add_argument("--size", type=int, default=16, help="side of the generated maps (cells)")
     parser.add_argument(
-        "--obstacles", type=int, default=4, help="moving discs per episode in the dynamic set"
+        "--episodes", type=int, help=f"episodes per evaluation set (default: {HEADLINE_HELP})"
     )
-    parser.add_argument("--out", help="directory for eval.json and the path plots")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="evaluation set seed: same seed, same episodes (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--size", type=int, default=16, help="side of the generated maps in cells (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--obstacles",
+        type=int,
+        default=4,
+        help="moving discs per episode in the dynamic set (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--out", help="directory for eval.json and the path plots (with --compare: compare.json)"
+    )
     parser.set_defaults(func=run)
 
 
@@ -39,28 +67,36 @@ def run(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
-    from agents.evaluation import evaluate, make_eval_set, plot_paths
-    from agents.evaluation.policies import PolicyFormatError, load_policy
+    from agents.evaluation import HEADLINE_EPISODES, compare, evaluate, make_eval_set, plot_paths
+    from agents.evaluation.policies import GreedyMLPPolicy, PolicyFormatError, load_policy_or_baseline
     from worlds.config import NavConfig, ObstacleConfig
 
+    if args.episodes is None:
+        args.episodes = HEADLINE_EPISODES
     if args.episodes < 1:
         print("navlearn evaluate: --episodes must be positive", file=sys.stderr)
         return 2
-    try:
-        policy = load_policy(args.policy)
-    except PolicyFormatError as exc:
-        print(f"navlearn evaluate: {exc}", file=sys.stderr)
-        return 2
     config = NavConfig()
+    specs = args.compare or [args.policy]
     obs_dim = config.sensors.n_beams + 3
-    if policy.obs_dim != obs_dim or policy.architecture["n_actions"] != config.robot.n_actions:
-        print(
-            f"navlearn evaluate: the policy takes {policy.obs_dim} observations and "
-            f"{policy.architecture['n_actions']} actions; the environment has {obs_dim} and "
-            f"{config.robot.n_actions}",
-            file=sys.stderr,
-        )
-        return 2
+    policies = []
+    for spec in specs:
+        try:
+            policy = load_policy_or_baseline(spec, config)
+        except PolicyFormatError as exc:
+            print(f"navlearn evaluate: {exc}", file=sys.stderr)
+            return 2
+        if isinstance(policy, GreedyMLPPolicy) and (
+            policy.obs_dim != obs_dim or policy.architecture["n_actions"] != config.robot.n_actions
+        ):
+            print(
+                f"navlearn evaluate: {spec}: the policy takes {policy.obs_dim} observations and "
+                f"{policy.architecture['n_actions']} actions; the environment has {obs_dim} and "
+                f"{config.robot.n_actions}",
+                file=sys.stderr,
+            )
+            return 2
+        policies.append(policy)
     try:
         sets = [
             make_eval_set(
@@ -75,16 +111,37 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"navlearn evaluate: {exc}", file=sys.stderr)
         return 2
-    result = evaluate(policy, sets, config)
+    results = [evaluate(policy, sets, config) for policy in policies]
+    out = Path(args.out) if args.out else None
+    if out:
+        out.mkdir(parents=True, exist_ok=True)
+    if args.compare:
+        names = [
+            f"{spec} ({p!r})" if isinstance(p, GreedyMLPPolicy) else spec
+            for spec, p in zip(specs, policies, strict=True)
+        ]
+        comparison = compare(*results, names=names)
+        print(f"{', '.join(args.maps)} ({args.episodes} episodes each, seed {args.seed})")
+        print(comparison.table())
+        if out:
+            report = {
+                "seed": args.seed,
+                **comparison.to_dict(),
+                "metrics": {
+                    k: r.to_dict(with_episodes=False)["metrics"] for k, r in zip("ab", results, strict=True)
+                },
+            }
+            (out / "compare.json").write_text(json.dumps(report, indent=1) + "\n")
+            print(f"wrote {out / 'compare.json'}")
+        return 0
+    policy, result = policies[0], results[0]
     print(f"{policy} on {', '.join(args.maps)} ({args.episodes} episodes each, seed {args.seed})")
     print(result.table())
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
+    if out:
         report = {
             "policy": str(Path(args.policy).resolve()),
-            "model": policy.model,
-            "version": policy.version,
+            "model": getattr(policy, "model", args.policy),
+            "version": getattr(policy, "version", 0),
             "seed": args.seed,
             **result.to_dict(),
         }

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from services.evaluator_config import EvaluatorConfig
-from services.options import add_options
-from services.transport import add_zenoh_args
+from services.common.options import add_options
+from services.common.transport import add_zenoh_args
+from services.evaluator.config import EvaluatorConfig
 
 DESCRIPTION = """\
 Run the evaluator: it follows the learner's weights (navlearn/<run>/weights/<model>, asking
@@ -36,10 +36,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     import sys
 
-    from services.evaluator import run_evaluator
-    from services.options import OptionError, options_from_args
-    from services.process import setup_logging, stop_on_signals
-    from services.transport import TransportError, settings_from_args
+    from services.common.options import OptionError, options_from_args
+    from services.common.process import setup_logging, stop_on_signals
+    from services.common.transport import TransportError, settings_from_args
+    from services.evaluator.evaluator import run_evaluator
 
     try:
         config = options_from_args(EvaluatorConfig, args, "NAVLEARN_EVALUATOR")

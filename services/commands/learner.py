@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 
 from agents.nnql.config import NNQLConfig
-from services.learner_config import LearnerConfig
-from services.options import add_options
-from services.transport import add_zenoh_args
+from services.common.options import add_options
+from services.common.transport import add_zenoh_args
+from services.learner.config import LearnerConfig
 
 DESCRIPTION = """\
 Run the learner: it takes transition batches from actors (navlearn/<run>/transitions/*) and
@@ -55,10 +55,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     import sys
 
-    from services.learner import run_learner
-    from services.options import OptionError, options_from_args
-    from services.process import setup_logging, stop_on_signals
-    from services.transport import TransportError, settings_from_args
+    from services.common.options import OptionError, options_from_args
+    from services.common.process import setup_logging, stop_on_signals
+    from services.common.transport import TransportError, settings_from_args
+    from services.learner.service import run_learner
 
     try:
         config = options_from_args(LearnerConfig, args, "NAVLEARN_LEARNER")
@@ -91,7 +91,7 @@ def nirl_config(args: argparse.Namespace, seed: int):
     from pathlib import Path
 
     from agents.nirl.config import NIRLConfig
-    from services.options import options_from_args
+    from services.common.options import options_from_args
 
     values = {} if os.environ.get("NAVLEARN_NIRL_SEED") else {"seed": seed}
     if args.nirl_config:

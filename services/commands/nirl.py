@@ -19,7 +19,7 @@ curve.jsonl and summary.json; prints the greedy evaluation on 100 held-out gener
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from agents.nirl.config import NIRLConfig, NIRLRun
-    from services.options import add_options
+    from services.common.options import add_options
 
     parser = subparsers.add_parser(
         "nirl",
@@ -75,7 +75,7 @@ def run_train(args: argparse.Namespace) -> int:
     from agents.nirl.buffers import load_demonstrations
     from agents.nirl.config import NIRLConfig, NIRLRun
     from agents.nirl.train_local import train_nirl
-    from services.options import OptionError, options_from_args
+    from services.common.options import OptionError, options_from_args
     from worlds.tasks import parse_map_spec
 
     try:

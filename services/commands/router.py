@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from services.transport import add_zenoh_args
+from services.common.transport import add_zenoh_args
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -30,8 +30,8 @@ def main(args: argparse.Namespace) -> int:
 
     import zenoh
 
-    from services.router import run_router
-    from services.transport import TransportError, settings_from_args
+    from services.common.transport import TransportError, settings_from_args
+    from services.ops.router import run_router
 
     logging.basicConfig(
         stream=sys.stdout, level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s"

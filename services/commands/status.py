@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from services.transport import add_zenoh_args
+from services.common.transport import add_zenoh_args
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -48,8 +48,8 @@ def main(args: argparse.Namespace) -> int:
     import sys
     import time
 
-    from services.status import query_alive, query_status, render, status_dict
-    from services.transport import TransportError, open_session, settings_from_args
+    from services.common.transport import TransportError, open_session, settings_from_args
+    from services.ops.status import query_alive, query_status, render, status_dict
 
     try:
         settings = settings_from_args(args)
@@ -64,7 +64,7 @@ def main(args: argparse.Namespace) -> int:
         status = query_status(session, settings.run, timeout=args.timeout)
         view = status_dict(status, query_alive(session, settings.run, timeout=min(args.timeout, 1.0)))
         if args.actors:
-            from services.actor_status import actor_status_dicts, query_actor_statuses
+            from services.actor.status import actor_status_dicts, query_actor_statuses
 
             statuses = query_actor_statuses(session, settings.run, timeout=min(args.timeout, 2.0))
             view["actor_status"] = actor_status_dicts(statuses)
@@ -75,7 +75,7 @@ def main(args: argparse.Namespace) -> int:
             return render(view)
         from rich.console import Group
 
-        from services.actor_status import render_actor_statuses
+        from services.actor.status import render_actor_statuses
 
         return Group(render(view), render_actor_statuses(view["actor_status"]))
 

@@ -6,8 +6,8 @@ import argparse
 
 from agents.nnql.config import NNQLConfig
 from services.commands.learner import SARSA_LOCAL_ONLY
-from services.options import add_options
-from services.up import UpConfig
+from services.common.options import add_options
+from services.ops.up import UpConfig
 
 DESCRIPTION = """\
 Train NNQL the distributed way on one machine: start the learner (hosting the Zenoh router on a
@@ -48,10 +48,10 @@ def main(args: argparse.Namespace) -> int:
 
     from rich.console import Console
 
-    from services.options import OptionError, options_from_args
-    from services.process import stop_on_signals
-    from services.status import progress_line
-    from services.up import ChildFailed, Up
+    from services.common.options import OptionError, options_from_args
+    from services.common.process import stop_on_signals
+    from services.ops.status import progress_line
+    from services.ops.up import ChildFailed, Up
 
     try:
         config = options_from_args(UpConfig, args, "NAVLEARN_UP")

@@ -14,8 +14,8 @@ from collections import deque
 from typing import Any
 
 from protocols.messages import LearnerStatus
-from services.acl import ACTOR_STATUS_PREFIX, all_status_keys
-from services.status import status_replies
+from services.ops.acl import ACTOR_STATUS_PREFIX, all_status_keys
+from services.ops.status import status_replies
 
 BACKPRESSURE_SHARE = 0.5
 """the actor reports back-pressure when it waited for the learner more than this share of the window"""
@@ -45,7 +45,7 @@ class BlockedShare:
 
 
 def actor_status(actor: Any, seq: int) -> LearnerStatus:
-    """The status of a services.actor.Actor (read from its fields; called on a Zenoh thread)."""
+    """The status of a services.actor.actor.Actor (read from its fields; called on a Zenoh thread)."""
     outbox = actor.outbox
     actor.blocked.add(outbox.blocked_s)  # the actor may be inside a long wait: count it up to now
     share = actor.blocked.share()

@@ -17,7 +17,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from services.transport import TransportError, ZenohSettings, open_session
+from services.common.transport import TransportError, ZenohSettings, open_session
 
 log = logging.getLogger("navlearn.process")
 

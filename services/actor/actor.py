@@ -7,7 +7,7 @@ router answers. Once connected, Zenoh itself re-establishes a lost router link
 (subscriptions, queryables and the liveliness token come back with it); batches
 made meanwhile wait in the outbox and the newest weights are asked for again.
 Until the first weights arrive the robots act uniformly at random (version 0).
-The actor answers ``status/actor:<id>`` (services.actor_status): outbox, acknowledgements,
+The actor answers ``status/actor:<id>`` (services.actor.status): outbox, acknowledgements,
 back-pressure, robot-steps and weights version.
 """
 
@@ -29,13 +29,13 @@ from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
 from protocols.messages import TransitionBatch
-from services.acl import actor_status_key
-from services.actor_config import ActorConfig
-from services.actor_status import BACKPRESSURE_SHARE, BlockedShare, actor_status
-from services.outbox import Outbox, decode_ack
-from services.process import connect
-from services.transport import ZenohSettings, declare_alive
-from services.weights import WeightsReceiver, split_architecture
+from services.actor.config import ActorConfig
+from services.actor.status import BACKPRESSURE_SHARE, BlockedShare, actor_status
+from services.common.outbox import Outbox, decode_ack
+from services.common.process import connect
+from services.common.transport import ZenohSettings, declare_alive
+from services.common.weights import WeightsReceiver, split_architecture
+from services.ops.acl import actor_status_key
 
 log = logging.getLogger("navlearn.actor")
 SUCCESS = 1  # worlds.outcomes.Outcome.GOAL

@@ -121,7 +121,7 @@ def _session(screen, config: Any, publisher: Any, stop: threading.Event) -> None
     import curses
 
     from agents.demos import make_demo
-    from services.demonstrator import nav_config
+    from services.demonstrator.demonstrator import nav_config
     from worlds.env import NavigationEnv
     from worlds.outcomes import OUTCOME_NAMES, Outcome
 

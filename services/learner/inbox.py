@@ -28,7 +28,7 @@ from protocols.codec import decode
 from protocols.errors import ProtocolError
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, Message, TransitionBatch
-from services.fairqueue import FairQueue, SenderFull
+from services.learner.fairqueue import FairQueue, SenderFull
 
 log = logging.getLogger("navlearn.inbox")
 EXPECTED = {"transitions": TransitionBatch, "demos": DemoBatch, "eval": EvalReport}

@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from services.stats import ActorStats
+from services.learner.stats import ActorStats
 
 
 def write_service_state(service: Any, tmp: Path) -> None:

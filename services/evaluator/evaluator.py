@@ -22,10 +22,10 @@ from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
 from protocols.messages import EvalReport
-from services.evaluator_config import EvaluatorConfig
-from services.process import Scalars, connect
-from services.transport import ZenohSettings, declare_alive
-from services.weights import WeightsReceiver, split_architecture
+from services.common.process import Scalars, connect
+from services.common.transport import ZenohSettings, declare_alive
+from services.common.weights import WeightsReceiver, split_architecture
+from services.evaluator.config import EvaluatorConfig
 
 log = logging.getLogger("navlearn.evaluator")
 CURVE_FILE = "learning_curve.png"

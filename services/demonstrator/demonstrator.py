@@ -5,7 +5,7 @@ Three sources, one publishing path:
 * ``astar``: the modified-A* expert (agents.planning) drives the robot on generated
   maps at ``rate`` episodes per second, optionally replacing actions by random wall-free
   ones with probability ``noise`` (injected sub-optimality; the action taken is recorded);
-* ``human``: a person drives the robot from the terminal (``services.teleop``), and each
+* ``human``: a person drives the robot from the terminal (``services.demonstrator.teleop``), and each
   finished episode is published;
 * ``file``: a demonstration dataset (Minari, ``navlearn demos generate``) is imported
   and published once.
@@ -34,10 +34,10 @@ from agents.demos import Demo
 from protocols import keys
 from protocols.codec import encode
 from protocols.messages import DemoBatch, EpisodeMeta
-from services.demonstrator_config import DemonstratorConfig
-from services.outbox import Outbox, decode_ack
-from services.process import connect
-from services.transport import Presence, ZenohSettings, declare_alive
+from services.common.outbox import Outbox, decode_ack
+from services.common.process import connect
+from services.common.transport import Presence, ZenohSettings, declare_alive
+from services.demonstrator.config import DemonstratorConfig
 
 log = logging.getLogger("navlearn.demonstrator")
 
@@ -223,7 +223,7 @@ def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: 
         elif config.source == "file":
             publisher.publish_all(file_episodes(config))
         else:
-            from services.teleop import drive
+            from services.demonstrator.teleop import drive
 
             drive(config, publisher, stop)
         publisher.drain()

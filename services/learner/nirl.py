@@ -26,7 +26,7 @@ class NIRLTrainer:
     def __init__(self, config: Any, experience, demos, session, run: str, sender: str, broadcast_every: int):
         from agents.nirl.learner import NIRLLearner
         from agents.nirl.weights import WeightHistory
-        from services.weights import WeightsBroadcaster
+        from services.common.weights import WeightsBroadcaster
 
         self.learner = NIRLLearner(config, experience=experience, demos=demos)
         self.weights = WeightsBroadcaster(session, run, MODEL, sender)

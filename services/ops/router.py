@@ -11,7 +11,7 @@ import logging
 import threading
 from dataclasses import replace
 
-from services.transport import ZenohSettings, build_config, open_session
+from services.common.transport import ZenohSettings, build_config, open_session
 
 log = logging.getLogger("navlearn.router")
 

@@ -207,8 +207,8 @@ class Up:
 
     def watch(self, stop: threading.Event, show) -> dict[str, Any] | None:
         """Follow the learner's status until the budget is spent, ``stop`` is set or a child dies."""
-        from services.status import query_alive, query_status, status_dict
-        from services.transport import TransportError, ZenohSettings, open_session
+        from services.common.transport import TransportError, ZenohSettings, open_session
+        from services.ops.status import query_alive, query_status, status_dict
 
         cfg = self.config
         settings = ZenohSettings(mode="client", connect=[self.endpoint], run=cfg.run)
@@ -269,7 +269,7 @@ class Up:
         return json.loads((policy / "config.json").read_text())["version"] if policy else None
 
     def latest_policy(self) -> Path | None:
-        from services.checkpoint import CheckpointDir
+        from services.learner.checkpoint import CheckpointDir
 
         latest = CheckpointDir(self.out / "checkpoints").latest()
         policy = latest / "nnql" / "policy" if latest else None

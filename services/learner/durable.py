@@ -22,8 +22,8 @@ from protocols.codec import decode, encode
 from protocols.errors import ProtocolError
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, Message, TransitionBatch
-from services.dedup import Deduplicator
-from services.wal import WriteAheadLog
+from services.learner.dedup import Deduplicator
+from services.learner.wal import WriteAheadLog
 
 log = logging.getLogger("navlearn.durable")
 

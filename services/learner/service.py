@@ -7,8 +7,8 @@ updates, acknowledges each inserted batch to its actor (flow control; the batche
 drained together share one write-ahead-log fsync before their acks go out), keeps the
 status snapshot that the ``status/learner`` queryable serves, writes TensorBoard
 scalars and checkpoints. ``run_learner`` does the process set-up around it. Its settings
-are in services.learner_config, what a checkpoint holds besides the networks in
-services.learner_state, the status snapshot in services.learner_status.
+are in services.learner.config, what a checkpoint holds besides the networks in
+services.learner.state, the status snapshot in services.learner.status.
 """
 
 from __future__ import annotations
@@ -26,17 +26,17 @@ from protocols.codec import encode
 from protocols.flow import Ack
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, EvalReport, LearnerStatus, TransitionBatch
-from services.checkpoint import CheckpointDir
-from services.durable import DurableIngest
-from services.inbox import Inbox, Received
-from services.learner_config import EXPLORATION_FIELDS, LearnerConfig
-from services.learner_state import load_service_state, write_service_state
-from services.learner_status import build_status
-from services.process import Scalars, connect
-from services.ratelimit import RateLimiter
-from services.stats import ActorStats, LagWindow, RateWindow
-from services.status import eval_summary
-from services.transport import ZenohSettings, declare_alive
+from services.common.process import Scalars, connect
+from services.common.transport import ZenohSettings, declare_alive
+from services.learner.checkpoint import CheckpointDir
+from services.learner.config import EXPLORATION_FIELDS, LearnerConfig
+from services.learner.durable import DurableIngest
+from services.learner.inbox import Inbox, Received
+from services.learner.ratelimit import RateLimiter
+from services.learner.state import load_service_state, write_service_state
+from services.learner.stats import ActorStats, LagWindow, RateWindow
+from services.learner.status import build_status
+from services.ops.status import eval_summary
 
 log = logging.getLogger("navlearn.learner")
 
@@ -47,7 +47,7 @@ class LearnerService:
     def __init__(
         self, config: LearnerConfig, learner, session, run: str, inbox: Inbox, demos, sender: str, nirl=None
     ):
-        from services.weights import WeightsBroadcaster
+        from services.common.weights import WeightsBroadcaster
 
         self.config = config
         self.learner = learner
@@ -56,7 +56,7 @@ class LearnerService:
         self.inbox = inbox
         self.demos = demos
         self.sender = sender
-        self.nirl = nirl  # services.nirl_trainer.NIRLTrainer, or None
+        self.nirl = nirl  # services.learner.nirl.NIRLTrainer, or None
         self.nnql_ran = 0  # NNQL updates in the last loop (NIRL's pace once warm)
         nnql = learner.config
         self.limiter = RateLimiter(
@@ -360,7 +360,7 @@ def run_learner(
     """Process set-up: learner, Zenoh session (hosting the router unless told to connect), the loop.
     ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
     from agents.nnql.learner import NNQLLearner
-    from services.demo_buffer import DemoBuffer
+    from services.learner.demo_buffer import DemoBuffer
     from worlds.config import NavConfig
     from worlds.env import observation_space
 
@@ -377,7 +377,7 @@ def run_learner(
     trainer = None
     if config.nirl:
         from agents.nirl.config import NIRLConfig
-        from services.nirl_trainer import NIRLTrainer
+        from services.learner.nirl import NIRLTrainer
 
         nirl = nirl or NIRLConfig(seed=nnql.seed)
         trainer = NIRLTrainer(

@@ -1,0 +1,4 @@
+"""The learner service.
+
+Inbox, fair queue, rate limiter, replay, NNQL/NIRL training, write-ahead log, checkpoints, status.
+"""
