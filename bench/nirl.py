@@ -45,6 +45,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation.compare import mcnemar_exact
 from agents.imitation.config import ImitationConfig
 from agents.imitation.train import train_policy
 from agents.nirl.buffers import demo_buffer, sample
@@ -225,13 +226,10 @@ def refinement_rates(learner: NIRLLearner, expert_labels: list[np.ndarray]) -> d
 
 
 def mcnemar(a: list[int], b: list[int]) -> tuple[int, int, float]:
-    """Exact McNemar test on paired successes: (only a, only b, two-sided p)."""
-    from scipy.stats import binomtest
-
+    """McNemar's exact test on paired successes (agents.evaluation.compare): (only a, only b, p)."""
     only_a = sum(x and not y for x, y in zip(a, b, strict=True))
     only_b = sum(y and not x for x, y in zip(a, b, strict=True))
-    p = 1.0 if only_a + only_b == 0 else binomtest(only_a, only_a + only_b, 0.5).pvalue
-    return only_a, only_b, float(p)
+    return only_a, only_b, mcnemar_exact(only_a, only_b)
 
 
 def wilson(successes: int, n: int) -> tuple[float, float]:
