@@ -196,7 +196,8 @@ def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, s
         policy, row["env_steps"] = train_dqfd(demos, seed, budget, nav)
     else:  # nnql from scratch
         result = train_local(
-            LocalTrainConfig(steps=args.nnql_steps, eval_every=args.nnql_eval_every, eval_episodes=args.val_episodes,
+            LocalTrainConfig(steps=args.nnql_steps, eval_every=args.nnql_eval_every,
+                             eval_episodes=args.val_episodes,
                              keep_best=False, final_eval_episodes=0, out="", seed=seed, progress=False)
         )  # fmt: skip
         policy, row["env_steps"] = result.learner.policy(), result.env_steps
@@ -247,7 +248,8 @@ def report(path: Path) -> int:
     latest = {(r["method"], r["set"], r["seed"]): r for r in rows}  # a re-run replaces its line
     rows = list(latest.values())
     table, summary = [], {"bench": "nirl", "cells": {}}
-    print("| learner | demos | seeds | unseen success (pooled) [95% CI] | per seed | dynamic success [95% CI] |"
+    print("| learner | demos | seeds | unseen success (pooled) [95% CI] | per seed "
+          "| dynamic success [95% CI] |"
           " collisions (unseen) |")  # fmt: skip
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for method in METHODS:
@@ -268,7 +270,8 @@ def report(path: Path) -> int:
             per_seed = " / ".join(f"{s:.0%}" for s in entry["unseen"]["per_seed"])
             collisions = np.mean([r["test"]["unseen"]["collision_static"] for r in cell])
             print(
-                f"| {method} | {set_name} | {len(cell)} | {text[0]} | {per_seed} | {text[1]} | {collisions:.0%} |"
+                f"| {method} | {set_name} | {len(cell)} | {text[0]} | {per_seed} | {text[1]} "
+                f"| {collisions:.0%} |"
             )
             summary["cells"][f"{method}/{set_name}"] = entry
             table.append(entry)
@@ -288,15 +291,17 @@ def report(path: Path) -> int:
                     "nirl": float(np.mean(a)), "bc": float(np.mean(b)), "only_nirl": only_nirl,
                     "only_bc": only_bc, "p": p, "n": len(a),
                 }  # fmt: skip
-                print(f"McNemar NIRL vs BC, {set_name} demos, {family}: {np.mean(a):.1%} vs {np.mean(b):.1%}, "
-                      f"{only_nirl} episodes only NIRL solved, {only_bc} only BC, p = {p:.2g} (n = {len(a)})")  # fmt: skip
+                print(f"McNemar NIRL vs BC, {set_name} demos, {family}: {np.mean(a):.1%} vs "
+                      f"{np.mean(b):.1%}, {only_nirl} episodes only NIRL solved, {only_bc} only BC, "
+                      f"p = {p:.2g} (n = {len(a)})")  # fmt: skip
     summary["nirl_vs_bc"] = comparisons
     refinement = [r["map_refinement"] for r in rows if r["method"] == "nirl" and "map_refinement" in r]
     if refinement:
         summary["map_refinement"] = refinement
         for item in refinement:
-            print(f"MAP refinement (20 noisy): {item['injected_relabelled_to_expert']:.1%} of {item['injected_steps']} "
-                  f"injected steps relabelled to the expert's action ({item['injected_changed']:.1%} changed), "
+            print(f"MAP refinement (20 noisy): {item['injected_relabelled_to_expert']:.1%} of "
+                  f"{item['injected_steps']} injected steps relabelled to the expert's action "
+                  f"({item['injected_changed']:.1%} changed), "
                   f"{item['clean_kept']:.1%} of {item['clean_steps']} clean steps kept")  # fmt: skip
     scales = [
         (r["set"], r["seed"], r["reward_scale"])
@@ -319,7 +324,8 @@ def report(path: Path) -> int:
     if grid:
         summary["gridcheck"] = grid
         for g in grid:
-            print(f"grid world (seed {g['seed']}): re-planned under the learned reward, {g['agreement']:.1%} of "
+            print(f"grid world (seed {g['seed']}): re-planned under the learned reward, "
+                  f"{g['agreement']:.1%} of "
                   f"{g['states']} states take a truly optimal action")  # fmt: skip
 
     def cell(name, family="unseen"):
