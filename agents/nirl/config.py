@@ -54,13 +54,13 @@ class NIRLConfig:
     """max_margin: weight of the large-margin term on the Q-network's values at demo states"""
     refine: bool = True
     """MAP refinement of demonstrations (False: every demonstrated action kept with weight 1)"""
-    refine_start: int = 250
+    refine_start: int = 500
     """Q updates fitted to the recorded actions before MAP refinement starts (EM needs a trained prior:
     an untrained one relabels at random and its own relabels then confirm it)"""
     demo_noise: float = 0.1
     """probability that a demonstrated action is a random one (MAP refinement's observation noise), for
     demonstrations whose dataset does not record it (a recorded ``noise``, 0 for a clean expert, wins)"""
-    prior_temperature: float = 0.02
+    prior_temperature: float = 0.01
     """temperature of the policy prior softmax(Q / T) of MAP refinement: sharper than alpha, as a
     policy fitted to noisy steps spreads the noise over every action and would explain it away"""
     relabel_threshold: float = 0.9

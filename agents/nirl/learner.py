@@ -16,6 +16,7 @@ machinery; ``max_margin`` the thesis-era fit (``agents.nirl.max_margin``).
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -96,7 +97,9 @@ class NIRLLearner:
             self.goal_tolerance,
             self.max_range,
             self._clip_step,
+            self._freeze_prior,
         )
+        self.prior_network: torch.nn.Module | None = None
         self.demo_episodes = 0
         self.demo_path_steps = 0
         self.iteration = 0
@@ -168,9 +171,16 @@ class NIRLLearner:
     # ------------------------------------------------------------ MAP refinement
 
     def prior(self, obs: torch.Tensor) -> torch.Tensor:
-        """The current stochastic policy as a prior over intended actions: softmax(Q / T)."""
+        """The prior over intended actions, softmax(Q / T) of the policy as it was after ``refine_start``
+        updates on the recorded actions (frozen then: a prior that kept learning from its own relabels
+        would confirm them - measured: 25% of clean steps changed on the 20 noisy demonstrations)."""
+        network = self.q.network if self.prior_network is None else self.prior_network
         with torch.no_grad():
-            return torch.softmax(self.q.network(obs) / self.config.prior_temperature, dim=1)
+            return torch.softmax(network(obs) / self.config.prior_temperature, dim=1)
+
+    def _freeze_prior(self) -> None:
+        if self.prior_network is None and self.config.refine and self.q.updates >= self.config.refine_start:
+            self.prior_network = copy.deepcopy(self.q.network).requires_grad_(False)
 
     def refine(
         self, obs: torch.Tensor, actions: torch.Tensor, noise: torch.Tensor | None = None
@@ -260,6 +270,7 @@ class NIRLLearner:
         norm = self._clip_step(loss, self.q.loss.parameters(), self.q.optimizer)
         self.q.target_updater.step()
         self.q.updates += 1
+        self._freeze_prior()
         metrics.update(self._reward_scale(reward, q_taken.detach(), q_all.detach(), batch, is_expert))
         decisions = refined.decisions
         metrics.update({
@@ -424,6 +435,7 @@ class NIRLLearner:
             "reward_architecture": self.reward.architecture,
             "reward": self.reward.state_dict(),
             "reward_optimizer": self.reward_optimizer.state_dict(),
+            "prior_network": None if self.prior_network is None else self.prior_network.state_dict(),
             "counters": {
                 "iteration": self.iteration,
                 "reward_steps": self.reward_steps,
@@ -456,6 +468,9 @@ class NIRLLearner:
             )
         self.reward.load_state_dict(state["reward"])
         self.reward_optimizer.load_state_dict(state["reward_optimizer"])
+        if state.get("prior_network") is not None:
+            self.prior_network = copy.deepcopy(self.q.network).requires_grad_(False)
+            self.prior_network.load_state_dict(state["prior_network"])
         counters = state["counters"]
         self.iteration = int(counters["iteration"])
         self.reward_steps = int(counters["reward_steps"])

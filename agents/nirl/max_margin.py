@@ -74,6 +74,7 @@ class MaxMarginFit:
         goal_tolerance: float,
         max_range: float,
         clip_step: ClipStep,
+        after_update: Callable[[], None],
     ):
         self.config = config
         self.reward = reward
@@ -86,6 +87,7 @@ class MaxMarginFit:
         self.goal_tolerance = goal_tolerance
         self.max_range = max_range
         self.clip_step = clip_step
+        self.after_update = after_update
 
     def reward_step(self, myopic: bool = False) -> dict[str, float]:
         """One maximum-margin update of the reward network on refined demonstration steps
@@ -165,6 +167,7 @@ class MaxMarginFit:
         norm = self.clip_step(loss, q.loss.parameters(), q.optimizer)
         q.target_updater.step()
         q.updates += 1
+        self.after_update()
         return {
             "losses/td_loss": float(td_loss.detach()),
             "losses/q_margin": float(margin.detach()),
