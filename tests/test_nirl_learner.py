@@ -129,6 +129,7 @@ def test_learned_reward_recovers_the_grid_worlds_optimal_policy():
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1200)  # three short runs: about 1 min on a quiet machine, 6+ on a loaded one
 def test_nirl_from_5_demos_on_a_tiny_map_reaches_the_goal_across_seeds(tmp_path):
     from agents.evaluation.policies import load_policy
     from agents.nirl.train_local import train_nirl
