@@ -14,6 +14,7 @@ Learners, each per (demo set, seed):
             reward, demonstrations kept in their own buffer and 25% of each batch, DQfD's large-margin
             loss (0.8) on them, 500 pre-training updates on demonstrations alone; NIRL's env budget;
 * ``nirl``  NIRL with its default core (IQ-Learn), ``--iterations`` x ``--steps-per-iteration``;
+* ``maxmargin`` the max-margin core with issue 8's settings (gamma 0.95 ...), the same budget;
 * ``nnql``  NNQL from scratch (``train --local`` defaults), ``--nnql-steps``: once per seed, no demos.
 
 Every policy is evaluated greedily on the same ``--episodes`` test episodes per family (seed 0:
@@ -63,9 +64,14 @@ from worlds.config import NavConfig
 
 FAMILIES = ("unseen", "dynamic")
 SETS = ("5", "10", "20", "20noisy")
-METHODS = ("bc", "sqil", "dqfd", "nirl", "nnql")
+METHODS = ("bc", "sqil", "dqfd", "nirl", "maxmargin", "nnql")
+ISSUE8 = {
+    "core": "max_margin", "gamma": 0.95, "target_tau": 0.005, "prior_temperature": 0.1,
+    "relabel_threshold": 0.6, "demo_noise": 0.2, "refine_start": 0, "demo_fraction": 0.25,
+    "temperature_start": 0.3, "temperature_end": 0.02,
+}  # fmt: skip
+"""NIRLConfig of the max-margin learner as issue 8 measured it (its defaults then)"""
 VALIDATION_SEED = 1
-GOAL = "goal"
 
 
 def demo_sets(seed: int, noise: float, nav: NavConfig) -> tuple[dict[str, list], list[np.ndarray]]:
@@ -165,14 +171,12 @@ def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, s
         policy, row["env_steps"] = trained.policy(), 0
         row["bc_epochs"], row["bc_best_epoch"] = len(trained.history), trained.best_epoch
         row["bc_steps_per_epoch"] = math.ceil(trained.train_steps / config.batch_size)
-    elif method in ("nirl", "sqil"):
+    elif method in ("nirl", "sqil", "maxmargin"):
         curve_run = method == "nirl" and set_name == "20"
         rounds = max(args.iterations, args.curve_iterations) if curve_run else args.iterations
+        core = {"nirl": {"core": "iq"}, "sqil": {"core": "sqil"}, "maxmargin": ISSUE8}[method]
         config = NIRLConfig(
-            core="iq" if method == "nirl" else "sqil",
-            iterations=rounds,
-            steps_per_iteration=args.steps_per_iteration,
-            seed=seed,
+            **core, iterations=rounds, steps_per_iteration=args.steps_per_iteration, seed=seed
         )
         curve, tested = [], {}
 
@@ -190,7 +194,7 @@ def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, s
         policy, row["env_steps"], row["reward_scale"] = tested["policy"], tested["steps"], tested["scale"]
         if curve_run:
             row["curve"] = curve
-        if set_name == "20noisy":
+        if set_name == "20noisy" and method != "sqil":
             row["map_refinement"] = refinement_rates(result.learner, expert_labels)
     elif method == "dqfd":
         policy, row["env_steps"] = train_dqfd(demos, seed, budget, nav)
@@ -295,11 +299,11 @@ def report(path: Path) -> int:
                       f"{np.mean(b):.1%}, {only_nirl} episodes only NIRL solved, {only_bc} only BC, "
                       f"p = {p:.2g} (n = {len(a)})")  # fmt: skip
     summary["nirl_vs_bc"] = comparisons
-    refinement = [r["map_refinement"] for r in rows if r["method"] == "nirl" and "map_refinement" in r]
+    refinement = [(r["method"], r["map_refinement"]) for r in rows if "map_refinement" in r]
     if refinement:
         summary["map_refinement"] = refinement
-        for item in refinement:
-            print(f"MAP refinement (20 noisy): {item['injected_relabelled_to_expert']:.1%} of "
+        for method, item in refinement:
+            print(f"MAP refinement ({method}, 20 noisy): {item['injected_relabelled_to_expert']:.1%} of "
                   f"{item['injected_steps']} injected steps relabelled to the expert's action "
                   f"({item['injected_changed']:.1%} changed), "
                   f"{item['clean_kept']:.1%} of {item['clean_steps']} clean steps kept")  # fmt: skip

@@ -324,6 +324,7 @@ class LearnerService:
             "charts/update_to_data": status.rates["update_to_data"],
         }
         charts.update({k: v for k, v in self.metrics.items() if k.startswith("losses/")})
+        charts.update({k: v for k, v in status.losses.items() if k.startswith("nirl/")})  # learned reward too
         self.scalars.add(charts, self.learner.version)
 
     def _on_status(self, query) -> None:
