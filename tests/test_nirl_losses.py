@@ -220,3 +220,19 @@ def test_goal_reached_reads_the_squashed_distance():
     obs = torch.zeros(3, 11)
     obs[:, 8] = torch.tensor([0.4 / 6.4, 0.5 / 6.5, 0.6 / 6.6])
     assert goal_reached(obs, 8, goal_tolerance=0.5, max_range=6.0).tolist() == [True, True, False]
+
+
+def test_crash_absorbing_value_minimises_iq_loss_on_the_absorbing_self_loop():
+    from agents.nirl.losses import crash_absorbing_value
+
+    gamma, chi2 = 0.99, 0.5
+    best = crash_absorbing_value(chi2, gamma)
+    assert best == pytest.approx(-100.0)
+
+    def row_loss(v: float) -> float:  # one non-expert self-loop row beside a fixed expert row
+        q = torch.tensor([1.0, v])
+        terms = iq_loss(q, q, torch.tensor([0.0, v]), torch.tensor([True, False]),
+                        torch.tensor([True, False]), gamma, chi2)  # fmt: skip
+        return float(terms.loss)
+
+    assert row_loss(best) < row_loss(best + 5) and row_loss(best) < row_loss(best - 5)

@@ -40,6 +40,8 @@ class NIRLConfig:
     """iq/sqil: entropy temperature of the soft Q-function; V = alpha logsumexp(Q / alpha)"""
     chi2_alpha: float = 0.5
     """iq: chi-squared regulariser E[r^2] / (4 chi2_alpha); a demonstrated step earns about 2 chi2_alpha"""
+    crash_absorbing: bool = True
+    """iq: a collision leads to an absorbing state valued at IQ-Learn's optimum there (not to nothing)"""
     lr: float = 1e-3
     """Adam learning rate of the Q-network"""
     reward_lr: float = 1e-3

@@ -33,6 +33,7 @@ from agents.nirl.losses import (
     RELABEL,
     REWEIGHT,
     Refinement,
+    crash_absorbing_value,
     implicit_reward,
     iq_loss,
     map_posterior,
@@ -251,6 +252,13 @@ class NIRLLearner:
         q_taken = q_all.gather(1, labels[:, None]).squeeze(1)
         next_value = soft_value(self.target_q(next_obs), cfg.alpha)
         metrics: dict[str, float] = {}
+        if cfg.core == "iq" and cfg.crash_absorbing:
+            # a collision leads to an absorbing state (Kostrikov et al. 2019, DAC) told apart from the
+            # goal by the observation; its value is IQ-Learn's optimum there (losses.crash_absorbing_value)
+            at_goal = goal_reached(next_obs, self.reward.n_beams, self.goal_tolerance, self.max_range)
+            crashed = terminated.bool() & ~at_goal
+            next_value = torch.where(crashed, crash_absorbing_value(cfg.chi2_alpha, cfg.gamma), next_value)
+            terminated = terminated.bool() & at_goal
         if cfg.core == "iq":
             terms = iq_loss(
                 q_taken, soft_value(q_all, cfg.alpha), next_value, terminated, is_expert, cfg.gamma,

@@ -80,6 +80,17 @@ def iq_loss(
     return IQLoss(loss, expert_term.detach(), value_term.detach(), chi2_term.detach(), reward.detach())
 
 
+def crash_absorbing_value(chi2_alpha: float, gamma: float) -> float:
+    """Value of the absorbing state a collision leads to, at the optimum of IQ-Learn's objective there.
+
+    Only the learner's own episodes reach it, and it only loops on itself: each visit adds
+    ``V - gamma V`` (value term) and ``r^2 / (4 chi2_alpha)`` with ``r = (1 - gamma) V`` (regulariser)
+    and no expert term, minimised at ``r = -2 chi2_alpha``: ``V = -2 chi2_alpha / (1 - gamma)``.
+    Treating a crash as "nothing follows" (value 0) instead made it about as good as a demonstrated
+    path at IQ-Learn's reward scale (issue 15: collision values near 0 and above)."""
+    return -2.0 * chi2_alpha / (1.0 - gamma)
+
+
 def sqil_rewards(is_expert: torch.Tensor) -> torch.Tensor:
     """SQIL's fixed rewards (Reddy, Dragan & Levine, ICLR 2020): 1 on demonstrated steps, 0 on own."""
     return is_expert.to(torch.float32).reshape(-1)
