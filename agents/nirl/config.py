@@ -36,7 +36,7 @@ class NIRLConfig:
     """max_margin: the learned reward is a cost in (-reward_scale, 0); iq/sqil: unused"""
     gamma: float = 0.99
     """discount factor (0.99: a 100-step horizon, three times the ~31-step demonstrated paths)"""
-    alpha: float = 0.05
+    alpha: float = 0.01
     """iq/sqil: entropy temperature of the soft Q-function; V = alpha logsumexp(Q / alpha)"""
     chi2_alpha: float = 0.5
     """iq: chi-squared regulariser E[r^2] / (4 chi2_alpha); a demonstrated step earns about 2 chi2_alpha"""
@@ -87,9 +87,9 @@ class NIRLConfig:
     """reward-network updates per iteration (iq/sqil: regression on the Q-function's implicit reward)"""
     q_updates: int = 256
     """Q-network updates per iteration"""
-    temperature_start: float = 0.05
+    temperature_start: float = 0.02
     """Boltzmann temperature of the behaviour policy at iteration 0"""
-    temperature_end: float = 0.01
+    temperature_end: float = 0.005
     """... after temperature_decay_iterations (geometric decay)"""
     temperature_decay_iterations: int = 30
     """iterations over which the temperature decays"""
