@@ -62,9 +62,9 @@ class NIRLConfig:
     demo_noise: float = 0.1
     """probability that a demonstrated action is a random one (MAP refinement's observation noise), for
     demonstrations whose dataset does not record it (a recorded ``noise``, 0 for a clean expert, wins)"""
-    prior_temperature: float = 0.01
-    """temperature of the policy prior softmax(Q / T) of MAP refinement: sharper than alpha, as a
-    policy fitted to noisy steps spreads the noise over every action and would explain it away"""
+    prior_temperature: float = 0.002
+    """temperature of the policy prior softmax(Q / T) of MAP refinement: alpha / 5, sharper than the
+    policy, as a policy fitted to noisy steps spreads the noise over every action and explains it away"""
     relabel_threshold: float = 0.9
     """relabel a demonstrated step to the MAP action when that action's posterior reaches this"""
     batch_size: int = 128
