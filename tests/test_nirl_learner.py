@@ -81,7 +81,7 @@ def test_map_refinement_relabels_injected_noise_and_keeps_clean_steps():
     learner.warm_start()
     relabelled, kept = refinement_rates(learner, recorded, expert)
     assert before == (0.0, 1.0)  # no refinement before refine_start updates
-    assert relabelled >= 0.7, relabelled  # 75% when this bar was set
+    assert relabelled >= 0.6, relabelled  # 67% when this bar was set (alpha 0.01, prior T 0.002)
     assert kept >= 0.99, kept
 
 
