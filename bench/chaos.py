@@ -8,7 +8,7 @@ Outbox, one Zenoh session each) and a flooder publishing the same big batch with
 At the end the learner is stopped with SIGTERM and its final checkpoint is read back:
 every acknowledged id must be stored exactly once.
 
-    python bench/chaos.py --actors 3 --kills 3 --seconds 45
+    python -m bench.chaos --actors 3 --kills 3 --seconds 45
 """
 
 from __future__ import annotations
@@ -25,14 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench import ingest
 from protocols.codec import encode
-from services.common.transport import ZenohSettings, open_session
+from services.common.transport import ZenohSettings, free_port, open_session
 from services.learner.checkpoint import CheckpointDir
 from services.ops.status import query_status
-from tests.conftest import free_port
 from tests.reliability_helpers import TracedActor, start_learner, stop_process, stored_ids
 
 

@@ -12,7 +12,7 @@ one thread. The machine is shared, so each figure is reported per wall-clock sec
 CPU second of this process (all its threads), with the load average; the threaded ratio is a
 wall-clock ratio (what threads buy is wall-clock time).
 
-    python bench/env_throughput.py     # human lines, then one JSON object on the last line
+    python -m bench.env_throughput     # human lines, then one JSON object on the last line
 """
 
 from __future__ import annotations
@@ -22,13 +22,9 @@ import json
 import os
 import sys
 import time
-from pathlib import Path
-
-import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import gymnasium as gym
+import numpy as np
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import worlds  # noqa: F401  (registers navlearn/Navigation-v0)

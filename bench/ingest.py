@@ -24,7 +24,7 @@ Rounds are interleaved (each load: the three settings back to back, the order ro
 round); the first round is a warm-up and discarded. The ratio is taken per round and its
 median and range reported.
 
-    python bench/ingest.py --rounds 4 --seconds 3
+    python -m bench.ingest --rounds 4 --seconds 3
 """
 
 from __future__ import annotations
@@ -41,17 +41,14 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from protocols import keys
 from protocols.codec import decode, encode
 from protocols.flow import Ack
 from protocols.messages import LearnerStatus, TransitionBatch
 from services.actor.config import ActorConfig
 from services.common.outbox import Outbox
-from services.common.transport import ZenohSettings, open_session
+from services.common.transport import ZenohSettings, free_port, open_session
 from services.ops.status import query_status
-from tests.conftest import free_port
 from tests.reliability_helpers import N_ACTIONS, OBS_DIM, start_learner, stop_process
 
 SETTINGS = ("off", "acks", "acks+wal")

@@ -1,55 +1,77 @@
-"""Distributed-NNQL overheads: learner updates/s, actor robot-steps/s, weight broadcast latency.
+"""Learner and actor costs: the update step against bare PyTorch, the services' overheads, weight latency.
 
-(a) Learner: updates/s of a `navlearn learner` subprocess (router, Zenoh ingest, decoding,
-    replay inserts, acknowledgements, status, weight broadcasts all running), kept saturated
-    by a feeder process that replays pre-built TransitionBatches under the acknowledgement
-    window, against the update step `train --local` times (NNQLLearner.update on a full
-    replay), same network and batch size, measured in this process before and after.
-    Target: <= 10% overhead.
-(b) Actor: robot-steps/s of the actor service (services.actor.actor.Actor: vector env, NNQL
-    Boltzmann policy, batching, encoding, publishing, acknowledgement window) towards a sink
-    that acknowledges every batch, against the same env and policy stepped without any
-    publishing, before and after. Target: <= 15% overhead.
-(c) Weight broadcast to 4 receiver processes (services.common.weights.WeightsReceiver + the actor's
-    NNQLPolicy.set_weights): p50/p99 from publish to applied.
+(u) Update step, one process, interleaved windows, per CPU-second: a bare-PyTorch double-DQN
+    update written plainly here (tensors indexed directly, nn.Sequential, Adam, Polyak) against
+    ``NNQLLearner.update(n)`` (TorchRL sampler and storage, the lean hot loop of
+    agents/nnql/lean.py) and against the TorchRL path as it ran before that loop existed
+    (``train_step(replay.sample())``: DQNLoss + SoftUpdate on TensorDicts, per-tensor Adam).
+    Same 128x128 MLP, batch 256, replay of 20,000 random transitions. Target: >= 0.9 of bare.
+(a) Learner service: updates/s of a `navlearn learner` subprocess (router, Zenoh ingest,
+    decoding, replay inserts, acknowledgements, status, weight broadcasts all running), kept
+    saturated by a feeder process that replays pre-built TransitionBatches under the
+    acknowledgement window, against ``NNQLLearner.update`` in this process (same network and
+    batch size), measured before and after. Target: <= 10% overhead.
+(b) Actor: robot-steps/s of the actor service (services.actor.Actor: vector env, NNQL Boltzmann
+    policy, batching, encoding, publishing, acknowledgement window) towards a sink that
+    acknowledges every batch, against the same env and policy stepped without any publishing,
+    before and after. Target: <= 15% overhead.
+(c) Weight broadcast to 4 receiver processes (services.common.weights.WeightsReceiver + the
+    actor's NNQLPolicy.set_weights): p50/p99 from publish to applied.
 
-    python bench/learner.py         # human lines, then one JSON object on the last line
+    python -m bench.learner                  # human lines, then one JSON object on the last line
+    python -m bench.learner --only update    # (u) alone
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
+import cProfile
 import json
-import os
+import pstats
 import signal
-import socket
-import subprocess
-import sys
 import threading
 import time
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from protocols import keys
-from protocols.codec import decode, encode
-from protocols.flow import Ack
-from protocols.messages import TransitionBatch
-from services.common.outbox import Outbox
-from services.common.transport import ZenohSettings, open_session
+from agents.nnql.config import NNQLConfig
+from agents.nnql.learner import NNQLLearner
+from bench._common import (
+    N_ACTIONS,
+    OBS_DIM,
+    Rate,
+    free_port,
+    machine_load,
+    median_rate,
+    overheads,
+    process_cpu,
+    random_transitions,
+    spawn,
+    stop,
+    timed,
+    wait_ready,
+)
+from bench._common import settings as zenoh_settings
+from services.common.transport import open_session
 from services.ops.status import query_status
 
 RUN = "bench"
-OBS_DIM, N_ACTIONS = 11, 5
+ROLES = "bench._learner_roles"
 
 
 @dataclass
 class Args:
     rounds: int = 3
     """Measurement windows of each kind, interleaved with the baseline's; medians are reported."""
+    step_seconds: float = 4.0
+    """Length of each update-step window (u)."""
+    many: int = 16
+    """Updates per ``update(n)`` call in the several-per-call window (u)."""
     measure_seconds: float = 15.0
     """Length of each learner-service window."""
     baseline_seconds: float = 6.0
@@ -67,210 +89,148 @@ class Args:
     """Seconds between two published versions."""
 
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
+def settings(endpoint: str, mode: str = "client"):
+    return zenoh_settings(endpoint, RUN, mode)
 
 
-def settings(endpoint: str, mode: str = "client") -> ZenohSettings:
-    if mode == "router":
-        return ZenohSettings(mode="router", listen=[endpoint], run=RUN)
-    return ZenohSettings(mode="client", connect=[endpoint], run=RUN, connect_timeout=120)
+# ---------------------------------------------------------------- (u) update step
 
 
-def spawn(*argv: str) -> subprocess.Popen:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
-    return subprocess.Popen(
-        [sys.executable, *argv], env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
-    )
+class BareDQN:
+    """Double DQN in plain PyTorch, as one would write it without a library: the comparison."""
+
+    def __init__(self, data: dict[str, np.ndarray], config: NNQLConfig):
+        torch.manual_seed(config.seed)
+        hidden = config.hidden_sizes
+        self.net = nn.Sequential(
+            nn.Linear(OBS_DIM, hidden[0]), nn.ReLU(),
+            nn.Linear(hidden[0], hidden[1]), nn.ReLU(),
+            nn.Linear(hidden[1], N_ACTIONS),
+        )  # fmt: skip
+        self.target = copy.deepcopy(self.net)
+        self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.lr)
+        self.config = config
+        self.obs = torch.as_tensor(data["obs"])
+        self.action = torch.as_tensor(data["action"])
+        self.reward = torch.as_tensor(data["reward"])
+        self.next_obs = torch.as_tensor(data["next_obs"])
+        self.terminated = torch.as_tensor(data["terminated"])
+        self.generator = torch.Generator().manual_seed(config.seed)
+
+    def step(self) -> None:
+        cfg = self.config
+        i = torch.randint(0, len(self.obs), (cfg.batch_size,), generator=self.generator)
+        obs, action, reward, next_obs = self.obs[i], self.action[i], self.reward[i], self.next_obs[i]
+        with torch.no_grad():
+            next_action = self.net(next_obs).argmax(1, keepdim=True)
+            next_value = self.target(next_obs).gather(1, next_action).squeeze(1)
+            target = reward + cfg.gamma * (~self.terminated[i]).float() * next_value
+        q = self.net(obs).gather(1, action.unsqueeze(1)).squeeze(1)
+        loss = F.smooth_l1_loss(q, target)
+        self.optimizer.zero_grad()
+        loss.backward()
+        nn.utils.clip_grad_norm_(self.net.parameters(), cfg.grad_clip)
+        self.optimizer.step()
+        with torch.no_grad():
+            for p, tp in zip(self.net.parameters(), self.target.parameters(), strict=True):
+                tp.lerp_(p, cfg.target_tau)
 
 
-def stop(process: subprocess.Popen, timeout: float = 60) -> str:
-    process.send_signal(signal.SIGTERM)
-    try:
-        out, _ = process.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        out, _ = process.communicate()
-    return out or ""
-
-
-def random_transitions(n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
-    return {
-        "obs": rng.random((n, OBS_DIM), dtype=np.float32),
-        "action": rng.integers(0, N_ACTIONS, n),
-        "reward": rng.normal(size=n).astype(np.float32),
-        "next_obs": rng.random((n, OBS_DIM), dtype=np.float32),
-        "terminated": rng.random(n) < 0.02,
-        "truncated": np.zeros(n, bool),
-    }
-
-
-# ---------------------------------------------------------------- helper processes
-
-
-def feeder_main(endpoint: str, batch: int) -> None:
-    """Sends pre-encoded TransitionBatches as fast as the learner acknowledges them."""
-    rng = np.random.default_rng(1)
-    session = open_session(settings(endpoint))
-    publisher = session.declare_publisher(keys.transitions(RUN, "feeder"))
-    outbox = Outbox(publisher.put, lambda: publisher.matching_status.matching, capacity=8, window=4)
-    session.declare_subscriber(
-        keys.acks(RUN, "feeder"), lambda s: outbox.on_ack(decode(s.payload.to_bytes()).accepted_seq)
-    )
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    payloads = []
-    for _ in range(16):
-        fields = random_transitions(batch, rng)
-        message = TransitionBatch(
-            sender="feeder",
-            seq=0,
-            actor="feeder",
-            model="nnql",
-            policy_version=0,
-            env_ids=np.zeros(batch, np.int32),
-            **fields,
-        )
-        payloads.append(message)
-    seq = 0
-    while not done.is_set():
-        seq += 1
-        message = payloads[seq % len(payloads)]
-        message.seq = seq
-        outbox.put(seq, encode(message))
-        outbox.flush(done)
-    session.close()
-
-
-def sink_main(endpoint: str) -> None:
-    """A router that acknowledges every transition batch at once (the actor's ideal learner)."""
-    session = open_session(settings(endpoint, "router"))
-    count = [0]
-
-    def on_batch(sample) -> None:
-        batch = decode(sample.payload.to_bytes())
-        count[0] += len(batch)
-        ack = Ack(sender="sink", seq=batch.seq, actor=batch.actor, accepted_seq=batch.seq, policy_version=0)
-        session.put(keys.acks(RUN, batch.actor), encode(ack))
-
-    session.declare_subscriber(keys.everything(RUN, "transitions"), on_batch)
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    print("ready", flush=True)
-    done.wait()
-    print(json.dumps({"transitions": count[0]}), flush=True)
-    session.close()
-
-
-def receiver_main(endpoint: str) -> None:
-    """Applies weights as they arrive (as an actor does) and prints version and applied time."""
-    from agents.nnql.policy import NNQLPolicy
-    from services.common.weights import WeightsReceiver, split_architecture
-
-    session = open_session(settings(endpoint))
-    receiver = WeightsReceiver(session, RUN, "nnql")
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    policy = None
-    print("ready", flush=True)
-    lines = []
-    while not done.is_set():
-        received = receiver.take()
-        if received is None:
-            time.sleep(0.0005)
-            continue
-        message = received.message
-        network, _ = split_architecture(message.architecture)
-        if policy is None:
-            policy = NNQLPolicy(message.tensors, network, version=message.version)
-        else:
-            policy.set_weights(message.tensors, message.version)
-        lines.append(f"{message.version} {time.time():.6f}")
-    print("\n".join(lines), flush=True)
-    session.close()
-
-
-def wait_ready(process: subprocess.Popen, timeout: float = 120) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if process.stdout.readline().strip() == "ready":
-            return
-    raise RuntimeError("helper process did not start")
-
-
-# ---------------------------------------------------------------- (a) learner
-
-
-@dataclass
-class Rate:
-    """Work done over a window: per wall-clock second and per CPU second of the process doing it."""
-
-    count: float
-    wall: float
-    cpu: float
-
-    @property
-    def per_s(self) -> float:
-        return self.count / self.wall
-
-    @property
-    def per_cpu_s(self) -> float:
-        return self.count / self.cpu
-
-
-def process_cpu(pid: int) -> float:
-    """User + system CPU seconds of process ``pid`` (all its threads)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-def median_rate(rates: list[Rate]) -> dict:
-    return {
-        "per_s": round(float(np.median([r.per_s for r in rates])), 2),
-        "per_cpu_s": round(float(np.median([r.per_cpu_s for r in rates])), 2),
-        "windows": len(rates),
-    }
-
-
-def overheads(service: dict, baseline: dict) -> dict:
-    return {
-        "wall": round(1 - service["per_s"] / baseline["per_s"], 4),
-        "cpu": round(1 - service["per_cpu_s"] / baseline["per_cpu_s"], 4),
-    }
-
-
-def make_baseline_learner():
-    """The learner `train --local` updates, default config, replay filled with random transitions."""
-    from agents.nnql.config import NNQLConfig
-    from agents.nnql.learner import NNQLLearner
-
-    learner = NNQLLearner(NNQLConfig(), OBS_DIM, N_ACTIONS)
-    learner.add(random_transitions(20_000, np.random.default_rng(0)))
-    for _ in range(30):
-        learner.update()
+def filled_learner(data: dict[str, np.ndarray], config: NNQLConfig) -> NNQLLearner:
+    learner = NNQLLearner(config, OBS_DIM, N_ACTIONS)
+    learner.add(data)
+    learner.update(30)
     return learner
 
 
-def baseline_window(learner, seconds: float) -> Rate:
+def bench_update_step(args: Args) -> dict:
+    """Interleaved windows of the bare loop, the learner's update(1) and update(many), and the
+    TorchRL path as it was (train_step on replay.sample(), Adam's per-tensor loop)."""
+    config = NNQLConfig(torch_threads=1)
+    data = random_transitions(20_000, np.random.default_rng(0))
+    bare = BareDQN(data, config)
+    after = filled_learner(data, config)
+    before = filled_learner(data, config)
+    before.optimizer = torch.optim.Adam(before.loss.parameters(), lr=config.lr)  # as it was
+    loops = {
+        "bare": (bare.step, 1),
+        "update_1": (after.update, 1),
+        f"update_{args.many}": (lambda: after.update(args.many), args.many),
+        "before": (lambda: before.train_step(before.replay.sample()), 1),
+    }
+    for step, _ in loops.values():
+        step()  # warm up
+    rates: dict[str, list[Rate]] = {name: [] for name in loops}
+    for _ in range(args.rounds):
+        for name, (step, per_call) in loops.items():
+            rates[name].append(timed(step, args.step_seconds, per_call))
+    result = {name: median_rate(r) for name, r in rates.items()}
+    result["ratio_to_bare"] = {
+        name: [round(r.per_cpu_s / b.per_cpu_s, 3) for r, b in zip(rs, rates["bare"], strict=True)]
+        for name, rs in rates.items()
+        if name != "bare"
+    }
+    ratio = {name: float(np.median(v)) for name, v in result["ratio_to_bare"].items()}
+    result["target_met"] = ratio["update_1"] >= 0.9
+    result["profile_before"] = profile_before(before)
+    print(
+        f"(u) update step per CPU-second: bare PyTorch {result['bare']['per_cpu_s']:.0f}, "
+        f"NNQLLearner.update() {result['update_1']['per_cpu_s']:.0f} ({ratio['update_1']:.2f} of bare), "
+        f"update({args.many}) {result[f'update_{args.many}']['per_cpu_s']:.0f} "
+        f"({ratio[f'update_{args.many}']:.2f}), TorchRL path before {result['before']['per_cpu_s']:.0f} "
+        f"({ratio['before']:.2f}); target >= 0.9 of bare"
+    )
+    return result
+
+
+PROFILE_PARTS = {
+    "loss forward": ("objectives/dqn.py", "forward"),
+    "  of which linear layers": ("~", "<built-in method torch._C._nn.linear>"),
+    "backward": ("torch/_tensor.py", "backward"),
+    "Adam step": ("torch/optim/optimizer.py", "wrapper"),
+    "clip_grad_norm_": ("torch/nn/utils/clip_grad.py", "clip_grad_norm_"),
+    "SoftUpdate.step": ("objectives/utils.py", "step"),
+    "replay.sample": ("replay_buffers/tensordict.py", "sample"),
+}
+
+
+def profile_before(learner: NNQLLearner, updates: int = 300) -> dict[str, float]:
+    """cProfile of the TorchRL path: each part's share of the update's time (cumulative)."""
+    profiler = cProfile.Profile()
+    profiler.enable()
+    for _ in range(updates):
+        learner.train_step(learner.replay.sample())
+    profiler.disable()
+    stats = pstats.Stats(profiler).stats
+    total = sum(row[2] for row in stats.values())  # own time of every function
+    shares = {}
+    for part, (file, name) in PROFILE_PARTS.items():
+        cumulative = sum(row[3] for (f, _, n), row in stats.items() if f.endswith(file) and n == name)
+        shares[part] = round(cumulative / total, 3)
+    print(
+        "    TorchRL path, share of an update's CPU time (cProfile): "
+        + ", ".join(f"{part.strip()} {100 * share:.0f}%" for part, share in shares.items())
+    )
+    return shares
+
+
+# ---------------------------------------------------------------- (a) learner service
+
+
+def baseline_window(learner: NNQLLearner, seconds: float) -> Rate:
     """The update step `train --local` times (NNQLLearner.update), for ``seconds``."""
-    count, wall, cpu = 0, time.perf_counter(), time.process_time()
-    while time.perf_counter() - wall < seconds:
-        learner.update()
-        count += 1
-    return Rate(count, time.perf_counter() - wall, time.process_time() - cpu)
+    return timed(learner.update, seconds)
 
 
 def bench_learner(args: Args) -> dict:
     """Baseline and service windows interleaved (the service paused with SIGSTOP meanwhile)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    local = make_baseline_learner()
+    local = filled_learner(random_transitions(20_000, np.random.default_rng(0)), NNQLConfig())
     baseline = [baseline_window(local, args.baseline_seconds)]
     learner = spawn(
         "-m", "services.cli", "learner", "--listen", endpoint, "--run", RUN, "--checkpoint-dir", ""
     )
-    feeder = spawn(__file__, "--role", "feeder", "--endpoint", endpoint, "--batch", str(args.feeder_batch))
+    feeder = spawn("-m", ROLES, "feeder", "--endpoint", endpoint, "--batch", str(args.feeder_batch))
     session = open_session(settings(endpoint))
     service, transitions = [], []
     try:
@@ -318,8 +278,6 @@ def bench_learner(args: Args) -> dict:
 
 def bench_actor(args: Args, endpoint: str) -> dict:
     """Plain stepping and the actor service in alternating windows, same env and policy."""
-    from agents.nnql.config import NNQLConfig
-    from agents.nnql.learner import NNQLLearner
     from agents.nnql.rollout import VectorRollout
     from protocols.limits import Limits
     from services.actor.actor import Actor, ActorConfig
@@ -369,11 +327,9 @@ def bench_actor(args: Args, endpoint: str) -> dict:
 
 
 def bench_broadcast(args: Args, endpoint: str) -> dict:
-    from agents.nnql.config import NNQLConfig
-    from agents.nnql.learner import NNQLLearner
     from services.common.weights import WeightsBroadcaster
 
-    receivers = [spawn(__file__, "--role", "receiver", "--endpoint", endpoint) for _ in range(args.receivers)]
+    receivers = [spawn("-m", ROLES, "receiver", "--endpoint", endpoint) for _ in range(args.receivers)]
     session = open_session(settings(endpoint))
     try:
         for receiver in receivers:
@@ -417,11 +373,14 @@ def bench_broadcast(args: Args, endpoint: str) -> dict:
     }
 
 
-def main(args: Args) -> dict:
-    print(f"bench/learner.py {asdict(args)}")
-    result = {"learner": bench_learner(args)}
+def main(args: Args, only: str | None = None) -> dict:
+    print(f"bench/learner.py {asdict(args)} load {machine_load()}")
+    result = {"update_step": bench_update_step(args)}
+    if only == "update":
+        return result
+    result["learner"] = bench_learner(args)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    sink = spawn(__file__, "--role", "sink", "--endpoint", endpoint)
+    sink = spawn("-m", ROLES, "sink", "--endpoint", endpoint)
     try:
         wait_ready(sink)
         result["actor"] = bench_actor(args, endpoint)
@@ -435,21 +394,13 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--role", choices=("feeder", "sink", "receiver"), help=argparse.SUPPRESS)
-    parser.add_argument("--endpoint", help=argparse.SUPPRESS)
-    parser.add_argument("--batch", type=int, default=256, help=argparse.SUPPRESS)
+    parser.add_argument("--only", choices=("update",), help="run only the update-step comparison (u)")
     parser.add_argument(
         "--quick", action="store_true", help="short windows (a smoke run, not for RESULTS.md)"
     )
+    parser.add_argument("--rounds", type=int, default=Args.rounds, help="interleaved rounds of each window")
     cli = parser.parse_args()
-    if cli.role == "feeder":
-        feeder_main(cli.endpoint, cli.batch)
-    elif cli.role == "sink":
-        sink_main(cli.endpoint)
-    elif cli.role == "receiver":
-        receiver_main(cli.endpoint)
-    else:
-        bench_args = (
-            Args(rounds=1, measure_seconds=6, baseline_seconds=3, broadcasts=40) if cli.quick else Args()
-        )
-        print(json.dumps(main(bench_args)))
+    quick = Args(rounds=1, step_seconds=1.5, measure_seconds=6, baseline_seconds=3, broadcasts=40)
+    result = main(quick if cli.quick else Args(rounds=cli.rounds), cli.only)
+    result["load_after"] = machine_load()
+    print(json.dumps(result))

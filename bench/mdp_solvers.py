@@ -17,24 +17,20 @@ rule: sup-norm change of a sweep below eps (1 - gamma) / (2 gamma).
     grid solver in row-major order). Accuracy is max |V - V*| against a tight reference (grid solver
     to eps 1e-9, then its policy evaluated exactly by a sparse LU; its Bellman residual is printed).
 
-    python bench/mdp_solvers.py       # human lines, then one JSON object on the last line
+    python -m bench.mdp_solvers       # human lines, then one JSON object on the last line
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.mdp import (
     FiniteMDP,

@@ -27,8 +27,8 @@ The grid-world check (``agents.nirl.gridcheck``) measures reward recovery where 
 Runs append one JSON line each to ``--runs`` (so the grid can be run in pieces, in the background);
 ``--report`` reads them and prints the table, then one JSON object on the last line.
 
-    python bench/nirl.py --methods nirl,bc --sets 20,20noisy --seeds 0,1,2    # a piece
-    python bench/nirl.py --report                                             # the table
+    python -m bench.nirl --methods nirl,bc --sets 20,20noisy --seeds 0,1,2    # a piece
+    python -m bench.nirl --report                                             # the table
 """
 
 from __future__ import annotations
@@ -42,8 +42,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.evaluation import evaluate, make_eval_set
 from agents.evaluation.compare import mcnemar_exact

@@ -6,7 +6,7 @@ selected greedy policy and, as the same-run baseline, the hand-written goal-seek
 (``worlds.heuristics``) on the shared evaluation sets (seed 0). The learning curve PNG lands in
 ``--out``. Last line: one JSON object.
 
-    python bench/nnql_science.py --steps 200000 --out runs/bench-nnql
+    python -m bench.nnql_science --steps 200000 --out runs/bench-nnql
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@
     discs, plus the MovingAI arena: success rate with its 95% interval, SPL and path
     length ratio to A*, against a uniform random policy in the same run.
 
-    python bench/planning.py            # human lines, then one JSON object on the last line
+    python -m bench.planning            # human lines, then one JSON object on the last line
 """
 
 from __future__ import annotations
@@ -18,14 +18,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.evaluation import evaluate, make_eval_set
 from agents.evaluation.runner import MOVINGAI_DIR, EvalSet, fixed_sampler

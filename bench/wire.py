@@ -11,8 +11,9 @@
     reported for both kinds: it shows where the time goes;
 (c) WeightsUpdate of a 2x256 MLP: publish, the peer decodes and echoes it re-encoded,
     we decode the echo; p50/p99 against a raw echo of the same bytes.
+The peer (subscriber and echo side) is bench/_wire_peer.py, started as a process of its own.
 
-    python bench/wire.py            # prints human lines, then one JSON object on the last line
+    python -m bench.wire            # prints human lines, then one JSON object on the last line
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ import itertools
 import json
 import os
 import pickle
-import socket
 import subprocess
 import sys
 import threading
@@ -32,12 +32,12 @@ from pathlib import Path
 
 import msgpack
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import zenoh
 
 from protocols.codec import _decode, _encode, decode, encode
 from protocols.limits import Limits
 from protocols.messages import TransitionBatch, WeightsUpdate
+from services.common.transport import ZenohSettings, free_port, open_session
 
 RAW, MSG, END, ECHO, ECHO_BACK = "bench/raw", "bench/msg", "bench/end", "bench/echo", "bench/echo_back"
 LIMITS = Limits(n_actions=5)
@@ -164,86 +164,7 @@ def per_call(args: Args) -> dict:
     return out
 
 
-# ----------------------------------------------------------------------------- peer process
-
-
-def peer_main(endpoint: str) -> None:
-    """Subscriber and echo side; one JSON line per finished round on stdout."""
-    import zenoh
-
-    from services.common.transport import ZenohSettings, open_session
-
-    session = open_session(ZenohSettings(connect=[endpoint]))
-    lock = threading.Lock()
-    state = {"count": 0, "transitions": 0, "bytes": 0, "first": 0.0, "last": 0.0, "rejected": 0}
-    state["handler_cpu_s"] = 0.0  # CPU time of the subscriber callbacks (payload copy + decode)
-
-    def count(nbytes: int, transitions: int) -> None:
-        now = time.perf_counter()
-        with lock:
-            if state["count"] == 0:
-                state["first"] = now
-            state["count"] += 1
-            state["transitions"] += transitions
-            state["bytes"] += nbytes
-            state["last"] = now
-
-    def subscriber(handle):
-        # Decoding runs in Zenoh's callback thread, as a service's subscriber would (a FIFO channel
-        # drained by a Python thread was slower here: the two threads contend for the GIL).
-        def on_sample(sample) -> None:
-            start = time.thread_time()
-            data = sample.payload.to_bytes()
-            try:
-                transitions = handle(data)
-            except ValueError:
-                state["rejected"] += 1
-            else:
-                count(len(data), transitions)
-            state["handler_cpu_s"] += time.thread_time() - start
-
-        return on_sample
-
-    echo_pub = session.declare_publisher(ECHO_BACK, congestion_control=zenoh.CongestionControl.BLOCK)
-
-    def on_echo(sample) -> None:
-        data = sample.payload.to_bytes()
-        if data[:1] == b"R":  # raw echo: bytes straight back
-            echo_pub.put(data)
-        else:
-            echo_pub.put(encode(decode(data, LIMITS)))
-
-    def on_end(sample) -> None:
-        threading.Thread(target=report, args=(int(sample.payload.to_string()),)).start()
-
-    def report(expected: int) -> None:
-        deadline = time.monotonic() + 60
-        while state["count"] < expected and time.monotonic() < deadline:
-            time.sleep(0.01)
-        with lock:
-            print(json.dumps(state), flush=True)
-            state.update(count=0, transitions=0, bytes=0, first=0.0, last=0.0, rejected=0, handler_cpu_s=0.0)
-
-    subs = [
-        session.declare_subscriber(END, on_end),
-        session.declare_subscriber(ECHO, on_echo),
-        session.declare_subscriber(RAW, subscriber(lambda data: 0)),
-        session.declare_subscriber(MSG, subscriber(lambda data: len(decode(data, LIMITS)))),
-    ]
-    print("ready", flush=True)
-    sys.stdin.read()  # runs until the parent closes our stdin
-    for sub in subs:
-        sub.undeclare()
-    session.close()
-
-
 # ----------------------------------------------------------------------------- publisher side
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def wait_line(proc: subprocess.Popen, timeout: float) -> str:
@@ -266,8 +187,6 @@ def cpu_seconds(pid: int | None = None) -> float:
 
 
 def run_round(session, peer, router, key: str, payloads, args: Args) -> dict:
-    import zenoh
-
     pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
     pids = {"publisher": None, "router": router.pid, "subscriber": peer.pid}
     cpu_start = {name: cpu_seconds(pid) for name, pid in pids.items()}
@@ -342,8 +261,6 @@ def bench_end_to_end(args: Args, session, peer, router, rng: np.random.Generator
 
 
 def bench_latency(args: Args, session, rng: np.random.Generator) -> dict:
-    import zenoh
-
     weights = make_weights(rng, args.obs_dim)
     wire = encode(weights)
     raw = b"R" + bytes(len(wire) - 1)
@@ -383,8 +300,6 @@ def bench_latency(args: Args, session, rng: np.random.Generator) -> dict:
 
 
 def main(args: Args) -> dict:
-    from services.common.transport import ZenohSettings, open_session
-
     rng = np.random.default_rng(0)
     result: dict = {"bench": "wire", "config": args.__dict__}
     result["codec"] = bench_codec(args, make_batch(args.batch, args.obs_dim, rng))
@@ -395,7 +310,7 @@ def main(args: Args) -> dict:
     peer = None
     try:
         peer = subprocess.Popen(
-            [sys.executable, __file__, "--peer", endpoint],
+            [sys.executable, "-m", "bench._wire_peer", endpoint],
             cwd=root,
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
@@ -429,11 +344,6 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--peer", metavar="ENDPOINT", help=argparse.SUPPRESS)
     for name, value in Args().__dict__.items():
         parser.add_argument(f"--{name.replace('_', '-')}", type=type(value), default=value)
-    ns = parser.parse_args()
-    if ns.peer:
-        peer_main(ns.peer)
-    else:
-        print(json.dumps(main(Args(**{k: v for k, v in vars(ns).items() if k != "peer"}))))
+    print(json.dumps(main(Args(**vars(parser.parse_args())))))

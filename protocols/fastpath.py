@@ -15,10 +15,16 @@ changes the wire)::
         (protocols.arrays: dtype code, ndim, two zero bytes, u32 shape, zero padding to 8, raw data)
 
 Given the batch size N and the observation size D, everything after ``policy_version`` except the array
-data is constant. :func:`decode_transitions` compares those constant parts with byte templates cached
-per (N, D), reads the three strings and two integers itself, makes the arrays, and applies every check
-of ``TransitionBatch.read_body`` and of the envelope. :func:`encode_transitions` writes the same bytes
-as the general encoder from the cached templates, without building the body map.
+data is constant. The decoder compares those constant parts with byte templates cached per (N, D), reads
+the strings and integers itself, makes the arrays, and applies every check of the schema's
+``read_body`` and of the envelope; the encoder writes the same bytes as the general encoder from the
+cached templates, without building the body map.
+
+Both are derived from TransitionBatch's field declarations (protocols.schema): the layout above is
+what the declarations say (texts and counts, then columns, each 1-d or 2-d with a named width), so
+a field added there is read and written here too (tests/test_protocols_schema.py adds three). They
+are generated as straight-line code once at import (``_TRANSITIONS.source`` shows it), as
+``dataclasses`` generates ``__init__``: a loop over the fields costs about a fifth of a decode.
 
 Arrays are read-only views of the received bytes where their data is 8-byte aligned, and aligned
 copies of their bytes where it is not, so decoded arrays are aligned whichever path decoded them (the
@@ -51,57 +57,234 @@ from protocols.arrays import _array_head
 from protocols.checks import INT64_MAX
 from protocols.errors import ProtocolError
 from protocols.limits import Limits
-from protocols.messages import TransitionBatch
+from protocols.messages import Message, TransitionBatch
+from protocols.schema import Count, Schema, Text
 
-_ARRAY_FIELDS = ("env_ids", "obs", "action", "reward", "next_obs", "terminated", "truncated")
-_WIRE_DTYPES = tuple(np.dtype(s) for s in ("<i4", "<f4", "<i8", "<f4", "<f4", "|b1", "|b1"))
-_VIEW_DTYPES = tuple(np.dtype(s) for s in ("<i4", "<f4", "<u8", "<f4", "<f4", "|b1", "|b1"))
-"""The arrays' dtypes as first viewed: actions as unsigned (for the range check), then as int64."""
-_I64 = np.dtype("<i8")
-_NDARRAYS = (np.ndarray,) * len(_ARRAY_FIELDS)
-_OBS_FIELDS = frozenset({"obs", "next_obs"})
 _MAX_LAYOUTS = 256
-"""Most (N, D) layouts remembered (bounds memory whatever shapes arrive)."""
+"""Most (N, widths) layouts remembered (bounds memory whatever shapes arrive)."""
+_EXT_HEAD = 6  # 0xc9, u32 payload length, type
+_U32 = struct.Struct("<I")
+_UINT_SIZES = {0xCC: 1, 0xCD: 2, 0xCE: 4, 0xCF: 8}
+_STR_SIZES = {0xD9: 1, 0xDA: 2, 0xDB: 4}
+_UNSIGNED = {np.dtype("<i8"): np.dtype("<u8"), np.dtype("<i4"): np.dtype("<u4")}
 
 
 def _packed(*items: object) -> bytes:
     return b"".join(msgpack.packb(item) for item in items)
 
 
-_HEAD = b"\x85" + _packed("v", TransitionBatch.VERSION, "k", TransitionBatch.KIND, "s")
-_SEQ_KEY = _packed("n")
-_BODY_START = b"\x8a".join((_packed("b"), _packed("actor")))  # "b", the body's map header, "actor"
-_MODEL_KEY = _packed("model")
-_VERSION_KEY = _packed("policy_version")
-_KEY_SIZES = tuple(len(_packed(name)) for name in _ARRAY_FIELDS)
-_LONGEST_KEY = max(map(len, ("transitions", "policy_version", *_ARRAY_FIELDS)))
-"""Longest string of the layout, in bytes (msgpack's max_str_len applies to it as to any other)."""
-_EXT_HEAD = 6  # 0xc9, u32 payload length, type
-_ENV_IDS_DATA = _KEY_SIZES[0] + _EXT_HEAD + 8  # offset of env_ids' data from its key (shape[0] just before)
-_OBS_DIM = _KEY_SIZES[1] + _EXT_HEAD + 8  # offset of obs' shape[1] from its key
-_U32 = struct.Struct("<I")
-_UINT_SIZES = {0xCC: 1, 0xCD: 2, 0xCE: 4, 0xCF: 8}
-_STR_SIZES = {0xD9: 1, 0xDA: 2, 0xDB: 4}
+class _Format:
+    """The byte layout of one table message kind, derived from its schema: texts and counts first
+    (each a constant key and a value), then the columns (each a constant key and array header, and data).
+
+    Its ``decode`` and ``encode`` are generated from the schema as straight-line Python (``source``
+    holds their text), as ``dataclasses`` generates ``__init__``: a loop over the fields would cost
+    the hot path about a fifth of its time.
+    """
+
+    def __init__(self, cls: type) -> None:
+        schema: Schema = cls.SCHEMA
+        names = [name for name, _ in schema.fields]
+        columns = [name for name, _ in schema.columns]
+        if not schema.table or names[len(names) - len(columns) :] != columns:
+            raise TypeError(f"{cls.__name__}: the fast path needs texts and counts first, then only columns")
+        self.scalars = tuple((name, spec) for name, spec in schema.fields if name not in columns)
+        for name, spec in self.scalars:
+            if not (isinstance(spec, Count) or spec == Text()):
+                raise TypeError(f"{cls.__name__}.{name}: the fast path reads plain texts and counts only")
+        packer = msgpack.Packer(autoreset=False)
+        packer.pack_map_header(len(names))
+        self.head = b"\x85" + _packed("v", cls.VERSION, "k", cls.KIND, "s")
+        self.schema = schema
+        self.columns = tuple(columns)
+        self.specs = tuple(spec for _, spec in schema.columns)
+        self.widths = tuple(schema.widths)
+        self.layouts: dict[tuple[int, ...], _Layout] = {}
+        namespace = {
+            "CLS": cls,
+            "HEAD": self.head,
+            "HEAD_SIZE": len(self.head),
+            "SEQ_KEY": _packed("n"),
+            "BODY_START": _packed("b") + packer.bytes(),
+            **{f"KEY_{name}": _packed(name) for name, _ in self.scalars},
+            "NDARRAYS": (np.ndarray,) * len(columns),
+            "DTYPES": tuple(spec.dtype for spec in self.specs),
+            "LONGEST_KEY": max(map(len, (cls.KIND, *names))),
+            "_layout": self.layout,
+            "LAYOUTS": self.layouts,
+            "INT64_MAX": INT64_MAX,
+            "ProtocolError": ProtocolError,
+            "_U32": _U32,
+            "_str": _str,
+            "_uint": _uint,
+            "isfinite": isfinite,
+            "ndarray": np.ndarray,
+            "vdot": np.vdot,
+        }
+        self.source = self._decode_source(namespace) + "\n\n" + self._encode_source()
+        exec(compile(self.source, f"<fastpath {cls.__name__}>", "exec"), namespace)
+        self.decode: Callable[[bytes, Limits], Message | None] = namespace["decode"]
+        self.encode: Callable[[Message, Callable[[object], bytes]], bytes | None] = namespace["encode"]
+
+    def layout(self, n: int, *dims: int) -> _Layout:
+        layout = self.layouts.get((n, *dims))
+        if layout is None:
+            layout = _Layout(self, n, dict(zip(self.widths, dims, strict=True)))
+            if len(self.layouts) < _MAX_LAYOUTS:
+                self.layouts[(n, *dims)] = layout
+        return layout
+
+    def _decode_source(self, namespace: dict) -> str:
+        lines = [
+            "def decode(data, limits):",
+            "    max_string, max_bytes = limits.max_string, 4 * limits.max_string  # msgpack's max_str_len",
+            f"    if limits.max_items < {len(self.scalars) + len(self.columns)} or max_bytes < LONGEST_KEY:",
+            "        return None  # msgpack's limits bind keys and maps too",
+            "    sender, at = _str(data, HEAD_SIZE, max_bytes)",
+            "    if sender is None or len(sender) > max_string or not sender.isprintable():",
+            "        return None",
+            "    if not data.startswith(SEQ_KEY, at):",
+            "        return None",
+            f"    seq, at = _uint(data, at + {len(_packed('n'))})",
+            "    if not 0 <= seq <= INT64_MAX or not data.startswith(BODY_START, at):",
+            "        return None",
+            f"    at += {len(namespace['BODY_START'])}",
+        ]
+        for name, spec in self.scalars:
+            key = f"KEY_{name}"
+            lines += [f"    if not data.startswith({key}, at):", "        return None"]
+            if isinstance(spec, Text):
+                lines += [
+                    f"    f_{name}, at = _str(data, at + {len(_packed(name))}, max_bytes)",
+                    f"    if f_{name} is None or not 0 < len(f_{name}) <= max_string"
+                    f" or not f_{name}.isprintable():",
+                ]
+            else:
+                lines += [
+                    f"    f_{name}, at = _uint(data, at + {len(_packed(name))})",
+                    f"    if not 0 <= f_{name} <= INT64_MAX:",
+                ]
+            lines.append("        return None")
+        # The column section: N from the first column's header, each width from the first column of that
+        # width, all then checked in full against the layout's templates.
+        key_sizes = [len(_packed(name)) for name in self.columns]
+        lines.append(f"    n = _U32.unpack_from(data, at + {key_sizes[0] + _EXT_HEAD + 4})[0]")
+        fixed, rows, seen = 0, [], set()
+        for key_size, spec in zip(key_sizes, self.specs, strict=True):
+            if spec.width is not None and spec.width not in seen:
+                seen.add(spec.width)
+                offset = f"{fixed + key_size + _EXT_HEAD + 8}" + (
+                    f" + n * ({' + '.join(rows)})" if rows else ""
+                )
+                lines.append(f"    w_{spec.width} = _U32.unpack_from(data, at + {offset})[0]")
+            fixed += key_size + _EXT_HEAD + 8 * spec.ndim  # array headers: 8 bytes in 1-d, 16 in 2-d
+            itemsize = spec.dtype.itemsize
+            rows.append(str(itemsize) if spec.width is None else f"{itemsize} * w_{spec.width}")
+        widths = "".join(f", w_{w}" for w in self.widths)
+        tests = ["n > limits.max_batch", *(f"not 1 <= w_{w} <= limits.max_obs_dim" for w in self.widths)]
+        tests.append(f"len(data) - at != {fixed} + n * ({' + '.join(rows)})")
+        c = {name: f"c_{name}" for name in self.columns}
+        lines += [
+            f"    if {' or '.join(tests)}:",
+            "        return None",
+            f"    layout = LAYOUTS.get((n{widths},)) or _layout(n{widths})",
+            "    for offset, template in layout.templates:",
+            "        if not data.startswith(template, at + offset):",
+            "            return None",
+            "    for start, end, rest in layout.bool_spans:  # booleans only 0 or 1",
+            "        if data[at + start : at + end].translate(None, b'\\x00\\x01') != rest:",
+            "            return None",
+            f"    {', '.join(c.values())}, = [",
+            "        ndarray(shape, dtype, data[at + start : at + end]) if end"
+            " else ndarray(shape, dtype, data, at + start)",
+            "        for shape, dtype, start, end in layout.plans[at & 7]",
+            "    ]",
+        ]
+        finite = [f"isfinite(vdot(c_{a}, c_{b}))" for a, b in self.schema.pairs]
+        finite += [f"isfinite(vdot(c_{a}, c_{a}))" for a in self.schema.singles]
+        if finite:
+            lines += [f"    if not ({' and '.join(finite)}):", "        return None"]
+        actions = self.schema.actions
+        if actions:
+            lines += [
+                "    if n:",
+                "        bound = INT64_MAX + 1 if limits.n_actions is None else limits.n_actions",
+            ]
+            for name in actions:  # negative actions wrap to >= 2**63 as unsigned
+                lines += [f"        if c_{name}.item(c_{name}.argmax()) >= bound:", "            return None"]
+                c[name] = f"c_{name}.view(DTYPES[{self.columns.index(name)}])"
+        values = [f"{name}={value}" for name, value in c.items()]
+        values += [f"{name}=f_{name}" for name, _ in self.scalars] + ["sender=sender", "seq=seq"]
+        lines += [
+            "    message = object.__new__(CLS)",
+            f"    message.__dict__.update({', '.join(values)})",
+            "    return message",
+        ]
+        return "\n".join(lines) + "\n"
+
+    def _encode_source(self) -> str:
+        c = [f"c_{name}" for name in self.columns]
+        key = ", ".join(
+            [f"{c[0]}.shape[0]", *(f"c_{names[0]}.shape[1]" for names in self.schema.widths.values())]
+        )
+        t = [f"t{i}" for i in range(len(c))]
+        parts = ["HEAD", "pack(batch.sender)", "SEQ_KEY", "pack(batch.seq)", "BODY_START"]
+        for name, _ in self.scalars:
+            parts += [f"KEY_{name}", f"pack(batch.{name})"]
+        for template, name in zip(t, c, strict=True):
+            parts += [template, name]
+        lines = [
+            "def encode(batch, pack):",
+            f"    {', '.join(c)}, = {', '.join(f'batch.{name}' for name in self.columns)},",
+            f"    arrays = ({', '.join(c)},)",
+            "    if tuple(map(type, arrays)) != NDARRAYS:",
+            "        return None",
+            "    try:",
+            f"        key = ({key},)",
+            "        layout = LAYOUTS.get(key) or _layout(*key)",
+            "    except (IndexError, ProtocolError):  # a 0-d array, or a shape no header can hold",
+            "        return None",
+            f"    if ({', '.join(f'{x}.dtype' for x in c)},) != DTYPES"
+            f" or ({', '.join(f'{x}.shape' for x in c)},) != layout.shapes:",
+            "        return None",
+            f"    {', '.join(t)}, = layout.parts",
+            "    try:  # join takes an array's bytes only through a simple buffer (C-ordered arrays)",
+            f"        return b''.join(({', '.join(parts)}))",
+            "    except TypeError:",
+            "        return None",
+        ]
+        return "\n".join(lines) + "\n"
 
 
 class _Layout:
-    """The constant parts of the array section for one (N, D), offsets from the env_ids key."""
+    """The constant parts of the column section for one N and widths, offsets from the first key."""
 
-    __slots__ = ("flags_at", "flags_rest", "parts", "plans", "shapes", "size", "templates")
+    __slots__ = ("bool_spans", "parts", "plans", "shapes", "size", "templates")
 
-    def __init__(self, n: int, d: int) -> None:
+    def __init__(self, fmt: _Format, n: int, dims: dict[str, int]) -> None:
         templates, arrays, at = [], [], 0
-        for name, dtype, view in zip(_ARRAY_FIELDS, _WIRE_DTYPES, _VIEW_DTYPES, strict=True):
-            shape = (n, d) if name in _OBS_FIELDS else (n,)
-            template = _packed(name) + _array_head(dtype, shape)
+        for name, spec in zip(fmt.columns, fmt.specs, strict=True):
+            shape = (n,) if spec.width is None else (n, dims[spec.width])
+            template = _packed(name) + _array_head(spec.dtype, shape)
             templates.append((at, template))
             at += len(template)
-            nbytes = math.prod(shape) * dtype.itemsize
-            arrays.append((shape, view, at, at + nbytes, dtype.alignment > 1))
+            view = _UNSIGNED[spec.dtype] if spec.actions else spec.dtype
+            nbytes = math.prod(shape) * spec.dtype.itemsize
+            arrays.append((shape, view, at, at + nbytes, spec.dtype.alignment > 1))
             at += nbytes
+        spans: list[tuple[int, int, bytes]] = []  # runs of consecutive boolean columns
+        for i, spec in enumerate(fmt.specs):
+            if spec.dtype.kind != "b":
+                continue
+            start, end = arrays[i][2:4]
+            if spans and fmt.specs[i - 1].dtype.kind == "b":
+                start, _, rest = spans.pop()
+                spans.append((start, end, rest + templates[i][1].translate(None, b"\x00\x01")))
+            else:
+                spans.append((start, end, b""))
         self.size = at
         self.templates = tuple(templates)
-        """(offset, the field's key and its extension and array headers), in wire order."""
+        """(offset, the column's key and its extension and array headers), in wire order."""
         self.parts = tuple(template for _, template in templates)
         self.shapes = tuple(shape for shape, *_ in arrays)
         self.plans = tuple(
@@ -113,28 +296,8 @@ class _Layout:
         )
         """By the section's start modulo 8: each array's (shape, dtype to view it with, start, end of the
         bytes to copy, or 0 where a view of the message is aligned as it is)."""
-        self.flags_at = arrays[5][2]
-        """Where the two boolean arrays and the truncated template between them start."""
-        self.flags_rest = templates[6][1].translate(None, b"\x00\x01")
-        """What deleting every 0 and 1 byte from there to the end must leave."""
-
-    @staticmethod
-    def size_for(n: int, d: int) -> int:
-        """``size`` without building the templates (array headers: 8 bytes in 1-d, 16 in 2-d)."""
-        headers = sum(_KEY_SIZES) + _EXT_HEAD * 7 + 8 * 5 + 16 * 2
-        return headers + n * (4 + 8 + 4 + 1 + 1) + 2 * 4 * n * d
-
-
-_LAYOUTS: dict[tuple[int, int], _Layout] = {}
-
-
-def _layout(n: int, d: int) -> _Layout:
-    layout = _LAYOUTS.get((n, d))
-    if layout is None:
-        layout = _Layout(n, d)
-        if len(_LAYOUTS) < _MAX_LAYOUTS:
-            _LAYOUTS[(n, d)] = layout
-    return layout
+        self.bool_spans = tuple(spans)
+        """Runs of boolean columns: (start, end, what deleting every 0 and 1 byte there must leave)."""
 
 
 def _uint(data: bytes, at: int) -> tuple[int, int]:
@@ -169,155 +332,22 @@ def _str(data: bytes, at: int, max_bytes: int) -> tuple[str | None, int]:
     return data[start:end].decode(), end
 
 
+_TRANSITIONS = _Format(TransitionBatch)
+
+
 def decode_transitions(data: bytes, limits: Limits) -> TransitionBatch | None:
     """The TransitionBatch in ``data`` if it is in the canonical layout and passes every check the general
     decoder applies (``limits.max_message_bytes`` excepted: the caller checks it first); else None."""
-    if type(data) is not bytes or not data.startswith(_HEAD):
+    if type(data) is not bytes or not data.startswith(_TRANSITIONS.head):
         return None
     try:
-        return _decode(data, limits)
+        return _TRANSITIONS.decode(data, limits)
     except Exception:  # any surprise means "not the canonical layout": the general path says what
         return None
-
-
-def _decode(data: bytes, limits: Limits) -> TransitionBatch | None:
-    max_string, max_bytes = limits.max_string, 4 * limits.max_string  # msgpack's max_str_len in decode
-    if limits.max_items < 10 or max_bytes < _LONGEST_KEY:  # msgpack's limits bind keys and maps too
-        return None
-    sender, at = _str(data, len(_HEAD), max_bytes)
-    if sender is None or len(sender) > max_string or not sender.isprintable():
-        return None
-    if not data.startswith(_SEQ_KEY, at):
-        return None
-    seq, at = _uint(data, at + len(_SEQ_KEY))
-    if not 0 <= seq <= INT64_MAX or not data.startswith(_BODY_START, at):
-        return None
-    actor, at = _str(data, at + len(_BODY_START), max_bytes)
-    if actor is None or not 0 < len(actor) <= max_string or not actor.isprintable():
-        return None
-    if not data.startswith(_MODEL_KEY, at):
-        return None
-    model, at = _str(data, at + len(_MODEL_KEY), max_bytes)
-    if model is None or not 0 < len(model) <= max_string or not model.isprintable():
-        return None
-    if not data.startswith(_VERSION_KEY, at):
-        return None
-    version, at = _uint(data, at + len(_VERSION_KEY))
-    if not 0 <= version <= INT64_MAX:
-        return None
-
-    # The array section: N from env_ids' header, D from obs' header; both then checked in full.
-    n = _U32.unpack_from(data, at + _ENV_IDS_DATA - 4)[0]
-    d = _U32.unpack_from(data, at + _ENV_IDS_DATA + 4 * n + _OBS_DIM)[0]
-    if n > limits.max_batch or not 1 <= d <= limits.max_obs_dim or len(data) - at != _Layout.size_for(n, d):
-        return None
-    layout = _layout(n, d)
-    for offset, template in layout.templates:
-        if not data.startswith(template, at + offset):
-            return None
-    flags_at = at + layout.flags_at
-    if data[flags_at:].translate(None, b"\x00\x01") != layout.flags_rest:  # booleans only 0 or 1
-        return None
-
-    # Arrays are read-only views of ``data`` where their data is 8-byte aligned (bytes objects' data is,
-    # as the general decoder assumes of msgpack's extension payloads), else aligned copies: decoded
-    # arrays are always aligned, whichever path decoded them.
-    ndarray = np.ndarray
-    arrays = [
-        ndarray(shape, dtype, data[at + start : at + end]) if end else ndarray(shape, dtype, data, at + start)
-        for shape, dtype, start, end in layout.plans[at & 7]
-    ]
-    env_ids, obs, actions, reward, next_obs, terminated, truncated = arrays
-    # Finite floats: a dot product is finite only if every term is (inf * 0 and inf - inf are NaN, NaN
-    # propagates); an overflowing sum of finite values returns None and the general path decides.
-    # np.vdot, unlike np.dot, sets no floating-point error flags, so no errstate is needed around it.
-    if not (isfinite(np.vdot(obs, next_obs)) and isfinite(np.vdot(reward, reward))):
-        return None
-    if n:  # actions in [0, n_actions): negative ones wrap to >= 2**63 as unsigned
-        bound = INT64_MAX + 1 if limits.n_actions is None else limits.n_actions
-        if actions.item(actions.argmax()) >= bound:
-            return None
-    message = object.__new__(TransitionBatch)
-    message.__dict__.update(
-        env_ids=env_ids,
-        obs=obs,
-        action=actions.view(_I64),
-        reward=reward,
-        next_obs=next_obs,
-        terminated=terminated,
-        truncated=truncated,
-        actor=actor,
-        model=model,
-        policy_version=version,
-        sender=sender,
-        seq=seq,
-    )
-    return message
 
 
 def encode_transitions(batch: TransitionBatch, pack: Callable[[object], bytes]) -> bytes | None:
     """The general encoder's bytes for ``batch`` (``pack`` packs one value, as it does there), written
     from cached templates; None if an array is not a numpy array of its wire dtype, shape and C order
     (the general encoder then handles it, or raises)."""
-    obs = batch.obs
-    if type(obs) is not np.ndarray or obs.ndim != 2:
-        return None
-    env_ids, action, reward, next_obs = batch.env_ids, batch.action, batch.reward, batch.next_obs
-    terminated, truncated = batch.terminated, batch.truncated
-    arrays = (env_ids, obs, action, reward, next_obs, terminated, truncated)
-    if tuple(map(type, arrays)) != _NDARRAYS:
-        return None
-    try:
-        layout = _layout(*obs.shape)
-    except ProtocolError:  # a shape the array header cannot hold
-        return None
-    if (
-        env_ids.dtype,
-        obs.dtype,
-        action.dtype,
-        reward.dtype,
-        next_obs.dtype,
-        terminated.dtype,
-        truncated.dtype,
-    ) != _WIRE_DTYPES or (
-        env_ids.shape,
-        obs.shape,
-        action.shape,
-        reward.shape,
-        next_obs.shape,
-        terminated.shape,
-        truncated.shape,
-    ) != layout.shapes:
-        return None
-    t0, t1, t2, t3, t4, t5, t6 = layout.parts
-    try:  # join takes an array's bytes only through a simple buffer, which numpy grants C-ordered arrays
-        return b"".join(
-            (
-                _HEAD,
-                pack(batch.sender),
-                _SEQ_KEY,
-                pack(batch.seq),
-                _BODY_START,
-                pack(batch.actor),
-                _MODEL_KEY,
-                pack(batch.model),
-                _VERSION_KEY,
-                pack(batch.policy_version),
-                t0,
-                env_ids,
-                t1,
-                obs,
-                t2,
-                action,
-                t3,
-                reward,
-                t4,
-                next_obs,
-                t5,
-                terminated,
-                t6,
-                truncated,
-            )
-        )
-    except TypeError:
-        return None
+    return _TRANSITIONS.encode(batch, pack)

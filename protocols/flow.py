@@ -10,10 +10,10 @@ registers the ``ack`` kind with the codec.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import ClassVar
 
-from protocols.checks import BodyReader
 from protocols.messages import Message, register
+from protocols.schema import count, text
 
 
 @register
@@ -23,21 +23,13 @@ class Ack(Message):
 
     KIND: ClassVar[str] = "ack"
     VERSION: ClassVar[int] = 1
-    actor: str
+    actor: str = text()
     """The batch's envelope sender (the actor incarnation, ``<id>#<start>``): a restarted actor
     ignores acknowledgements meant for its predecessor's seqs."""
-    accepted_seq: int
+    accepted_seq: int = count()
     """Envelope ``seq`` of that batch."""
-    policy_version: int
+    policy_version: int = count()
     """The learner's policy version when it accepted the batch."""
-
-    @classmethod
-    def read_body(cls, body: BodyReader) -> dict[str, Any]:
-        return {
-            "actor": body.string("actor"),
-            "accepted_seq": body.integer("accepted_seq"),
-            "policy_version": body.integer("policy_version"),
-        }
 
 
 __all__ = ["Ack"]

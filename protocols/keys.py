@@ -8,6 +8,7 @@ key                        from -> to                  payload
 ``weights/<model>``        learner -> actors, eval     WeightsUpdate
 ``eval/<evaluator>``       evaluator -> learner        EvalReport
 ``status/learner``         queryable                   LearnerStatus
+``status/actor:<actor>``   queryable (each actor)      LearnerStatus (the actor's figures)
 ``acks/<actor>``           learner -> actor            acknowledgements
 ``alive/<role>/<id>``      liveliness tokens           (none)
 =========================  ==========================  =================
@@ -84,6 +85,14 @@ def status(run: str) -> str:
     return _key(run, "status", "learner")
 
 
+ACTOR_STATUS_PREFIX = "actor:"
+"""An actor answers its status on ``status/actor:<id>`` (the ``status`` channel has one name)."""
+
+
+def actor_status(run: str, actor: str) -> str:
+    return _key(run, "status", ACTOR_STATUS_PREFIX + check_name(actor, "actor id"))
+
+
 def acks(run: str, actor: str) -> str:
     return _key(run, "acks", actor)
 
@@ -102,6 +111,11 @@ def everything(run: str, channel: str) -> str:
 def alive_role(run: str, role: str) -> str:
     """Every liveliness token of one role: ``navlearn/<run>/alive/<role>/*``."""
     return f"{prefix(run)}/alive/{check_name(role, 'role')}/*"
+
+
+def alive_in_every_run(role: str) -> str:
+    """Every liveliness token of one role in any run: ``navlearn/*/alive/<role>/*`` (who is where)."""
+    return f"{ROOT}/*/alive/{check_name(role, 'role')}/*"
 
 
 @dataclass(frozen=True)

@@ -2,21 +2,17 @@
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 import pytest
 
+from services.common.transport import free_port
+
+__all__ = ["free_port"]  # tests import it from here
+
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 ARENA_MAP = SHARED_DATA / "movingai" / "arena.map"
 ARENA_SCEN = SHARED_DATA / "movingai" / "arena.map.scen"
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture

@@ -8,6 +8,7 @@ test can compare them with what the learner's replay buffer holds.
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import signal
 import subprocess
@@ -133,7 +134,9 @@ def stored_ids(checkpoint: Path, replay_capacity: int | None = None) -> np.ndarr
     config = NNQLConfig(hidden_sizes=(16,), batch_size=16, learning_starts=64)
     if replay_capacity is not None:
         config = dataclasses.replace(config, replay_capacity=replay_capacity)
-    learner = NNQLLearner(config, OBS_DIM, N_ACTIONS)
+    memmap = checkpoint / "nnql" / "replay" / "memmap.json"  # a memory-mapped replay: its files' directory
+    replay_dir = json.loads(memmap.read_text())["directory"] if memmap.exists() else None
+    learner = NNQLLearner(config, OBS_DIM, N_ACTIONS, replay_dir=replay_dir)
     learner.load_checkpoint(checkpoint / "nnql")
     n = len(learner.replay)
     if n == 0:

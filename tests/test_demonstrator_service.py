@@ -134,7 +134,8 @@ def finish(process: subprocess.Popen, timeout: float = 60) -> int:
 def test_human_teleop_through_a_pseudo_terminal(network, tmp_path):
     """Keys go in through a pty, exactly as a person's would; the episode arrives at the subscriber."""
     from agents.planning.expert import Expert
-    from services.demonstrator.demonstrator import DemonstratorConfig, nav_config
+    from services.demonstrator.config import DemonstratorConfig
+    from services.demonstrator.episodes import nav_config
     from worlds.env import NavigationEnv
 
     endpoint, run, received, session = network

@@ -15,6 +15,7 @@ from agents.nnql.policy import (
     load_policy_dir,
     temperature_at,
 )
+from protocols.messages import ExplorationSchedule
 
 ARCH = {"obs_dim": 5, "n_actions": 4, "hidden_sizes": [12, 7], "activation": "relu"}
 
@@ -83,6 +84,28 @@ def test_exploration_schedules():
     policy = fixed_q_policy([0.0, 1.0])
     policy.explore_as(config, 10)
     assert (policy.mode, policy.epsilon) == ("epsilon", pytest.approx(0.1))
+
+
+def test_an_actor_explores_as_the_schedule_in_the_weights_says():
+    """The ExplorationSchedule a WeightsUpdate carries gives the policy the config's exploration."""
+    config = NNQLConfig(exploration="epsilon", epsilon_start=1.0, epsilon_end=0.1, epsilon_decay_updates=10)
+    from_config, from_wire = fixed_q_policy([0.0, 1.0]), fixed_q_policy([0.0, 1.0])
+    from_config.explore_as(config, 5)
+    from_wire.explore_as(ExplorationSchedule.of(config), 5)
+    assert (from_wire.mode, from_wire.epsilon, from_wire.temperature) == (
+        from_config.mode,
+        from_config.epsilon,
+        from_config.temperature,
+    )
+    nirl = ExplorationSchedule(  # NIRL sends no epsilon: the policy keeps its own
+        exploration="boltzmann", temperature_start=0.5, temperature_end=0.05, temperature_decay_updates=100
+    )
+    from_wire.explore_as(nirl, 100)
+    assert (from_wire.mode, from_wire.temperature, from_wire.epsilon) == (
+        "boltzmann",
+        pytest.approx(0.05),
+        from_config.epsilon,
+    )
 
 
 def test_save_load_roundtrip_and_bad_weights(tmp_path):

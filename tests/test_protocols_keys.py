@@ -19,6 +19,8 @@ def test_builders() -> None:
     assert keys.evaluation("run1", "eval@host") == "navlearn/run1/eval/eval@host"
     assert keys.status("run1") == "navlearn/run1/status/learner"
     assert keys.acks("run1", "a1") == "navlearn/run1/acks/a1"
+    assert keys.actor_status("run1", "a1") == "navlearn/run1/status/actor:a1"
+    assert keys.parse(keys.actor_status("run1", "a1")).name == keys.ACTOR_STATUS_PREFIX + "a1"
     assert keys.alive("run1", "actor", "a1") == "navlearn/run1/alive/actor/a1"
     assert keys.everything("run1", "transitions") == "navlearn/run1/transitions/*"
     assert keys.everything("run1", "alive") == "navlearn/run1/alive/*/*"

@@ -13,7 +13,7 @@ import pytest
 
 from protocols import keys
 from services.common.transport import TransportError, ZenohSettings, open_session
-from services.ops.acl import Deployment, access_control, actor_status_key
+from services.ops.acl import Deployment, access_control
 from tests.test_wire_zenoh import REPO, start_router, stop
 
 RUN = "acl"
@@ -106,7 +106,7 @@ def test_an_actor_publishes_only_its_own_transitions(tmp_path: Path) -> None:
                 learner.put(acks, b"ack")
                 time.sleep(0.1)
             replies = [r.ok.payload.to_bytes() for r in actor.get(weights, timeout=5) if r.ok is not None]
-            own_status, learner_status = actor_status_key(RUN, "a1"), keys.status(RUN)
+            own_status, learner_status = keys.actor_status(RUN, "a1"), keys.status(RUN)
             actor.declare_queryable(own_status, lambda q: q.reply(own_status, b"a1 status"))
             actor.declare_queryable(learner_status, lambda q: q.reply(learner_status, b"forged status"))
             with session("status") as operator:

@@ -34,11 +34,14 @@ def wait_for(predicate, timeout: float, what: str) -> None:
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def test_sigkill_learner_loses_no_acknowledged_transition_and_stores_none_twice(tmp_path):
+@pytest.mark.parametrize("replay_storage", ["memory", "memmap"])
+def test_sigkill_learner_loses_no_acknowledged_transition_and_stores_none_twice(tmp_path, replay_storage):
     port = free_port()
     endpoint, run = f"tcp/127.0.0.1:{port}", f"kill{port}"
     ckpt_dir = tmp_path / "ckpt"
-    argv = learner_argv(endpoint, run, ckpt_dir, "--checkpoint-every", "1")
+    argv = learner_argv(
+        endpoint, run, ckpt_dir, "--checkpoint-every", "1", f"--replay-storage={replay_storage}"
+    )
     log_path = tmp_path / "learner.log"
     learner = start_learner(argv, log_path)
     session = actor = None
@@ -92,7 +95,10 @@ def test_sigkill_learner_loses_no_acknowledged_transition_and_stores_none_twice(
         stop_process(learner)  # SIGTERM: a final checkpoint holding everything
 
     acked = actor.acked_ids()
-    stored = stored_ids(CheckpointDir(ckpt_dir).latest())
+    latest = CheckpointDir(ckpt_dir).latest()
+    memmap = (latest / "nnql" / "replay" / "memmap.json").exists()  # its state only, not the transitions
+    assert memmap == (replay_storage == "memmap") == (ckpt_dir / "replay").is_dir()
+    stored = stored_ids(latest)
     unique, counts = np.unique(stored, return_counts=True)
     assert counts.max() == 1, f"{int((counts > 1).sum())} transitions stored twice"
     missing = np.setdiff1d(acked, unique)

@@ -97,7 +97,7 @@ def test_learner_serves_weights_rejects_bad_input_trains_acks_and_checkpoints(le
     ]
     assert len(replies) == 1 and isinstance(replies[0], WeightsUpdate)
     assert replies[0].version == 0 and replies[0].architecture["obs_dim"] == OBS_DIM
-    assert replies[0].architecture["exploration"]["exploration"] == "boltzmann"
+    assert replies[0].exploration.exploration == "boltzmann" and "exploration" not in replies[0].architecture
 
     # bad input is counted by reason, never crashes the learner
     key = keys.transitions(run, "a1")

@@ -13,6 +13,7 @@ from worlds.config import NavConfig
 from worlds.maps import Task
 from worlds.obstacles import DiscObstacles
 from worlds.outcomes import Outcome
+from worlds.render import render_rgb
 from worlds.rng import seed_state
 from worlds.tasks import DEFAULT_MAPS, TaskSampler, as_sampler
 
@@ -149,6 +150,5 @@ class NavigationEnv(gym.Env):
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from worlds.render import render_rgb
 
         return render_rgb(self.batch, 0, self._trajectory)

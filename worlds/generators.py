@@ -10,7 +10,6 @@ goal apart.
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from worlds.maps import GridMap, Task, components, sample_task
 
@@ -155,8 +154,3 @@ def generate_task(family: str, height: int, width: int, seed: int, cell_size: fl
             if distance <= grid.cell_size:
                 raise
             distance /= 2
-
-
-def free_fraction(grid: GridMap) -> float:
-    """Share of free cells, a quick density figure for pictures and tests."""
-    return float(ndimage.sum(~grid.blocked) / grid.blocked.size)

@@ -298,5 +298,4 @@ class GridWorldEnv(gym.Env):
 
 
 ENV_ID = "navlearn/GridWorld-v0"
-if ENV_ID not in gym.registry:
-    gym.register(id=ENV_ID, entry_point="worlds.gridworld:GridWorldEnv")
+"""Registered with gymnasium by ``worlds/__init__.py`` (importing this module imports that first)."""

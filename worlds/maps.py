@@ -81,9 +81,6 @@ class GridMap:
         """``(x, y)`` in metres of the centre of ``cell``."""
         return ((cell[1] + 0.5) * self.cell_size, (cell[0] + 0.5) * self.cell_size)
 
-    def world_to_cell(self, x: float, y: float) -> Cell:
-        return (int(np.floor(y / self.cell_size)), int(np.floor(x / self.cell_size)))
-
     def __eq__(self, other: object) -> bool:
         return (
             isinstance(other, GridMap)

@@ -1,12 +1,14 @@
 """Pictures of evaluations: learned paths beside grid A*'s, and learning curves.
 
-Both write PNG files with matplotlib's Agg backend (no display needed).
+All write PNG files with matplotlib's Agg backend (no display needed); ``plot_evaluations`` draws the
+evaluator service's curve (services.evaluator).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -128,3 +130,96 @@ def plot_learning_curves(
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
+
+
+REFERENCE = "reference"
+"""model field of points that evaluate a fixed saved policy (the imitation policy) once"""
+
+
+def plot_evaluations(points: list[dict[str, Any]], path: Path) -> Path:
+    """The evaluator's learning curve (:func:`evaluations_figure`) written to ``path``."""
+    import matplotlib.pyplot as plt
+
+    fig = evaluations_figure(points)
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    tmp.replace(path)
+    return path
+
+
+def evaluations_figure(points: list[dict[str, Any]]):
+    """The evaluator's learning curve: success rate (95% band) and path ratio to A* per family, against
+    policy version and wall time since the first launch. ``points`` are the evaluator's records
+    (``evaluations.jsonl``: time, launch, model, policy_version, metrics per family); each launch of a
+    resumed run is its own segment (no line across the gap), its start marked on the time axis; those
+    of model :data:`REFERENCE` (a fixed saved policy) are drawn as horizontal lines."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    launches = sorted({p.get("launch", p["time"]) for p in points})
+    start = min(launches[0], min(p["time"] for p in points))
+    families = sorted({f for p in points for f in p["metrics"]})
+    models = sorted({p.get("model", "") for p in points if p.get("model") != REFERENCE})
+    series = [(m, f) for m in models for f in families]
+    references = [p for p in points if p.get("model") == REFERENCE]
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), sharey="row")
+    for col, (xlabel, xof) in enumerate(
+        (
+            ("policy version (updates)", lambda p: p["policy_version"]),
+            ("wall time since launch (min)", lambda p: (p["time"] - start) / 60),
+        )
+    ):
+        for model, family in series:
+            color = None
+            for launch in launches:  # one segment per launch: no line across a resumed run's gap
+                rows = sorted(
+                    (xof(p), p["metrics"][family])
+                    for p in points
+                    if family in p["metrics"]
+                    and p.get("model", "") == model
+                    and p.get("launch", p["time"]) == launch
+                )
+                if not rows:
+                    continue
+                name = f"{model} {family}".strip() if len(models) > 1 else family
+                label = name if color is None else None
+                xs = [x for x, _ in rows]
+                success = [m["success"] for _, m in rows]
+                (line,) = axes[0, col].plot(
+                    xs, [s["value"] for s in success], "o-", ms=3, label=label, color=color
+                )
+                color = line.get_color()
+                axes[0, col].fill_between(
+                    xs, [s["low"] for s in success], [s["high"] for s in success], color=color, alpha=0.2
+                )
+                ratio = [(x, m["path_ratio"]) for x, m in rows if m.get("path_ratio") is not None]
+                if ratio:
+                    axes[1, col].plot(*zip(*ratio, strict=True), "o-", ms=3, color=color, label=label)
+        for reference in references:  # a fixed policy (imitation): one horizontal line per family
+            for family, metrics in reference["metrics"].items():
+                label = f"{reference.get('name', REFERENCE)} {family}"
+                axes[0, col].axhline(metrics["success"]["value"], ls="--", lw=1, color="gray", label=label)
+                if metrics.get("path_ratio") is not None:
+                    axes[1, col].axhline(metrics["path_ratio"], ls="--", lw=1, color="gray")
+        if col == 1:
+            for k, launch in enumerate(launches[1:]):  # where a resumed run started again
+                for ax in axes[:, col]:
+                    ax.axvline((launch - start) / 60, ls=":", lw=1, color="black")
+                axes[0, col].annotate(
+                    "resumed" if k == 0 else "",
+                    ((launch - start) / 60, 0.02),
+                    fontsize=7,
+                    xytext=(2, 0),
+                    textcoords="offset points",
+                )
+        axes[0, col].set(ylim=(0, 1.02), ylabel="success rate" if col == 0 else None)
+        axes[1, col].set(xlabel=xlabel, ylabel="path length / A*" if col == 0 else None)
+        for ax in axes[:, col]:
+            ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8, loc="upper left")
+    fig.suptitle(f"{', '.join(models).upper() or 'policies'} on held-out maps (greedy policy)")
+    fig.tight_layout()
+    return fig

@@ -19,23 +19,29 @@ baseline of :mod:`worlds.heuristics`, for comparing a learned policy with it.
 
 from __future__ import annotations
 
-import itertools
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from safetensors import SafetensorError
+from safetensors.numpy import load_file
 
-from agents.nnql.policy import mlp_forward, q_layers
+from agents.mlp import (
+    ACTIVATIONS,
+    ARCHITECTURE_KEYS,
+    CONFIG_FILE,
+    KINDS,
+    WEIGHTS_FILE,
+    check_layers,
+    mlp_forward,
+    mlp_layers,
+    save_policy,
+)
 from worlds.config import NavConfig
 from worlds.heuristics import goal_seeking_policy
 
-WEIGHTS_FILE = "model.safetensors"
-CONFIG_FILE = "config.json"
-KINDS = ("q_network", "policy_logits")
-ACTIVATIONS = ("relu", "tanh", "elu")
-ARCHITECTURE_KEYS = ("obs_dim", "n_actions", "hidden_sizes", "activation")
+__all__ = ["GreedyMLPPolicy", "PolicyFormatError", "load_policy", "load_policy_or_baseline", "save_policy"]
 HEURISTIC = "heuristic"
 """the name that ``load_policy_or_baseline`` reads as the goal-seeking baseline"""
 
@@ -53,18 +59,10 @@ class GreedyMLPPolicy:
         self.model = str(config.get("model", ""))
         self.kind = str(config["kind"])
         self.version = int(config.get("version", 0))
-        self.layers = q_layers(weights)
-        sizes = [
-            self.architecture["obs_dim"],
-            *self.architecture["hidden_sizes"],
-            self.architecture["n_actions"],
-        ]
-        expected = list(itertools.pairwise(sizes))
-        got = [w.shape for w, _ in self.layers]
-        if got != expected or any(b.shape != (w.shape[1],) for w, b in self.layers):
-            raise PolicyFormatError(
-                f"weights do not fit the architecture: layer shapes {got}, expected {expected}"
-            )
+        try:
+            self.layers = check_layers(mlp_layers(weights), self.architecture)
+        except ValueError as exc:
+            raise PolicyFormatError(str(exc)) from None
 
     @property
     def obs_dim(self) -> int:
@@ -84,45 +82,8 @@ class GreedyMLPPolicy:
         return f"GreedyMLPPolicy(model={self.model!r}, kind={self.kind!r}, version={self.version})"
 
 
-def save_policy(
-    path: str | Path,
-    weights: dict[str, np.ndarray],
-    architecture: dict[str, Any],
-    model: str,
-    kind: str,
-    version: int = 0,
-    **metadata: Any,
-) -> Path:
-    """Write a policy directory (see the module docstring); returns its path."""
-    from safetensors.numpy import save_file
-
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    missing = [k for k in ARCHITECTURE_KEYS if k not in architecture]
-    if missing:
-        raise ValueError(f"architecture lacks {missing}")
-    path = Path(path)
-    path.mkdir(parents=True, exist_ok=True)
-    config = {
-        "model": model,
-        "kind": kind,
-        "version": int(version),
-        "architecture": dict(architecture),
-        **metadata,
-    }
-    tensors = {name: np.ascontiguousarray(value, dtype=np.float32) for name, value in weights.items()}
-    save_file(tensors, str(path / (WEIGHTS_FILE + ".tmp")))
-    os.replace(path / (WEIGHTS_FILE + ".tmp"), path / WEIGHTS_FILE)
-    (path / (CONFIG_FILE + ".tmp")).write_text(json.dumps(config, indent=2, sort_keys=True) + "\n")
-    os.replace(path / (CONFIG_FILE + ".tmp"), path / CONFIG_FILE)
-    return path
-
-
 def load_policy(path: str | Path) -> GreedyMLPPolicy:
     """The greedy policy saved in directory ``path`` by any navlearn learner."""
-    from safetensors import SafetensorError
-    from safetensors.numpy import load_file
-
     path = Path(path)
     config_path, weights_path = path / CONFIG_FILE, path / WEIGHTS_FILE
     if not config_path.is_file() or not weights_path.is_file():

@@ -8,6 +8,10 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from safetensors.numpy import save_file
+
+from agents.mlp import save_policy
+from agents.replay_files import load_replay, save_replay
 
 MODEL_NAME = "nirl"
 REWARD_FILE = "reward.safetensors"
@@ -15,12 +19,8 @@ STATE_FILE = "nirl.pt"
 
 
 def save_policy_files(learner: Any, path: str | Path, **metadata: Any) -> Path:
-    """The Q-network in the shared policy format (``agents.evaluation.policies``: model "nirl",
+    """The Q-network in the shared policy format (``agents.mlp``: model "nirl",
     kind "q_network", loadable by ``navlearn evaluate``) plus ``reward.safetensors``."""
-    from safetensors.numpy import save_file
-
-    from agents.evaluation.policies import save_policy
-
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     save_file(learner.reward_weights(), str(path / (REWARD_FILE + ".tmp")))
@@ -49,7 +49,7 @@ def save_checkpoint(learner: Any, path: str | Path) -> Path:
     learner.q.save_checkpoint(tmp / "q")
     torch.save(learner.state_dict(), tmp / STATE_FILE)
     if learner.owns_demos and len(learner.demos):
-        learner.demos.dumps(tmp / "demos")
+        save_replay(learner.demos, tmp / "demos")
     old = path.with_name(f".{path.name}.old{os.getpid()}")
     if path.exists():
         os.replace(path, old)
@@ -63,4 +63,4 @@ def load_checkpoint(learner: Any, path: str | Path) -> None:
     learner.q.load_checkpoint(path / "q")
     learner.load_state_dict(torch.load(path / STATE_FILE, weights_only=True))
     if learner.owns_demos and (path / "demos").exists():
-        learner.demos.loads(path / "demos")
+        load_replay(learner.demos, path / "demos")

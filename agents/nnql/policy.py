@@ -12,51 +12,22 @@ On disk a policy is a directory with ``model.safetensors`` (the weights) and
 
 from __future__ import annotations
 
-import itertools
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from safetensors.numpy import load_file
 
+from agents.mlp import CONFIG_FILE, WEIGHTS_FILE, check_layers, mlp_forward, mlp_layers, save_policy
 from agents.nnql.config import NNQLConfig
 
 MODEL_NAME = "nnql"
 POLICY_KIND = "q_network"
-WEIGHTS_FILE = "model.safetensors"
-CONFIG_FILE = "config.json"
 MODES = ("greedy", "boltzmann", "epsilon")
 
 
 # ---------------------------------------------------------------- pure maths
-
-
-def q_layers(weights: dict[str, np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(W^T, b) per linear layer, in order, from ``"<index>.weight"/"<index>.bias"`` names."""
-    indices = sorted({int(name.split(".")[0]) for name in weights})
-    layers = []
-    for index in indices:
-        weight = np.ascontiguousarray(np.asarray(weights[f"{index}.weight"], dtype=np.float32).T)
-        bias = np.asarray(weights[f"{index}.bias"], dtype=np.float32)
-        layers.append((weight, bias))
-    return layers
-
-
-def mlp_forward(layers: list[tuple[np.ndarray, np.ndarray]], activation: str, obs: np.ndarray) -> np.ndarray:
-    """Q-values (N, n_actions) of a batch of observations (N, obs_dim)."""
-    x = np.asarray(obs, dtype=np.float32)
-    for i, (weight, bias) in enumerate(layers):
-        x = x @ weight + bias
-        if i < len(layers) - 1:
-            if activation == "relu":
-                np.maximum(x, 0.0, out=x)
-            elif activation == "tanh":
-                np.tanh(x, out=x)
-            elif activation == "elu":
-                x = np.where(x > 0, x, np.expm1(np.minimum(x, 0.0)))
-            else:
-                raise ValueError(f"unknown activation {activation!r}")
-    return x
 
 
 def boltzmann_probabilities(q_values: np.ndarray, temperature: float) -> np.ndarray:
@@ -114,25 +85,19 @@ class NNQLPolicy:
 
     def set_weights(self, weights: dict[str, np.ndarray], version: int | None = None) -> None:
         """Swap in new weights (same architecture); shapes are checked."""
-        layers = q_layers(weights)
-        sizes = [
-            self.architecture["obs_dim"],
-            *self.architecture["hidden_sizes"],
-            self.architecture["n_actions"],
-        ]
-        expected = list(itertools.pairwise(sizes))
-        got = [w.shape for w, _ in layers]
-        if got != expected or any(b.shape != (w.shape[1],) for w, b in layers):
-            raise ValueError(f"weights do not fit the architecture: layer shapes {got}, expected {expected}")
-        self.layers = layers
+        self.layers = check_layers(mlp_layers(weights), self.architecture)
         if version is not None:
             self.version = int(version)
 
-    def explore_as(self, config: NNQLConfig, version: int) -> None:
-        """Behaviour-policy exploration for policy version ``version`` (actors, local training)."""
-        self.mode = config.exploration
-        self.temperature = temperature_at(config, version)
-        self.epsilon = epsilon_at(config, version)
+    def explore_as(self, schedule: NNQLConfig, version: int) -> None:
+        """Behaviour-policy exploration for policy version ``version``: ``schedule`` is the NNQLConfig
+        (local training) or the ``protocols.messages.ExplorationSchedule`` a WeightsUpdate carries
+        (actors; same field names, and a schedule may leave the unused mode's fields None)."""
+        self.mode = schedule.exploration
+        if schedule.temperature_start is not None:
+            self.temperature = temperature_at(schedule, version)
+        if schedule.epsilon_start is not None:
+            self.epsilon = epsilon_at(schedule, version)
 
     def q_values(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float32)
@@ -190,17 +155,12 @@ def save_policy_dir(
     version: int,
     **metadata: Any,
 ) -> Path:
-    """Weights as safetensors plus a JSON config; files appear atomically (temp + rename).
-    The one writer of that format is ``agents.evaluation.policies.save_policy``."""
-    from agents.evaluation.policies import save_policy
-
+    """Weights as safetensors plus a JSON config (:func:`agents.mlp.save_policy`)."""
     return save_policy(path, weights, architecture, MODEL_NAME, POLICY_KIND, version, **metadata)
 
 
 def load_policy_dir(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """(weights, config) of a policy directory; a clear error if it is not an NNQL policy."""
-    from safetensors.numpy import load_file
-
     path = Path(path)
     config_path, weights_path = path / CONFIG_FILE, path / WEIGHTS_FILE
     if not config_path.is_file() or not weights_path.is_file():

@@ -18,10 +18,12 @@ from typing import Any
 
 import numpy as np
 
+from agents.evaluation.runner import evaluate, make_eval_set
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
+from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
 CURVE_EVERY = 2_000
@@ -52,6 +54,8 @@ class LocalTrainConfig:
     """episodes of the final evaluation (test set, seed 0: generated maps never trained on)"""
     progress: bool = True
     """show a progress bar"""
+    device: str = "cpu"
+    """where the learner's networks, loss and sampled batches live: cpu, cuda or auto (agents.device)"""
 
 
 @dataclass
@@ -87,8 +91,6 @@ TEST_SEED = 0
 
 def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None) -> Any:
     """Greedy evaluation on the shared held-out "unseen" set (agents.evaluation) -> EvalResult."""
-    from agents.evaluation.runner import evaluate, make_eval_set
-
     return evaluate(policy.greedy(), make_eval_set("unseen", episodes, seed=seed), config=nav)
 
 
@@ -98,13 +100,11 @@ def train_local(
     nav: Any = None,
 ) -> TrainResult:
     """Train NNQL for ``run.steps`` robot-steps; writes the outputs to ``run.out`` if set."""
-    from worlds.vector_env import NavigationVectorEnv
-
     nnql = nnql or NNQLConfig(seed=run.seed)
     env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
     obs_dim = int(env.single_observation_space.shape[0])
     n_actions = int(env.single_action_space.n)
-    learner = NNQLLearner(nnql, obs_dim, n_actions)
+    learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device)
     policy = learner.policy(seed=run.seed)
     policy.explore_as(nnql, learner.version)
     rollout = VectorRollout(env, policy, with_next_action=nnql.sarsa)
@@ -125,8 +125,7 @@ def train_local(
         due = learner.updates_due()
         if due:
             t0 = time.perf_counter()
-            for _ in range(due):
-                metrics = learner.update()
+            metrics = learner.update(due)
             update_time += time.perf_counter() - t0
             policy.set_weights(learner.get_weights(), learner.version)
             policy.explore_as(nnql, learner.version)

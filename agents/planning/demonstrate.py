@@ -22,6 +22,7 @@ from agents.demos import Demo, make_demo
 from agents.planning.expert import Expert, ExpertConfig
 from agents.planning.lattice import LatticeConfig
 from worlds.config import NavConfig
+from worlds.env import NavigationEnv
 from worlds.outcomes import Outcome
 
 
@@ -93,7 +94,6 @@ def generate_demos(
     """Run ``n_episodes`` expert episodes on tasks from the map spec ``maps``; episode ``i``
     resets the env with seed ``seed + i``. Only episodes that reach the goal are kept unless
     ``keep_failures``. ``progress(1)`` is called after each episode."""
-    from worlds.env import NavigationEnv
 
     if not 0.0 <= noise <= 1.0:
         raise ValueError(f"noise must be a probability in [0, 1], got {noise}")

@@ -8,12 +8,13 @@ router answers. Once connected, Zenoh itself re-establishes a lost router link
 made meanwhile wait in the outbox and the newest weights are asked for again.
 Until the first weights arrive the robots act uniformly at random (version 0).
 The actor answers ``status/actor:<id>`` (services.actor.status): outbox, acknowledgements,
-back-pressure, robot-steps and weights version.
+back-pressure, robot-steps and weights version. When batches wait and nothing is
+acknowledged for ``silence_warning`` seconds it says so and why (services.actor.silence).
 """
 
 from __future__ import annotations
 
-import dataclasses
+import contextlib
 import logging
 import os
 import re
@@ -24,18 +25,23 @@ import zlib
 from collections import deque
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
+from agents.nnql.config import NNQLConfig
+from agents.nnql.policy import NNQLPolicy
+from agents.nnql.rollout import VectorRollout
 from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
-from protocols.messages import TransitionBatch
+from protocols.messages import ExplorationSchedule, TransitionBatch
 from services.actor.config import ActorConfig
-from services.actor.status import BACKPRESSURE_SHARE, BlockedShare, actor_status
+from services.actor.silence import SilenceWatch
+from services.actor.status import BACKPRESSURE_SHARE, ActorView, BlockedShare, actor_status
 from services.common.outbox import Outbox, decode_ack
-from services.common.process import connect
-from services.common.transport import ZenohSettings, declare_alive
-from services.common.weights import WeightsReceiver, split_architecture
-from services.ops.acl import actor_status_key
+from services.common.transport import ZenohSettings, declare_alive, open_session
+from services.common.warmup import COMPILE_NOTE
+from services.common.weights import WeightsReceiver
+from worlds.vector_env import NavigationVectorEnv
 
 log = logging.getLogger("navlearn.actor")
 SUCCESS = 1  # worlds.outcomes.Outcome.GOAL
@@ -62,10 +68,11 @@ def concat_batches(pieces: list[dict[str, np.ndarray]], num_envs: int) -> dict[s
 class Actor:
     """Steps a VectorRollout, publishes TransitionBatches through an Outbox, swaps in new weights."""
 
-    def __init__(self, config: ActorConfig, env, session, run: str, seed: int, limits: Limits) -> None:
+    def __init__(
+        self, config: ActorConfig, env, session, run: str, seed: int, limits: Limits, where: str = ""
+    ) -> None:
+        """``where``: the router endpoints, named in the actor's warnings."""
         import zenoh
-
-        from agents.nnql.rollout import VectorRollout
 
         self.config = config
         self.run_name = run
@@ -74,11 +81,17 @@ class Actor:
         self.n_actions = int(env.single_action_space.n)
         self.policy = None
         self.version = 0
-        self.exploration = None
+        self.exploration: ExplorationSchedule | None = None
         self.rollout = VectorRollout(env, self.act)
-        self.receiver = WeightsReceiver(session, run, config.model, limits)
-        self.publisher = session.declare_publisher(
-            keys.transitions(run, config.id), congestion_control=zenoh.CongestionControl.BLOCK
+        self._declared = contextlib.ExitStack()
+        """everything declared on the session, undeclared by close() in reverse order"""
+        self.receiver = self._declared.enter_context(
+            contextlib.closing(WeightsReceiver(session, run, config.model, limits))
+        )
+        self.publisher = self._declared.enter_context(
+            session.declare_publisher(
+                keys.transitions(run, config.id), congestion_control=zenoh.CongestionControl.BLOCK
+            )
         )
         self.outbox = Outbox(
             self.publisher.put,
@@ -87,12 +100,18 @@ class Actor:
             window=config.ack_window,
             ack_timeout=config.ack_timeout,
         )
-        self.acks = session.declare_subscriber(keys.acks(run, config.id), self._on_ack)
+        self.silence = SilenceWatch(session, run, where, lambda: len(self.outbox), config.silence_warning)
+        self._declared.callback(self.silence.close)
+        self.acks = self._declared.enter_context(
+            session.declare_subscriber(keys.acks(run, config.id), self._on_ack)
+        )
         self.blocked = BlockedShare()
         """share of time waiting for the learner (back-pressure), for the status and the log"""
         self.status_seq = 0
-        self.status_key = actor_status_key(run, config.id)
-        self._status = session.declare_queryable(self.status_key, self._on_status, complete=True)
+        self.status_key = keys.actor_status(run, config.id)
+        self._status = self._declared.enter_context(
+            session.declare_queryable(self.status_key, self._on_status, complete=True)
+        )
         self._steps_window: deque[tuple[float, int]] = deque(maxlen=64)
         self.learner_version = 0
         self.seq = 0
@@ -105,7 +124,19 @@ class Actor:
 
     def _on_status(self, query) -> None:
         self.status_seq += 1
-        query.reply(self.status_key, encode(actor_status(self, self.status_seq)))
+        view = ActorView(
+            sender=self.sender,
+            model=self.config.model,
+            version=self.version,
+            learner_version=self.learner_version,
+            reachable=self.reachable,
+            robot_steps=self.rollout.steps,
+            episodes=self.episodes_done,
+            weights_applied=self.weights_applied,
+            recent_successes=tuple(self.episodes),
+            steps_per_s=self.steps_rate(),
+        )
+        query.reply(self.status_key, encode(actor_status(view, self.outbox, self.blocked, self.status_seq)))
 
     def steps_rate(self) -> float:
         """Robot-steps per second over the last ticks."""
@@ -122,29 +153,26 @@ class Actor:
     def _on_ack(self, sample) -> None:
         ack = decode_ack(sample.payload.to_bytes(), self.sender)
         if ack is not None:
+            self.silence.acknowledged()
             self.learner_version = max(self.learner_version, ack.policy_version)
             self.outbox.on_ack(ack.accepted_seq)
 
     def apply_weights(self) -> bool:
         """Swap in the newest weights if any arrived; True if the policy changed."""
-        from agents.nnql.config import NNQLConfig
-        from agents.nnql.policy import NNQLPolicy
-
         received = self.receiver.take()
         if received is None:
             return False
         message = received.message
-        network, exploration = split_architecture(message.architecture)
+        network = message.architecture
         try:
             if self.policy is None or self.policy.architecture != network:
                 self.policy = NNQLPolicy(message.tensors, network, version=message.version, seed=self.seed)
             else:
                 self.policy.set_weights(message.tensors, message.version)
-            known = {f.name for f in dataclasses.fields(NNQLConfig)}  # a newer learner may send more
-            self.exploration = NNQLConfig(**{k: v for k, v in exploration.items() if k in known})
         except (ValueError, TypeError, KeyError) as exc:
             log.warning("ignoring weights version %d: %s", message.version, exc)
             return False
+        self.exploration = message.exploration or ExplorationSchedule.of(NNQLConfig())  # none sent: defaults
         self.policy.explore_as(self.exploration, message.version)
         self.version = message.version
         self.weights_applied += 1
@@ -191,6 +219,7 @@ class Actor:
     def run(self, stop: threading.Event) -> int:
         cfg = self.config
         self.receiver.request_latest()
+        self.silence.start()
         self.rollout.reset(seed=self.seed)
         start = last_log = time.monotonic()
         steps_at_log = 0
@@ -234,39 +263,46 @@ class Actor:
         )
 
     def close(self) -> None:
-        self._status.undeclare()
-        self.acks.undeclare()
-        self.receiver.close()
-        self.publisher.undeclare()
+        self._declared.close()
+
+    def __enter__(self) -> Actor:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
 
 
 def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
     """Process set-up: env (from the config), Zenoh session (retried until a router answers), loop."""
-    from worlds.vector_env import NavigationVectorEnv
-
     if not config.id:
         config.id = default_actor_id()
     keys.check_name(config.id, "actor id")
     seed = config.seed if config.seed is not None else seed_for(config.id)
+    log.info("actor %s: building %d robots on %s (%s)", config.id, config.envs, config.maps, COMPILE_NOTE)
     env = NavigationVectorEnv(config.envs, maps=config.maps, seed=seed)
     limits = Limits(n_actions=int(env.single_action_space.n))
-    session = connect(settings, stop)
-    if session is None:
-        return 0
-    actor = Actor(config, env, session, settings.run, seed, limits)
-    token = declare_alive(session, settings.run, "actor", config.id)
-    log.info(
-        "actor %s up: %d robots on %s, seed %d, run %s",
-        config.id,
-        config.envs,
-        config.maps,
-        seed,
-        settings.run,
-    )
-    try:
-        return actor.run(stop)
-    finally:
-        token.undeclare()
-        actor.close()
-        session.close()
-        env.close()
+    with contextlib.closing(env):
+        session = open_session(settings, stop=stop)
+        if session is None:
+            return 0
+        where = settings.where()
+        with (
+            session,
+            Actor(config, env, session, settings.run, seed, limits, where) as actor,
+            declare_alive(session, settings.run, "actor", config.id),
+        ):
+            log.info(
+                "actor %s up: %d robots on %s, seed %d, run %s via %s",
+                config.id,
+                config.envs,
+                config.maps,
+                seed,
+                settings.run,
+                where,
+            )
+            # The policy multiplies a few dozen rows per step: OpenBLAS split that over every core
+            # and its threads spun between calls, 15-18x the CPU per robot-step at 64-256 robots on
+            # a busy machine (bench/RESULTS.md, capacity model). One BLAS thread, as
+            # agents.evaluation does.
+            with threadpool_limits(limits=1, user_api="blas"):
+                return actor.run(stop)

@@ -27,6 +27,9 @@ class ActorConfig:
     """seconds without any acknowledgement before the unacknowledged batches are sent again"""
     outbox_size: int = 64
     """batches held (unsent or unacknowledged); when full the actor waits for the learner (back-pressure)"""
+    silence_warning: float = 15.0
+    """seconds without any acknowledgement, while batches wait, before the actor says so and names the
+    likely cause (no learner on this run, a wrong --run, an ACL); repeated with back-off (0: never)"""
     max_steps: int = 0
     """stop after this many robot-steps (0: run until stopped)"""
     log_every: float = 10.0

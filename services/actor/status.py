@@ -11,10 +11,12 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from typing import Any
+from dataclasses import dataclass
 
+from protocols import keys
+from protocols.keys import ACTOR_STATUS_PREFIX
 from protocols.messages import LearnerStatus
-from services.ops.acl import ACTOR_STATUS_PREFIX, all_status_keys
+from services.common.outbox import Outbox
 from services.ops.status import status_replies
 
 BACKPRESSURE_SHARE = 0.5
@@ -44,11 +46,29 @@ class BlockedShare:
         return min(1.0, max(0.0, (b1 - b0) / (t1 - t0))) if t1 > t0 else 0.0
 
 
-def actor_status(actor: Any, seq: int) -> LearnerStatus:
-    """The status of a services.actor.actor.Actor (read from its fields; called on a Zenoh thread)."""
-    outbox = actor.outbox
-    actor.blocked.add(outbox.blocked_s)  # the actor may be inside a long wait: count it up to now
-    share = actor.blocked.share()
+@dataclass(frozen=True)
+class ActorView:
+    """What an actor's status reports besides its outbox and back-pressure: taken by the actor itself."""
+
+    sender: str
+    model: str
+    version: int
+    """the weights version it acts with"""
+    learner_version: int
+    """the learner's version in its newest acknowledgement"""
+    reachable: bool
+    robot_steps: int
+    episodes: int
+    weights_applied: int
+    recent_successes: tuple[int, ...]
+    """1 or 0 per recent episode"""
+    steps_per_s: float
+
+
+def actor_status(view: ActorView, outbox: Outbox, blocked: BlockedShare, seq: int) -> LearnerStatus:
+    """An actor's status (called on a Zenoh thread)."""
+    blocked.add(outbox.blocked_s)  # the actor may be inside a long wait: count it up to now
+    share = blocked.share()
     counters = {
         "outbox_held": len(outbox),
         "outbox_capacity": outbox.capacity,
@@ -60,22 +80,18 @@ def actor_status(actor: Any, seq: int) -> LearnerStatus:
         "waiting_for_learner_ms": int(1000 * outbox.blocked_s),
         "outbox_full_ms": int(1000 * outbox.full_s),
         "backpressure": int(share > BACKPRESSURE_SHARE),
-        "learner_reachable": int(actor.reachable),
-        "robot_steps": actor.rollout.steps,
-        "episodes": actor.episodes_done,
-        "weights_applied": actor.weights_applied,
-        "learner_version": actor.learner_version,
+        "learner_reachable": int(view.reachable),
+        "robot_steps": view.robot_steps,
+        "episodes": view.episodes,
+        "weights_applied": view.weights_applied,
+        "learner_version": view.learner_version,
     }
-    successes = list(actor.episodes)
-    rates = {"waiting_for_learner_share": share, "robot_steps_per_s": actor.steps_rate()}
+    successes = view.recent_successes
+    rates = {"waiting_for_learner_share": share, "robot_steps_per_s": view.steps_per_s}
     if successes:
         rates["success_rate"] = sum(successes) / len(successes)
     return LearnerStatus(
-        sender=actor.sender,
-        seq=seq,
-        counters=counters,
-        rates=rates,
-        versions={actor.config.model: actor.version},
+        sender=view.sender, seq=seq, counters=counters, rates=rates, versions={view.model: view.version}
     )
 
 
@@ -83,7 +99,7 @@ def query_actor_statuses(session, run: str, timeout: float = 2.0) -> dict[str, L
     """Every actor's answer on ``status/actor:<id>``, by actor id."""
     return {
         name.removeprefix(ACTOR_STATUS_PREFIX): message
-        for name, message in status_replies(session, all_status_keys(run), timeout)
+        for name, message in status_replies(session, keys.everything(run, "status"), timeout)
         if name.startswith(ACTOR_STATUS_PREFIX)
     }
 

@@ -55,6 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     import sys
 
+    from agents.device import resolve_device
     from services.common.options import OptionError, options_from_args
     from services.common.process import setup_logging, stop_on_signals
     from services.common.transport import TransportError, settings_from_args
@@ -62,6 +63,7 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         config = options_from_args(LearnerConfig, args, "NAVLEARN_LEARNER")
+        resolve_device(config.device)  # cuda without a GPU: one sentence, before anything starts
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL")
         if nnql.sarsa:
             raise ValueError(SARSA_LOCAL_ONLY)

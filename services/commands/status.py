@@ -14,11 +14,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Query navlearn/<run>/status/learner (policy version, replay sizes, updates/s, transitions "
             "received and rejected by reason, per-actor rate and last seen, losses, last evaluation) and "
-            "the liveliness tokens under navlearn/<run>/alive/ (learner, actors, evaluator, router), then "
-            "print a table, or JSON with --json. With --actors, also ask every actor for its own status "
-            "on navlearn/<run>/status/actor:<id> (outbox held/bound, unacknowledged and resent batches, "
-            "time spent waiting for the learner and whether it is slowed by back-pressure, robot-steps/s, "
-            "weights version). Exit code 1 if the learner does not answer."
+            "the liveliness tokens under navlearn/<run>/alive/ (learner, actors, demonstrators, "
+            "evaluator), then print a table, or JSON with --json. With --actors, also ask every actor "
+            "for its own status on navlearn/<run>/status/actor:<id> (outbox held/bound, unacknowledged "
+            "and resent batches, time spent waiting for the learner and whether it is slowed by "
+            "back-pressure, robot-steps/s, weights version). Exit code 1 if the learner does not "
+            "answer, 2 if no router answers within --connect-timeout seconds (both name the endpoint "
+            "and the run they asked)."
         ),
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
@@ -39,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--timeout", type=float, default=3.0, help="seconds to wait for the learner's answer (default 3)"
     )
-    add_zenoh_args(parser, default_mode="client")
+    add_zenoh_args(parser, default_mode="client", connect_timeout=3.0)
     parser.set_defaults(func=main)
 
 
@@ -49,12 +51,17 @@ def main(args: argparse.Namespace) -> int:
     import time
 
     from services.common.transport import TransportError, open_session, settings_from_args
-    from services.ops.status import query_alive, query_status, render, status_dict
+    from services.ops.status import (
+        learner_runs,
+        no_learner_hint,
+        query_alive,
+        query_status,
+        render,
+        status_dict,
+    )
 
     try:
         settings = settings_from_args(args)
-        if settings.connect_timeout == 0:
-            settings.connect_timeout = args.timeout
         session = open_session(settings)
     except TransportError as exc:
         print(f"navlearn status: {exc}", file=sys.stderr)
@@ -79,27 +86,36 @@ def main(args: argparse.Namespace) -> int:
 
         return Group(render(view), render_actor_statuses(view["actor_status"]))
 
-    try:
-        if args.watch is None:
-            view = snapshot()
+    with session:
+        try:
+            if args.watch is None:
+                view = snapshot()
+                if args.json:
+                    print(json.dumps(view))
+                else:
+                    from rich.console import Console
+
+                    Console().print(show(view))
+                if view["learner"] is None:
+                    hint = no_learner_hint(
+                        settings.run, learner_runs(session, timeout=min(args.timeout, 1.0))
+                    )
+                    print(
+                        f"navlearn status: no answer on navlearn/{settings.run}/status/learner via "
+                        f"{settings.where()} within {args.timeout:g} s; {hint}",
+                        file=sys.stderr,
+                    )
+                    return 1
+                return 0
             if args.json:
-                print(json.dumps(view))
-            else:
-                from rich.console import Console
+                while True:
+                    print(json.dumps(snapshot()), flush=True)
+                    time.sleep(args.watch)
+            from rich.live import Live
 
-                Console().print(show(view))
-            return 0 if view["learner"] is not None else 1
-        if args.json:
-            while True:
-                print(json.dumps(snapshot()), flush=True)
-                time.sleep(args.watch)
-        from rich.live import Live
-
-        with Live(show(snapshot()), auto_refresh=False) as live:
-            while True:
-                time.sleep(args.watch)
-                live.update(show(snapshot()), refresh=True)
-    except KeyboardInterrupt:
-        return 0
-    finally:
-        session.close()
+            with Live(show(snapshot()), auto_refresh=False) as live:
+                while True:
+                    time.sleep(args.watch)
+                    live.update(show(snapshot()), refresh=True)
+        except KeyboardInterrupt:
+            return 0

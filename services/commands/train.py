@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from agents.device import DEVICES, resolve_device
 from agents.nnql.config import NNQLConfig
 
 
@@ -64,6 +65,12 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--epsilon-greedy", action="store_true", help="epsilon-greedy exploration instead of Boltzmann"
     )
+    parser.add_argument(
+        "--device",
+        choices=DEVICES,
+        default="cpu",
+        help="where the learner's networks, loss and sampled batches live (auto: a GPU if torch sees one)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
@@ -87,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
         )
         if args.steps < 1 or args.envs < 1:
             raise ValueError("--steps and --envs must be positive")
+        resolve_device(args.device)
         from worlds.tasks import parse_map_spec
 
         parse_map_spec(args.maps)
@@ -107,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
         keep_best=not args.keep_last,
         final_eval_episodes=args.final_eval_episodes,
         progress=not args.no_progress,
+        device=args.device,
     )
     result = train_local(run_config, nnql)
     print(

@@ -7,18 +7,22 @@ import argparse
 from agents.nnql.config import NNQLConfig
 from services.commands.learner import SARSA_LOCAL_ONLY
 from services.common.options import add_options
-from services.ops.up import UpConfig
+from services.ops.up_config import UpConfig
 
 DESCRIPTION = """\
-Train NNQL the distributed way on one machine: start the learner (hosting the Zenoh router on a
-free loopback port), --actors actor processes of --envs robots each and the evaluator, show
-progress (one live line from the learner's status), and after --duration seconds of training
-(or --updates updates, or Ctrl-C) stop them in order: actors, learner (final checkpoint), then
-the evaluator once it has measured the final policy. Everything lands in --out (default
-runs/<run>): checkpoints/, policy/ (final weights: model.safetensors + config.json),
-eval/learning_curve.png and eval/evaluations.jsonl, tb/ (TensorBoard), logs/, summary.json.
-Running it again with the same --run resumes from its checkpoint. The NNQL flags go to the
-learner. Exit code 1 if a process fails (its log tail is printed).
+Train NNQL the distributed way on one machine: check the arguments (maps included), compile the
+robot world once (the first run on a machine takes about a minute; later runs load the cache),
+start the learner (hosting the Zenoh router on a free loopback port), --actors actor processes
+of --envs robots each and the evaluator, show progress (one live line: what each process is
+doing until the first transition, then the learner's status), and after --duration seconds of
+training counted from the first transition (or --updates updates, or Ctrl-C) stop them in
+order: actors, learner (final checkpoint), then the evaluator once it has measured the final
+policy. Everything lands in --out (default runs/<run>): checkpoints/, policy/ (final weights:
+model.safetensors + config.json), eval/learning_curve.png (time axis from the first launch,
+resumes marked) and eval/evaluations.jsonl, tb/ (TensorBoard), logs/, summary.json. Running it
+again with the same --run resumes from its checkpoint ("resumed from checkpoint N"). The NNQL
+flags go to the learner. Exit code 2 for a bad argument (before anything starts), 1 if a
+process fails (its log tail is printed).
 """
 
 
@@ -47,23 +51,27 @@ def main(args: argparse.Namespace) -> int:
     from contextlib import nullcontext
 
     from rich.console import Console
+    from rich.live import Live
+    from rich.text import Text
 
     from services.common.options import OptionError, options_from_args
     from services.common.process import stop_on_signals
+    from services.common.warmup import compile_world
     from services.ops.status import progress_line
-    from services.ops.up import ChildFailed, Up
+    from services.ops.up import ChildFailed, Up, checkpoint_number
+    from services.ops.up_config import check_config
 
     try:
         config = options_from_args(UpConfig, args, "NAVLEARN_UP")
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=config.seed)
         if nnql.sarsa:
             raise OptionError(SARSA_LOCAL_ONLY)
-    except OptionError as exc:
+        check_config(config)
+    except (OptionError, ValueError) as exc:
         print(f"navlearn up: {exc}", file=sys.stderr)
         return 2
     logging.basicConfig(level=logging.WARNING, format="%(name)s %(levelname)s %(message)s")
     console = Console()
-    stop = stop_on_signals()
     up = Up(config, nnql)
     limits = [
         f"{config.duration:.0f} s" * bool(config.duration),
@@ -72,14 +80,29 @@ def main(args: argparse.Namespace) -> int:
     budget = " or ".join(b for b in limits if b) or "until Ctrl-C"
     console.print(
         f"navlearn up: run [bold]{config.run}[/bold], learner + {config.actors} actors x {config.envs} "
-        f"robots + evaluator on {up.endpoint}; budget {budget}; "
+        f"robots + evaluator on {up.endpoint}; budget {budget} from the first transition; "
         f"outputs in {up.out}/",
         soft_wrap=True,
     )
+    # Compiled once here, before the processes start, rather than by each of them at once.
+    with (
+        console.status("compiling the robot world (first run only)...")
+        if console.is_terminal
+        else nullcontext()
+    ):
+        if not console.is_terminal:
+            console.print("compiling the robot world (first run only)...")
+        seconds, compiled = compile_world(config.maps)
+    console.print(
+        f"robot world compiled in {seconds:.0f} s (cached for later runs)"
+        if compiled
+        else f"robot world loaded from the compile cache in {seconds:.1f} s"
+    )
+    stop = stop_on_signals()
     up.start()
     start = time.monotonic()
     view, failed = None, None
-    from rich.live import Live
+    width = max(40, min(console.width, 80) - 1)
 
     # On a terminal one line updates in place (transient); in a log (pipe, file) a line every 10 s.
     live_or_not = (
@@ -87,14 +110,28 @@ def main(args: argparse.Namespace) -> int:
     )
     with live_or_not as live:
         last_print = [0.0]
+        said_resumed = [up.resumed_from is None]
 
-        def show(current, elapsed):
-            clock = f"{elapsed:4.0f}/{config.duration:.0f} s" if config.duration else f"{elapsed:4.0f} s"
-            line = f"[{clock}] {progress_line(current) if current else 'waiting for the learner...'}"
+        def show(current, elapsed, phases):
+            if not said_resumed[0] and current and current["learner"]:
+                learner = current["learner"]
+                console.print(
+                    f"resumed from checkpoint {checkpoint_number(up.resumed_from)} "
+                    f"(version {next(iter(learner['versions'].values()), 0)}, "
+                    f"replay {learner['replay_sizes'].get('transitions', 0)})"
+                )
+                said_resumed[0] = True
+            if elapsed is None:
+                line = f"[wait {time.monotonic() - start:3.0f} s] {phases}"
+            else:
+                clock = f"{elapsed:3.0f}/{config.duration:.0f} s" if config.duration else f"{elapsed:3.0f} s"
+                line = f"[{clock}] {progress_line(current, config.actors, width - len(clock) - 3)}"
+            text = Text(line, no_wrap=True, overflow="ellipsis")
+            text.truncate(width, overflow="ellipsis")
             if console.is_terminal:
-                live.update(line, refresh=True)
+                live.update(text, refresh=True)
             elif time.monotonic() - last_print[0] >= 10:
-                console.print(line, highlight=False, soft_wrap=True)
+                console.print(text, highlight=False)
                 last_print[0] = time.monotonic()
 
         try:
@@ -112,7 +149,10 @@ def main(args: argparse.Namespace) -> int:
         return 1
     bad = {name: code for name, code in codes.items() if code not in (0, -15)}
     final = summary["last_evaluation"]
-    console.print(f"final policy version {summary['final_version']} in {summary['wall_time_s']:.0f} s")
+    console.print(
+        f"final policy version {summary['final_version']} after {summary['training_s']:.0f} s of "
+        f"training ({summary['wall_time_s']:.0f} s in all)"
+    )
     if final:
         for family, m in final["metrics"].items():
             console.print(

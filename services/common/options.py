@@ -4,6 +4,12 @@ Every service keeps its settings in a dataclass whose fields carry a one-line
 docstring (cleanrl style). :func:`add_options` turns the fields into ``--flags``
 (the docstring is the help text) that also read ``<PREFIX>_<FIELD>`` environment
 variables; :func:`options_from_args` resolves flag > environment > default.
+
+A field's ``metadata`` may rename its flag (``flag``), its environment variable
+(``env``) or its metavar (``metavar``) and restrict its values (``choices``); a
+``list[str]`` field is a repeatable flag whose environment variable is
+comma-separated. This is the one option system: the Zenoh flags
+(services.common.transport.ZenohSettings) are built by it too.
 """
 
 from __future__ import annotations
@@ -46,11 +52,13 @@ def field_docs(cls: type) -> dict[str, str]:
     return docs
 
 
-def _flag(name: str) -> str:
-    return "--" + name.replace("_", "-")
+def _flag(field: dataclasses.Field) -> str:
+    return field.metadata.get("flag") or "--" + field.name.replace("_", "-")
 
 
-def env_name(prefix: str, name: str) -> str:
+def env_name(prefix: str, name: str, field: dataclasses.Field | None = None) -> str:
+    if field is not None and field.metadata.get("env"):
+        return field.metadata["env"]
     return f"{prefix}_{name.upper()}"
 
 
@@ -62,10 +70,18 @@ def _is_tuple(kind: Any) -> bool:
     return typing.get_origin(kind) is tuple
 
 
+def _is_list(kind: Any) -> bool:
+    """``list[str]`` or ``list[str] | None``: a repeatable flag."""
+    args = [a for a in typing.get_args(kind) if a is not type(None)] if typing.get_origin(kind) else [kind]
+    return any(typing.get_origin(a) is list for a in args)
+
+
 def _scalar(kind: Any) -> type:
     """The concrete type behind ``int``, ``float | None``, ``tuple[int, ...]``, ..."""
     if _is_tuple(kind):
         return typing.get_args(kind)[0]
+    if _is_list(kind):
+        return str
     args = [a for a in typing.get_args(kind) if a is not type(None)]
     return args[0] if args else kind
 
@@ -78,13 +94,16 @@ def add_options(
     *,
     skip: tuple[str, ...] = (),
     defaults: dict[str, Any] | None = None,
+    dest_prefix: str = "opt_",
+    description: str = "each flag also reads the environment variable named in it",
 ) -> None:
     """Add one flag per field of dataclass ``cls`` (except ``skip``) in an argument group.
 
     ``defaults`` overrides the dataclass defaults shown in --help and used when neither flag
-    nor environment variable is given.
+    nor environment variable is given; ``dest_prefix`` names the parsed attributes
+    (``<dest_prefix><field>``), for :func:`options_from_args` with the same prefix.
     """
-    group = parser.add_argument_group(title, "each flag also reads the environment variable named in it")
+    group = parser.add_argument_group(title, description)
     docs = field_docs(cls)
     defaults = defaults or {}
     for field in dataclasses.fields(cls):
@@ -92,18 +111,27 @@ def add_options(
             continue
         kind = _field_type(cls, field)
         default = defaults.get(field.name, _default(field))
-        shown = " ".join(map(str, default)) if isinstance(default, tuple) else default
+        shown = " ".join(map(str, default)) if isinstance(default, tuple | list) else default
+        if field.metadata.get("shown"):
+            shown = field.metadata["shown"]
         help_text = (
-            f"{docs.get(field.name, field.name)} [env {env_name(env_prefix, field.name)}; default {shown}]"
-        )
-        kwargs: dict[str, Any] = {"dest": f"opt_{field.name}", "default": None, "help": help_text}
+            f"{docs.get(field.name, field.name)} "
+            f"[env {env_name(env_prefix, field.name, field)}; default {shown}]"
+        ).replace("%", "%%")
+        kwargs: dict[str, Any] = {"dest": f"{dest_prefix}{field.name}", "default": None, "help": help_text}
+        metavar = field.metadata.get("metavar")
         if kind is bool:
-            group.add_argument(_flag(field.name), action=argparse.BooleanOptionalAction, **kwargs)
+            group.add_argument(_flag(field), action=argparse.BooleanOptionalAction, **kwargs)
+        elif _is_list(kind):
+            group.add_argument(_flag(field), action="append", metavar=metavar or "VALUE", **kwargs)
         elif _is_tuple(kind):
-            metavar = "N" if _scalar(kind) in (int, float) else "NAME"
-            group.add_argument(_flag(field.name), nargs="+", type=_scalar(kind), metavar=metavar, **kwargs)
+            metavar = metavar or ("N" if _scalar(kind) in (int, float) else "NAME")
+            group.add_argument(_flag(field), nargs="+", type=_scalar(kind), metavar=metavar, **kwargs)
+        elif "choices" in field.metadata:
+            group.add_argument(_flag(field), choices=field.metadata["choices"], **kwargs)
         else:
-            group.add_argument(_flag(field.name), type=_scalar(kind), metavar=field.name.upper(), **kwargs)
+            metavar = metavar or field.name.upper()
+            group.add_argument(_flag(field), type=_scalar(kind), metavar=metavar, **kwargs)
     parser.set_defaults(**{f"optdefaults_{cls.__name__}": defaults})
 
 
@@ -125,19 +153,28 @@ def _parse_env(raw: str, kind: Any, name: str) -> Any:
             return lowered in ("1", "true", "yes", "on")
         if _is_tuple(kind):
             return tuple(scalar(p) for p in raw.replace(",", " ").split())
+        if _is_list(kind):
+            return [p.strip() for p in raw.split(",") if p.strip()]
         return scalar(raw.strip())
     except ValueError:
         raise OptionError(f"{name}={raw!r} is not a valid {getattr(scalar, '__name__', scalar)}") from None
 
 
-def options_from_args(cls: type[T], args: argparse.Namespace | None, env_prefix: str, **overrides: Any) -> T:
+def options_from_args(
+    cls: type[T],
+    args: argparse.Namespace | None,
+    env_prefix: str,
+    *,
+    dest_prefix: str = "opt_",
+    **overrides: Any,
+) -> T:
     """Build ``cls`` from parsed flags, then environment variables, then defaults; ``overrides`` win."""
     defaults = getattr(args, f"optdefaults_{cls.__name__}", {}) if args is not None else {}
     values: dict[str, Any] = {}
     for field in dataclasses.fields(cls):
         kind = _field_type(cls, field)
-        value = getattr(args, f"opt_{field.name}", None) if args is not None else None
-        env = env_name(env_prefix, field.name)
+        value = getattr(args, f"{dest_prefix}{field.name}", None) if args is not None else None
+        env = env_name(env_prefix, field.name, field)
         if value is None and os.environ.get(env, "").strip():
             value = _parse_env(os.environ[env], kind, env)
         if value is None and field.name in defaults:

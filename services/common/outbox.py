@@ -90,11 +90,6 @@ class Outbox:
     def in_flight(self) -> int:
         return len(self._unacked)
 
-    @property
-    def acks_given_up(self) -> int:
-        """Old name, kept for callers: batches are never given up on any more, they are ``resent``."""
-        return self.resent
-
     def put(self, seq: int, payload: bytes) -> None:
         """Queue batch ``seq`` (seqs increase); ``flush`` afterwards keeps the outbox within capacity."""
         self._waiting.append((seq, payload))

@@ -1,7 +1,7 @@
-"""What every service process does the same way: logging, stop signals, joining Zenoh, scalars.
+"""What every service process does the same way: logging, stop signals, scalars.
 
 Kept apart from the service classes (Sample Factory's split): a service object
-gets an open session and a stop event; these helpers make them.
+gets an open session (services.common.transport.open_session) and a stop event.
 """
 
 from __future__ import annotations
@@ -12,12 +12,9 @@ import os
 import signal
 import sys
 import threading
-import time
 import warnings
 from pathlib import Path
 from typing import Any
-
-from services.common.transport import TransportError, ZenohSettings, open_session
 
 log = logging.getLogger("navlearn.process")
 
@@ -55,28 +52,6 @@ def stop_on_signals() -> threading.Event:
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, handler)
     return stop
-
-
-def connect(settings: ZenohSettings, stop: threading.Event, retry_every: float = 1.0):
-    """Open a session, retrying while no router answers, until ``stop`` is set (then None).
-
-    The outer retry loop of SEED RL's actor: a process may start before its router.
-    ``settings.connect_timeout`` (0 = forever) bounds the total wait.
-    """
-    start = last_log = time.monotonic()
-    while not stop.is_set():
-        try:
-            return open_session(settings, connect_timeout=retry_every)
-        except TransportError as exc:
-            waited = time.monotonic() - start
-            if "Unable to connect" not in str(exc) or settings.mode == "router":
-                raise
-            if settings.connect_timeout and waited >= settings.connect_timeout:
-                raise TransportError(f"no Zenoh router answered within {waited:.0f} s: {exc}") from None
-            if time.monotonic() - last_log >= 10:
-                log.info("still waiting for a Zenoh router at %s (%.0f s)", settings.connect, waited)
-                last_log = time.monotonic()
-    return None
 
 
 class Scalars:

@@ -16,160 +16,130 @@ import argparse
 import json
 import logging
 import os
+import socket
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from protocols import keys
+from services.common.endpoints import TransportError, check_endpoints, plain_zenoh_error
+from services.common.options import OptionError, add_options, options_from_args
+from services.common.waiting import WaitLog
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 MODES = ("client", "peer", "router")
 log = logging.getLogger("navlearn.transport")
 
 
-class TransportError(RuntimeError):
-    """A Zenoh session cannot be configured or opened; the message says why in one line."""
+def _opt(default: object, flag: str, env: str, metavar: str | None = None, **more: object):
+    return field(default=default, metadata={"flag": flag, "env": env, "metavar": metavar, **more})
 
 
 @dataclass
 class ZenohSettings:
     """How a process joins the Zenoh network; ``None`` means "not given" (config file or default applies)."""
 
-    mode: str | None = "client"
-    """client, peer or router (env NAVLEARN_ZENOH_MODE); None keeps the config file's."""
-    connect: list[str] | None = None
-    """Endpoints to connect to (env NAVLEARN_CONNECT, comma-separated); clients: DEFAULT_ENDPOINT."""
-    listen: list[str] | None = None
-    """Endpoints to listen on (env NAVLEARN_LISTEN); routers default to DEFAULT_ENDPOINT."""
-    run: str = "default"
-    """Run name: every key lives under navlearn/<run>/ (env NAVLEARN_RUN)."""
-    config_file: str | None = None
-    """Base Zenoh JSON5 config file (env NAVLEARN_ZENOH_CONFIG)."""
-    multicast_scouting: bool = False
-    """Find routers and peers by UDP multicast (env NAVLEARN_ZENOH_MULTICAST=1); off by default."""
-    tls_root_ca: str | None = None
-    """CA certificate that signed the other side's certificate (env NAVLEARN_TLS_ROOT_CA)."""
-    tls_cert: str | None = None
-    """This process's certificate, for tls/ listeners and mutual TLS (env NAVLEARN_TLS_CERT)."""
-    tls_key: str | None = None
-    """Private key of tls_cert (env NAVLEARN_TLS_KEY)."""
-    tls_mtls: bool = False
-    """Require and present client certificates (mutual TLS) (env NAVLEARN_TLS_MTLS=1)."""
-    credentials_file: str | None = None
-    """File holding one ``user:password`` line (env NAVLEARN_ZENOH_CREDENTIALS); else the env vars
-    NAVLEARN_ZENOH_USER and NAVLEARN_ZENOH_PASSWORD, if set."""
-    auth_dictionary: str | None = None
-    """Router side: file of ``user:password`` lines allowed in (env NAVLEARN_ZENOH_AUTH_DICTIONARY)."""
-    acl_file: str | None = None
-    """Router side: Zenoh JSON5 file whose ``access_control`` section is applied (env NAVLEARN_ZENOH_ACL)."""
-    connect_timeout: float = 0.0
-    """Seconds to keep retrying while no router answers; 0 waits forever (env NAVLEARN_CONNECT_TIMEOUT)."""
+    mode: str | None = _opt("client", "--mode", "NAVLEARN_ZENOH_MODE", choices=MODES)
+    """client, peer or router; a --zenoh-config file's mode is kept unless this is given"""
+    connect: list[str] | None = field(
+        default=None,
+        metadata={
+            "flag": "--connect",
+            "env": "NAVLEARN_CONNECT",
+            "metavar": "ENDPOINT",
+            "shown": f"{DEFAULT_ENDPOINT} for clients",
+        },
+    )
+    """endpoint to connect to, repeatable (env: comma-separated), e.g. tcp/HOST:7447"""
+    listen: list[str] | None = field(
+        default=None,
+        metadata={
+            "flag": "--listen",
+            "env": "NAVLEARN_LISTEN",
+            "metavar": "ENDPOINT",
+            "shown": f"{DEFAULT_ENDPOINT} for routers",
+        },
+    )
+    """endpoint to listen on, repeatable (env: comma-separated), e.g. tcp/0.0.0.0:7447"""
+    run: str = _opt("default", "--run", "NAVLEARN_RUN", "NAME")
+    """run name; every key is under navlearn/<run>/"""
+    config_file: str | None = _opt(None, "--zenoh-config", "NAVLEARN_ZENOH_CONFIG", "FILE")
+    """base Zenoh JSON5 config file; the other flags override it"""
+    multicast_scouting: bool = _opt(False, "--multicast-scouting", "NAVLEARN_ZENOH_MULTICAST")
+    """discover routers and peers by UDP multicast"""
+    tls_root_ca: str | None = _opt(None, "--tls-root-ca", "NAVLEARN_TLS_ROOT_CA", "FILE")
+    """CA certificate (PEM) used to verify the other side"""
+    tls_cert: str | None = _opt(None, "--tls-cert", "NAVLEARN_TLS_CERT", "FILE")
+    """this process's certificate (PEM), for tls/ listeners and mutual TLS"""
+    tls_key: str | None = _opt(None, "--tls-key", "NAVLEARN_TLS_KEY", "FILE")
+    """private key (PEM) of --tls-cert"""
+    tls_mtls: bool = _opt(False, "--tls-mtls", "NAVLEARN_TLS_MTLS")
+    """mutual TLS: require and present client certificates"""
+    credentials_file: str | None = _opt(None, "--credentials", "NAVLEARN_ZENOH_CREDENTIALS", "FILE")
+    """file with one user:password line for Zenoh authentication (never pass a password as a flag;
+    NAVLEARN_ZENOH_USER and NAVLEARN_ZENOH_PASSWORD also work)"""
+    auth_dictionary: str | None = _opt(None, "--auth-dictionary", "NAVLEARN_ZENOH_AUTH_DICTIONARY", "FILE")
+    """router: file of user:password lines allowed to connect"""
+    acl_file: str | None = _opt(None, "--acl", "NAVLEARN_ZENOH_ACL", "FILE")
+    """router: Zenoh JSON5 file whose access_control section is enforced"""
+    connect_timeout: float = _opt(0.0, "--connect-timeout", "NAVLEARN_CONNECT_TIMEOUT", "SECONDS")
+    """seconds to wait for a router before giving up with the reason (0: keep waiting, saying so)"""
+
+    def where(self) -> str:
+        """The endpoints a client connects to, for messages (``--connect``, else the default)."""
+        return ", ".join(self.connect or [DEFAULT_ENDPOINT])
 
 
-_ENV = {
-    "mode": "NAVLEARN_ZENOH_MODE",
-    "connect": "NAVLEARN_CONNECT",
-    "listen": "NAVLEARN_LISTEN",
-    "run": "NAVLEARN_RUN",
-    "config_file": "NAVLEARN_ZENOH_CONFIG",
-    "multicast_scouting": "NAVLEARN_ZENOH_MULTICAST",
-    "tls_root_ca": "NAVLEARN_TLS_ROOT_CA",
-    "tls_cert": "NAVLEARN_TLS_CERT",
-    "tls_key": "NAVLEARN_TLS_KEY",
-    "tls_mtls": "NAVLEARN_TLS_MTLS",
-    "credentials_file": "NAVLEARN_ZENOH_CREDENTIALS",
-    "auth_dictionary": "NAVLEARN_ZENOH_AUTH_DICTIONARY",
-    "acl_file": "NAVLEARN_ZENOH_ACL",
-    "connect_timeout": "NAVLEARN_CONNECT_TIMEOUT",
-}
-_FLAGS = {
-    "mode": ("--mode", "client, peer or router"),
-    "connect": ("--connect", f"endpoint to connect to, repeatable (default for clients: {DEFAULT_ENDPOINT})"),
-    "listen": ("--listen", f"endpoint to listen on, repeatable (default for routers: {DEFAULT_ENDPOINT})"),
-    "run": ("--run", "run name; every key is under navlearn/<run>/ (default: default)"),
-    "config_file": ("--zenoh-config", "base Zenoh JSON5 config file; the other flags override it"),
-    "multicast_scouting": (
-        "--multicast-scouting",
-        "discover routers and peers by UDP multicast (off by default)",
-    ),
-    "tls_root_ca": ("--tls-root-ca", "CA certificate (PEM) used to verify the other side"),
-    "tls_cert": ("--tls-cert", "this process's certificate (PEM), for tls/ listeners and mutual TLS"),
-    "tls_key": ("--tls-key", "private key (PEM) of --tls-cert"),
-    "tls_mtls": ("--tls-mtls", "mutual TLS: require and present client certificates"),
-    "credentials_file": (
-        "--credentials",
-        "file with one user:password line for Zenoh authentication (never pass a password as a flag; "
-        "NAVLEARN_ZENOH_USER and NAVLEARN_ZENOH_PASSWORD also work)",
-    ),
-    "auth_dictionary": ("--auth-dictionary", "router: file of user:password lines allowed to connect"),
-    "acl_file": ("--acl", "router: Zenoh JSON5 file whose access_control section is enforced"),
-    "connect_timeout": ("--connect-timeout", "seconds to wait for a router before giving up (0 = forever)"),
-}
-_BOOLS = {"multicast_scouting", "tls_mtls"}
+ROUTER_SKIPS = ("mode", "run", "connect_timeout")
+"""a stand-alone router has no mode choice, no run and waits for nobody"""
 
 
 def add_zenoh_args(
-    parser: argparse.ArgumentParser, *, default_mode: str = "client", modes: tuple[str, ...] = MODES
+    parser: argparse.ArgumentParser,
+    *,
+    default_mode: str = "client",
+    modes: tuple[str, ...] = MODES,
+    connect_timeout: float = 0.0,
 ) -> None:
-    """Add the Zenoh flags (one argument group) to ``parser``; ``modes=("router",)`` hides --mode."""
-    group = parser.add_argument_group("Zenoh", "every flag also reads the environment variable named in it")
+    """Add the Zenoh flags (one argument group) to ``parser``; ``modes=("router",)`` hides --mode.
+
+    ``connect_timeout`` is the command's default wait for a router: 0 (wait, saying so) for
+    supervised services, a few seconds for one-shot commands such as ``navlearn status``.
+    """
     parser.set_defaults(zenoh_default_mode=default_mode)
-    for name, (flag, text) in _FLAGS.items():
-        if len(modes) == 1 and name in ("mode", "run", "connect_timeout"):
-            continue  # a stand-alone router has no mode choice, no run and does not wait for anyone
-        help_text = f"{text} [env {_ENV[name]}]"
-        if name in _BOOLS:
-            group.add_argument(flag, dest=f"zenoh_{name}", action="store_true", default=None, help=help_text)
-        elif name in ("connect", "listen"):
-            group.add_argument(
-                flag, dest=f"zenoh_{name}", action="append", metavar="ENDPOINT", help=help_text
-            )
-        elif name == "mode":
-            group.add_argument(
-                flag, dest="zenoh_mode", choices=modes, help=f"{help_text} (default {default_mode})"
-            )
-        elif name == "connect_timeout":
-            group.add_argument(
-                flag, dest="zenoh_connect_timeout", type=float, metavar="SECONDS", help=help_text
-            )
-        else:
-            group.add_argument(
-                flag, dest=f"zenoh_{name}", metavar="NAME" if name == "run" else "FILE", help=help_text
-            )
+    add_options(
+        parser,
+        ZenohSettings,
+        "NAVLEARN_ZENOH",
+        "Zenoh",
+        skip=ROUTER_SKIPS if len(modes) == 1 else (),
+        defaults={"mode": default_mode, "connect_timeout": connect_timeout},
+        dest_prefix="zenoh_",
+    )
 
 
 def settings_from_args(args: argparse.Namespace | None = None, **overrides: object) -> ZenohSettings:
-    """Resolve flags, then environment variables, then defaults (``args=None``: environment only)."""
-    values: dict[str, object] = {}
-    for name, env in _ENV.items():
-        value = getattr(args, f"zenoh_{name}", None) if args is not None else None
-        if value is None and os.environ.get(env, "").strip():
-            raw = os.environ[env].strip()
-            if name in _BOOLS:
-                value = raw.lower() in ("1", "true", "yes", "on")
-            elif name in ("connect", "listen"):
-                value = [e.strip() for e in raw.split(",") if e.strip()]
-            elif name == "connect_timeout":
-                try:
-                    value = float(raw)
-                except ValueError:
-                    raise TransportError(f"{env}={raw!r} is not a number of seconds") from None
-            else:
-                value = raw
-        if value is not None:
-            values[name] = value
-    if "mode" not in values:
-        values["mode"] = None if "config_file" in values else getattr(args, "zenoh_default_mode", "client")
-    values.update(overrides)
-    settings = ZenohSettings(**values)
+    """Resolve flags, then environment variables, then defaults (``args=None``: environment only).
+
+    Endpoints are checked here (protocol, port, host name), before Zenoh sees them.
+    """
+    mode_given = getattr(args, "zenoh_mode", None) or os.environ.get("NAVLEARN_ZENOH_MODE", "").strip()
+    try:
+        settings = options_from_args(ZenohSettings, args, "NAVLEARN_ZENOH", dest_prefix="zenoh_")
+    except OptionError as exc:
+        raise TransportError(str(exc)) from None
+    if not mode_given:
+        settings.mode = None if settings.config_file else getattr(args, "zenoh_default_mode", "client")
+    settings = replace(settings, **overrides)
     if settings.mode is not None and settings.mode not in MODES:
         raise TransportError(f"Zenoh mode {settings.mode!r} is not one of {', '.join(MODES)}")
     try:
         keys.check_name(settings.run, "run")
     except ValueError as exc:
         raise TransportError(str(exc)) from None
+    check_endpoints(settings.connect, settings.listen, resolve=True)
     return settings
 
 
@@ -203,6 +173,7 @@ def build_config(settings: ZenohSettings):
     def put(key: str, value: object) -> None:
         conf.insert_json5(key, json.dumps(value))
 
+    check_endpoints(settings.connect, settings.listen)
     try:
         conf = (
             zenoh.Config.from_file(_file(settings.config_file, "Zenoh config"))
@@ -224,7 +195,8 @@ def build_config(settings: ZenohSettings):
             put("scouting/multicast/enabled", settings.multicast_scouting)
         _apply_security(conf, settings, put)
     except zenoh.ZError as exc:
-        raise TransportError(f"invalid Zenoh configuration: {exc}") from None
+        log.debug("Zenoh rejected the configuration: %s", exc)
+        raise TransportError(f"invalid Zenoh configuration: {plain_zenoh_error(exc)}") from None
     return conf
 
 
@@ -259,38 +231,70 @@ def _apply_security(conf, settings: ZenohSettings, put: Callable[[str, object], 
         put("access_control", acl)
 
 
-def open_session(source: argparse.Namespace | ZenohSettings | None = None, **overrides: object):
+def config_endpoints(conf, side: str) -> list[str]:
+    endpoints = json.loads(conf.get_json(f"{side}/endpoints"))
+    if isinstance(endpoints, dict):  # a config file may give endpoints per mode
+        endpoints = [e for per_mode in endpoints.values() for e in per_mode]
+    return list(endpoints or [])
+
+
+def open_session(
+    source: argparse.Namespace | ZenohSettings | None = None,
+    *,
+    stop: threading.Event | None = None,
+    **overrides: object,
+):
     """Open a Zenoh session from parsed flags, settings or the environment (``overrides`` win).
 
-    Clients and peers that find no router keep retrying (logging every ~10 s) until
-    ``connect_timeout``; the learner calls ``open_session(args, mode="router")`` to host the router.
+    The one connect loop (SEED RL's outer retry: a process may start before its router). A
+    client or peer that finds no router says so at once, naming the endpoints and the run, then
+    again with back-off (services.common.waiting), and keeps trying until ``connect_timeout`` (0: for
+    ever), when it raises TransportError with the reason, or until ``stop`` is set (returns None).
+    A router that cannot listen fails at once. The learner calls ``open_session(args,
+    mode="router")`` to host the router.
     """
     import zenoh
 
     if isinstance(source, ZenohSettings):
         settings = replace(source, **overrides)
+        check_endpoints(settings.connect, settings.listen, resolve=True)
     else:
         settings = settings_from_args(source, **overrides)
     conf = build_config(settings)
     mode = json.loads(conf.get_json("mode")) or "peer"
-    endpoints = json.loads(conf.get_json("connect/endpoints"))
-    start = last_log = time.monotonic()
-    delay = 0.1
+    where = ", ".join(config_endpoints(conf, "connect")) or "any router (multicast scouting)"
+    waiting = WaitLog(
+        log,
+        "waiting for a Zenoh router at %s for run %r (%.0f s so far; is the learner or "
+        "`navlearn router` running there?)",
+        where,
+        settings.run,
+    )
+    delay = 0.05
     while True:
         try:
             return zenoh.open(build_config(settings))
         except zenoh.ZError as exc:
-            waited = time.monotonic() - start
-            unreachable = "Unable to connect" in str(exc) and mode != "router"
-            if not unreachable or (settings.connect_timeout and waited >= settings.connect_timeout):
+            log.debug("zenoh.open: %s", exc)
+            if mode == "router":
+                listen = ", ".join(config_endpoints(conf, "listen"))
                 raise TransportError(
-                    f"cannot open a Zenoh {mode} session: {str(exc).split(' at /')[0]}"
+                    f"cannot listen on {listen} ({plain_zenoh_error(exc)}): another router or learner "
+                    "may hold that port; stop it or give --listen another endpoint"
                 ) from None
-            if waited == 0 or time.monotonic() - last_log >= 10:
-                log.info("waiting for a Zenoh router at %s (%.0f s so far)", ", ".join(endpoints), waited)
-                last_log = time.monotonic()
+        if settings.connect_timeout and waiting.waited >= settings.connect_timeout:
+            raise TransportError(
+                f"no Zenoh router answered at {where} within {settings.connect_timeout:g} s "
+                f"(run {settings.run!r}): start the learner (navlearn learner or navlearn up) or "
+                "`navlearn router` there, or point --connect at one; wrong credentials look the same"
+            )
+        waiting.tick()
+        if stop is not None:
+            if stop.wait(delay):
+                return None
+        else:
             time.sleep(delay)
-            delay = min(2 * delay, 1.0)
+        delay = min(2 * delay, 1.0)
 
 
 def declare_alive(session, run: str, role: str, ident: str):
@@ -351,3 +355,10 @@ class Presence:
 
     def __exit__(self, *_exc: object) -> None:
         self.close()
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago (for a loopback endpoint)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])

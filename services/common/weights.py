@@ -22,7 +22,7 @@ from protocols import keys
 from protocols.codec import decode, encode
 from protocols.errors import ProtocolError
 from protocols.limits import DEFAULT_LIMITS, Limits
-from protocols.messages import WeightsUpdate
+from protocols.messages import ExplorationSchedule, WeightsUpdate
 
 log = logging.getLogger("navlearn.weights")
 
@@ -44,8 +44,15 @@ class WeightsBroadcaster:
         )
         self._queryable = session.declare_queryable(self.key, self._on_query, complete=True)
 
-    def publish(self, weights: dict[str, np.ndarray], version: int, architecture: dict[str, Any]) -> int:
-        """Broadcast ``weights`` as ``version``; returns the encoded size in bytes."""
+    def publish(
+        self,
+        weights: dict[str, np.ndarray],
+        version: int,
+        architecture: dict[str, Any],
+        exploration: ExplorationSchedule | None = None,
+    ) -> int:
+        """Broadcast ``weights`` as ``version`` (actors explore as ``exploration`` says); returns the
+        encoded size in bytes."""
         self.seq += 1
         message = WeightsUpdate(
             sender=self.sender,
@@ -54,6 +61,7 @@ class WeightsBroadcaster:
             version=int(version),
             tensors=weights,
             architecture=architecture,
+            exploration=exploration,
         )
         payload = encode(message)
         self._latest = payload  # one reference swap: the query callback reads it without a lock
@@ -137,11 +145,9 @@ class WeightsReceiver:
 
 
 def split_architecture(architecture: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(network architecture, exploration schedule) out of a WeightsUpdate's architecture map.
-
-    The learner appends its exploration schedule under ``"exploration"`` so that every
-    actor explores as the learner's configuration says (a function of the version).
-    """
+    """(network architecture, exploration map) out of an architecture map that may still hold the
+    schedule under ``"exploration"``. A decoded WeightsUpdate already has it apart, typed
+    (``WeightsUpdate.exploration``); this is for maps from elsewhere (bench/learner.py)."""
     network = dict(architecture)
     exploration = network.pop("exploration", {}) or {}
     return network, dict(exploration)

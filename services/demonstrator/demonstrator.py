@@ -7,6 +7,7 @@ Three sources, one publishing path:
   ones with probability ``noise`` (injected sub-optimality; the action taken is recorded);
 * ``human``: a person drives the robot from the terminal (``services.demonstrator.teleop``), and each
   finished episode is published;
+  (the astar and file sources are in ``services.demonstrator.episodes``)
 * ``file``: a demonstration dataset (Minari, ``navlearn demos generate``) is imported
   and published once.
 
@@ -22,22 +23,25 @@ the acknowledgement of everything it published. It declares ``alive/demonstrator
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 
 import numpy as np
 
-from agents.demos import Demo
+from agents.demos import Demo, load_demos
 from protocols import keys
 from protocols.codec import encode
 from protocols.messages import DemoBatch, EpisodeMeta
 from services.common.outbox import Outbox, decode_ack
-from services.common.process import connect
-from services.common.transport import Presence, ZenohSettings, declare_alive
+from services.common.transport import Presence, ZenohSettings, declare_alive, open_session
+from services.common.waiting import WaitLog
 from services.demonstrator.config import DemonstratorConfig
+from services.demonstrator.episodes import expert_episodes, file_episodes
+from services.demonstrator.teleop import drive
 
 log = logging.getLogger("navlearn.demonstrator")
 
@@ -70,53 +74,22 @@ def demo_batch(demos: list[Demo], source: str, sender: str, seq: int) -> DemoBat
     )
 
 
-def nav_config(config: DemonstratorConfig):
-    from dataclasses import replace
-
-    from worlds.config import NavConfig, ObstacleConfig
-
-    return replace(NavConfig(), obstacles=ObstacleConfig(count=config.obstacles))
-
-
-def expert_episodes(config: DemonstratorConfig, stop: threading.Event) -> Iterator[Demo]:
-    """Expert demonstrations, one per ``1 / rate`` seconds, until ``stop`` (failures skipped unless kept)."""
-    from agents.planning.demonstrate import record_episode
-    from agents.planning.expert import Expert
-    from worlds.env import NavigationEnv
-    from worlds.outcomes import Outcome
-
-    nav = nav_config(config)
-    env = NavigationEnv(nav, maps=config.maps)
-    expert = Expert(nav)
-    rng = np.random.default_rng([config.seed, 1013])
-    index = 0
-    next_time = time.monotonic()
-    while not stop.is_set():
-        demo, _ = record_episode(env, expert, config.seed + index, config.noise, rng)
-        index += 1
-        if config.keep_failures or demo.metadata["outcome"] == Outcome.GOAL:
-            yield demo
-        if config.rate > 0:
-            next_time += 1.0 / config.rate
-            stop.wait(max(0.0, next_time - time.monotonic()))
-
-
-def file_episodes(config: DemonstratorConfig) -> Iterator[Demo]:
-    from agents.demos import load_demos
-    from worlds.outcomes import Outcome
-
-    for demo in load_demos(config.file):
-        if config.keep_failures or demo.metadata["outcome"] == Outcome.GOAL:
-            yield demo
-
-
 class DemoPublisher:
     """Publishes batches of episodes on ``demos/<source>``, waiting for a learner if told to."""
 
-    def __init__(self, session, run: str, config: DemonstratorConfig, stop: threading.Event):
+    def __init__(
+        self, session, run: str, config: DemonstratorConfig, stop: threading.Event, where: str = ""
+    ) -> None:
+        """``where``: the router endpoints, named while waiting for a learner."""
         import zenoh
 
         self.config = config
+        self.waiting = WaitLog(
+            log,
+            "waiting for a learner on run %r via %s to publish demonstrations to (%.0f s so far)",
+            run,
+            where,
+        )
         self.stop = stop
         self.sender = f"{config.id}#{int(time.time())}"
         self.publisher = session.declare_publisher(
@@ -148,13 +121,11 @@ class DemoPublisher:
         """Block until a learner is alive (or stop); True when one is."""
         if self.learners is None:
             return True
-        warned = False
+        self.waiting.reset()
         while not self.stop.is_set():
             if self.learners.wait_for(bool, timeout=0.5):
                 return True
-            if not warned:
-                log.info("waiting for a learner to publish demonstrations to")
-                warned = True
+            self.waiting.tick()
         return False
 
     def publish(self, demos: list[Demo]) -> bool:
@@ -205,26 +176,26 @@ class DemoPublisher:
 def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
     """Process set-up: Zenoh session, liveliness, the source, the publisher."""
     if config.source == "file":
-        from agents.demos import load_demos
-
         load_demos(config.file)  # a bad dataset fails here, before joining the network
     if not config.id:
         config.id = f"{config.source}-{os.getpid()}"
     keys.check_name(config.id, "demonstrator id")
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
-    publisher = DemoPublisher(session, settings.run, config, stop)
-    token = declare_alive(session, settings.run, "demonstrator", config.id)
-    log.info("demonstrator %s (%s) up, run %s", config.id, config.source, settings.run)
-    try:
+    with (
+        session,
+        contextlib.closing(DemoPublisher(session, settings.run, config, stop, settings.where())) as publisher,
+        declare_alive(session, settings.run, "demonstrator", config.id),
+    ):
+        log.info(
+            "demonstrator %s (%s) up, run %s via %s", config.id, config.source, settings.run, settings.where()
+        )
         if config.source == "astar":
             publisher.publish_all(expert_episodes(config, stop))
         elif config.source == "file":
             publisher.publish_all(file_episodes(config))
         else:
-            from services.demonstrator.teleop import drive
-
             drive(config, publisher, stop)
         publisher.drain()
         log.info(
@@ -234,7 +205,3 @@ def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: 
             publisher.steps,
         )
         return 0
-    finally:
-        token.undeclare()
-        publisher.close()
-        session.close()

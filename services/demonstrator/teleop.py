@@ -27,9 +27,25 @@ import contextlib
 import logging
 import math
 import threading
-from typing import Any
+from typing import Protocol
 
 import numpy as np
+
+from agents.demos import Demo, make_demo
+from services.demonstrator.config import DemonstratorConfig
+from services.demonstrator.episodes import nav_config
+from worlds.env import NavigationEnv
+from worlds.outcomes import OUTCOME_NAMES, Outcome
+
+
+class DemoSink(Protocol):
+    """Where finished episodes go (services.demonstrator.demonstrator.DemoPublisher)."""
+
+    episodes: int
+    """episodes published so far"""
+
+    def publish(self, demos: list[Demo]) -> bool: ...
+
 
 log = logging.getLogger("navlearn.teleop")
 HEADING_GLYPHS = (">", "\\", "v", "/", "<", "\\", "^", "/")
@@ -91,7 +107,7 @@ def beam_ends(obs: np.ndarray, pose, nav) -> np.ndarray:
     return np.column_stack([pose[0] + ranges * np.cos(angles), pose[1] + ranges * np.sin(angles)])
 
 
-def drive(config: Any, publisher: Any, stop: threading.Event) -> None:
+def drive(config: DemonstratorConfig, publisher: DemoSink, stop: threading.Event) -> None:
     """Run the teleoperation UI until quit, stop or ``config.episodes`` published episodes."""
     import curses
 
@@ -117,13 +133,8 @@ def _draw(screen, rows: list[str], status: list[str]) -> None:
     screen.refresh()
 
 
-def _session(screen, config: Any, publisher: Any, stop: threading.Event) -> None:
+def _session(screen, config: DemonstratorConfig, publisher: DemoSink, stop: threading.Event) -> None:
     import curses
-
-    from agents.demos import make_demo
-    from services.demonstrator.demonstrator import nav_config
-    from worlds.env import NavigationEnv
-    from worlds.outcomes import OUTCOME_NAMES, Outcome
 
     with contextlib.suppress(curses.error):  # terminals without cursor visibility control
         curses.curs_set(0)

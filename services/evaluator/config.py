@@ -27,6 +27,9 @@ class EvaluatorConfig:
     """directory for evaluations.jsonl and learning_curve.png"""
     tensorboard: str = ""
     """directory for TensorBoard scalars (eval/<family>/success, spl, path_ratio); empty: none"""
+    launched: float = 0.0
+    """Unix time the run was launched, time zero of the learning curve (navlearn up sets it); 0: when
+    this evaluator starts. Each launch of a resumed run starts a new segment of the curve"""
     max_evals: int = 0
     """stop after this many evaluations (0: run until stopped)"""
     compare: tuple[str, ...] = ()

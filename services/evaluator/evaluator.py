@@ -5,12 +5,14 @@ the newest weights on start), runs the shared evaluation (agents.evaluation) on
 fixed, seeded sets - unseen generated maps, the same with moving obstacles - with
 the greedy policy, publishes an EvalReport on ``eval/<id>``, appends a JSON line
 to ``evaluations.jsonl`` and redraws ``learning_curve.png`` (success and path
-ratio to A* against policy version and wall time). Evaluation takes seconds, so
+ratio to A* against policy version and wall time since the run's first launch; a
+resumed run starts a new segment, marked, with no line across the gap). Evaluation takes seconds, so
 versions that arrive meanwhile are skipped: it always takes the newest.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import threading
@@ -18,20 +20,25 @@ import time
 from pathlib import Path
 from typing import Any
 
+from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation.plots import REFERENCE, plot_evaluations
+from agents.evaluation.policies import load_policy
+from agents.nnql.policy import NNQLPolicy
 from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
 from protocols.messages import EvalReport
-from services.common.process import Scalars, connect
-from services.common.transport import ZenohSettings, declare_alive
-from services.common.weights import WeightsReceiver, split_architecture
+from services.common.process import Scalars
+from services.common.transport import ZenohSettings, declare_alive, open_session
+from services.common.waiting import WaitLog
+from services.common.warmup import COMPILE_NOTE
+from services.common.weights import WeightsReceiver
 from services.evaluator.config import EvaluatorConfig
+from worlds.config import NavConfig
 
 log = logging.getLogger("navlearn.evaluator")
 CURVE_FILE = "learning_curve.png"
 LINES_FILE = "evaluations.jsonl"
-REFERENCE = "reference"
-"""model field of points that evaluate a fixed saved policy (the imitation policy) once"""
 
 
 def summary_scalars(metrics: dict[str, Any]) -> dict[str, float]:
@@ -47,77 +54,26 @@ def summary_scalars(metrics: dict[str, Any]) -> dict[str, float]:
     return scalars
 
 
-def plot_curve(points: list[dict[str, Any]], path: Path) -> Path:
-    """Success rate (95% band) and path ratio to A* per family, against policy version and wall time."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    start = min(p["time"] for p in points)
-    families = sorted({f for p in points for f in p["metrics"]})
-    models = sorted({p.get("model", "") for p in points if p.get("model") != REFERENCE})
-    series = [(m, f) for m in models for f in families]
-    references = [p for p in points if p.get("model") == REFERENCE]
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), sharey="row")
-    for col, (xlabel, xof) in enumerate(
-        (
-            ("policy version (updates)", lambda p: p["policy_version"]),
-            ("wall time (min)", lambda p: (p["time"] - start) / 60),
-        )
-    ):
-        for model, family in series:
-            rows = sorted(
-                (xof(p), p["metrics"][family])
-                for p in points
-                if family in p["metrics"] and p.get("model", "") == model
-            )
-            if not rows:
-                continue
-            label = f"{model} {family}".strip() if len(models) > 1 else family
-            xs = [x for x, _ in rows]
-            success = [m["success"] for _, m in rows]
-            (line,) = axes[0, col].plot(xs, [s["value"] for s in success], "o-", ms=3, label=label)
-            axes[0, col].fill_between(
-                xs,
-                [s["low"] for s in success],
-                [s["high"] for s in success],
-                color=line.get_color(),
-                alpha=0.2,
-            )
-            ratio = [(x, m["path_ratio"]) for x, m in rows if m.get("path_ratio") is not None]
-            if ratio:
-                axes[1, col].plot(*zip(*ratio, strict=True), "o-", ms=3, color=line.get_color(), label=label)
-        for reference in references:  # a fixed policy (imitation): one horizontal line per family
-            for family, metrics in reference["metrics"].items():
-                label = f"{reference.get('name', REFERENCE)} {family}"
-                axes[0, col].axhline(metrics["success"]["value"], ls="--", lw=1, color="gray", label=label)
-                if metrics.get("path_ratio") is not None:
-                    axes[1, col].axhline(metrics["path_ratio"], ls="--", lw=1, color="gray")
-        axes[0, col].set(ylim=(0, 1.02), ylabel="success rate" if col == 0 else None)
-        axes[1, col].set(xlabel=xlabel, ylabel="path length / A*" if col == 0 else None)
-        for ax in axes[:, col]:
-            ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=8, loc="upper left")
-    fig.suptitle(f"{', '.join(models).upper() or 'policies'} on held-out maps (greedy policy)")
-    fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    tmp.replace(path)
-    return path
-
-
 class Evaluator:
     """Takes the newest weights, evaluates them, reports, records and plots."""
 
-    def __init__(self, config: EvaluatorConfig, session, run: str, eval_sets: list, limits: Limits) -> None:
+    def __init__(
+        self, config: EvaluatorConfig, session, run: str, eval_sets: list, limits: Limits, where: str = ""
+    ) -> None:
+        """``where``: the router endpoints, named while waiting for the first weights."""
         self.config = config
         self.session = session
         self.run_name = run
         self.eval_sets = eval_sets
         self.receiver = WeightsReceiver(session, run, config.model, limits)
         self.receivers = {config.model: self.receiver}
+        self.first_weights = WaitLog(
+            log,
+            "waiting for the first weights of %s from the learner on run %r via %s (%.0f s so far)",
+            config.model,
+            run,
+            where,
+        )
         for model in config.compare:
             if model not in self.receivers:
                 self.receivers[model] = WeightsReceiver(session, run, model, limits)
@@ -129,6 +85,8 @@ class Evaluator:
         self.scalars = Scalars(config.tensorboard)
         self.seq = 0
         self.last: tuple[str, int] | None = None  # (learner sender, version) last evaluated
+        self.launch = config.launched or time.time()
+        """time zero of this launch's segment of the learning curve"""
 
     def _load_points(self) -> list[dict[str, Any]]:
         path = self.out / LINES_FILE
@@ -143,11 +101,7 @@ class Evaluator:
         return version > last[1] and version - last[1] >= self.config.every_versions
 
     def evaluate(self, weights: dict, architecture: dict, version: int) -> dict[str, Any]:
-        from agents.evaluation import evaluate
-        from agents.nnql.policy import NNQLPolicy
-
-        network, _exploration = split_architecture(architecture)
-        policy = NNQLPolicy(weights, network, mode="greedy", version=version)
+        policy = NNQLPolicy(weights, architecture, mode="greedy", version=version)
         start = time.perf_counter()
         result = evaluate(policy, self.eval_sets)
         metrics = result.to_dict(with_episodes=False)["metrics"]
@@ -168,6 +122,7 @@ class Evaluator:
         point = {
             "policy_version": version,
             "time": time.time(),
+            "launch": self.launch,
             "learner": sender,
             "model": model,
             "metrics": metrics,
@@ -175,20 +130,18 @@ class Evaluator:
         self.points.append(point)
         with open(self.out / LINES_FILE, "a") as fh:
             fh.write(json.dumps(point) + "\n")
-        plot_curve(self.points, self.out / CURVE_FILE)
+        plot_evaluations(self.points, self.out / CURVE_FILE)
         prefix = "" if model == self.config.model else f"{model}/"
         self.scalars.add({prefix + k: v for k, v in summary_scalars(metrics).items()}, version)
 
     def evaluate_reference(self, path: str) -> None:
         """Evaluate a saved policy (the imitation one) once; it is drawn as a horizontal line."""
-        from agents.evaluation import evaluate
-        from agents.evaluation.policies import load_policy
-
         policy = load_policy(path)
         result = evaluate(policy, self.eval_sets)
         log.info("reference policy %s evaluated\n%s", path, result.table())
         metrics = result.to_dict(with_episodes=False)["metrics"]
-        point = {"policy_version": policy.version, "time": time.time(), "learner": "", "model": REFERENCE,
+        point = {"policy_version": policy.version, "time": time.time(), "launch": self.launch,
+                 "learner": "", "model": REFERENCE,
                  "name": policy.model or Path(path).name, "metrics": metrics}  # fmt: skip
         self.points = [p for p in self.points if p.get("model") != REFERENCE] + [point]
         with open(self.out / LINES_FILE, "a") as fh:
@@ -217,6 +170,8 @@ class Evaluator:
                 self.report(message.sender, message.version, metrics, model)
                 done += 1
             if idle:
+                if self.last is None:
+                    self.first_weights.tick()
                 stop.wait(0.2)
         return 0
 
@@ -228,24 +183,27 @@ class Evaluator:
 
 def run_evaluator(config: EvaluatorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
     """Process set-up: the fixed evaluation sets, the Zenoh session, the loop."""
-    from agents.evaluation import make_eval_set
-    from worlds.config import NavConfig
-
     start = time.perf_counter()
+    log.info("evaluator %s: building the evaluation sets (%s)", config.id, COMPILE_NOTE)
     eval_sets = [make_eval_set(family, config.episodes, seed=config.eval_seed) for family in config.families]
     log.info("evaluation sets %s ready in %.1f s", ", ".join(config.families), time.perf_counter() - start)
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
-    evaluator = Evaluator(
-        config, session, settings.run, eval_sets, Limits(n_actions=NavConfig().robot.n_actions)
-    )
-    token = declare_alive(session, settings.run, "evaluator", config.id)
-    log.info("evaluator %s up: %d episodes per family, run %s", config.id, config.episodes, settings.run)
-    try:
-        return evaluator.run(stop)
-    finally:
-        token.undeclare()
-        evaluator.close()
-        session.close()
-        log.info("evaluator stopped")
+    where = settings.where()
+    limits = Limits(n_actions=NavConfig().robot.n_actions)
+    with (
+        session,
+        contextlib.closing(Evaluator(config, session, settings.run, eval_sets, limits, where)) as evaluator,
+        declare_alive(session, settings.run, "evaluator", config.id),
+    ):
+        log.info(
+            "evaluator %s up: %d episodes per family, run %s via %s",
+            config.id,
+            config.episodes,
+            settings.run,
+            where,
+        )
+        code = evaluator.run(stop)
+    log.info("evaluator stopped")
+    return code

@@ -3,16 +3,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
-EXPLORATION_FIELDS = (
-    "exploration",
-    "temperature_start",
-    "temperature_end",
-    "temperature_decay_updates",
-    "epsilon_start",
-    "epsilon_end",
-    "epsilon_decay_updates",
-)
+from agents.device import DEVICES
+from agents.nnql.replay_storage import STORAGES
 
 
 @dataclass
@@ -51,3 +45,22 @@ class LearnerConfig:
     """also train NIRL (thesis ch. 5) on the demonstrations and the actors' experience; weights/nirl"""
     nirl_updates: int = 1
     """NIRL updates per NNQL update once NIRL's warm start on the demonstrations is done"""
+    replay_storage: str = "memory"
+    """memory (RAM) or memmap (files under checkpoint_dir/replay, flushed in place by each checkpoint)"""
+    device: str = "cpu"
+    """where networks, losses and sampled batches live: cpu, cuda (cuda:N) or auto (a GPU if torch has one)"""
+
+    def __post_init__(self) -> None:
+        if self.device not in DEVICES and not self.device.startswith("cuda:"):
+            raise ValueError(f"LearnerConfig.device={self.device!r}: expected one of {DEVICES} or cuda:N")
+        if self.replay_storage not in STORAGES:
+            raise ValueError(
+                f"LearnerConfig.replay_storage={self.replay_storage!r}: expected one of {STORAGES}"
+            )
+        if self.replay_storage == "memmap" and not self.checkpoint_dir:
+            raise ValueError("--replay-storage memmap keeps the replay under --checkpoint-dir; set one")
+
+    @property
+    def replay_dir(self) -> Path | None:
+        """Where a memory-mapped replay lives (None: in RAM)."""
+        return Path(self.checkpoint_dir) / "replay" if self.replay_storage == "memmap" else None

@@ -43,6 +43,19 @@ class Deduplicator:
             self._state.popitem(last=False)
         return False
 
+    def forget(self, sender: str, seq: int) -> None:
+        """Undo ``seen(sender, seq)`` (its batch was not stored after all: a failed write)."""
+        if sender not in self._state or seq < 1:
+            return
+        floor, above = self._state[sender]
+        above = set(above)
+        if seq in above:
+            above.discard(seq)
+        elif seq <= floor:
+            above.update(range(seq + 1, floor + 1))
+            floor = seq - 1
+        self._state[sender] = (floor, above)
+
     def state(self) -> dict[str, list]:
         return {s: [floor, sorted(above)] for s, (floor, above) in self._state.items()}
 

@@ -15,6 +15,7 @@ import torch
 from torchrl.data import LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
 
 from agents.nnql.learner import transitions_to_tensordict
+from agents.replay_files import load_replay, save_replay
 from protocols.messages import DemoBatch
 
 
@@ -57,9 +58,9 @@ class DemoBuffer:
 
     def save(self, path: Path) -> None:
         if len(self.replay):
-            self.replay.dumps(path)
+            save_replay(self.replay, path)
 
     def load(self, path: Path, episodes: int) -> None:
         if path.exists():
-            self.replay.loads(path)
+            load_replay(self.replay, path)
         self.episodes = episodes

@@ -3,12 +3,16 @@
 The learner calls ``admit`` for every decoded batch before inserting it: a
 duplicate (an actor's resend of a batch already stored) is counted and must
 only be acknowledged again; anything else is appended to the write-ahead log
-first and synced (``sync``) before the acknowledgement goes out, so an acknowledgement means "durably stored".
+(the bytes the learner received and accepted, not a re-encoding) and synced
+(``sync``) before it is inserted and acknowledged, so an acknowledgement means "durably stored".
+If the append or the sync fails (OSError: a full disk), the log is cut back to the
+last synced group and the duplicate filter forgets that group, so the actors' resends
+of it are taken as new once the disk has room again.
 ``checkpoint_state`` goes into each checkpoint (the log position and the
 de-duplication state); ``checkpointed`` then rotates the log. On start,
 ``load_state`` (from the checkpoint, if any) and ``replay`` give back the
 batches accepted after that checkpoint, which the learner inserts again
-without logging them twice.
+without logging them twice, decoded with the learner's own limits.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from protocols.codec import decode, encode
+from protocols.codec import decode
 from protocols.errors import ProtocolError
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, Message, TransitionBatch
@@ -49,29 +53,54 @@ class DurableIngest:
     def __init__(self, directory: str | Path, fsync: str = "always", limits: Limits | None = None) -> None:
         self.wal = WriteAheadLog(directory, fsync)
         self.dedup = Deduplicator()
-        self.limits = limits
+        self.limits = limits or Limits()
         self.checkpoint_seq = 0
+        self._group: list[tuple[str, int]] = []  # dedup keys admitted since the last sync
         self.counters = {"duplicates_dropped": 0, "wal_replayed": 0, "wal_undecodable": 0}
 
-    def admit(self, message: Message) -> bool:
-        """False for a duplicate (counted); else log it and return True. It is durable once
-        ``sync()`` has returned: one fsync for the group of batches admitted before it."""
-        if self.dedup.seen(dedup_key(message), message.seq):
+    def admit(self, message: Message, payload: bytes) -> bool:
+        """False for a duplicate (counted); else log ``payload`` (the accepted bytes of ``message``)
+        and return True. It is durable once ``sync()`` has returned: one fsync for the group of
+        batches admitted before it. OSError: nothing of the group is logged (see ``sync``)."""
+        key = dedup_key(message)
+        if self.dedup.seen(key, message.seq):
             self.counters["duplicates_dropped"] += 1
             return False
-        self.wal.append(encode(message), sync=False)
+        self._group.append((key, message.seq))
+        try:
+            self.wal.append(payload, sync=False)
+        except OSError:
+            self._forget_group()
+            raise
         return True
 
     def sync(self) -> None:
-        self.wal.sync()
+        """Make the group durable; on OSError the log holds none of it and the filter forgets it."""
+        try:
+            self.wal.sync()
+        except OSError:
+            self._forget_group()
+            raise
+        self._group.clear()
+
+    def _forget_group(self) -> None:
+        for key, seq in self._group:
+            self.dedup.forget(key, seq)
+        self._group.clear()
+
+    @property
+    def path(self) -> Path:
+        """The log's directory (named in storage errors)."""
+        return self.wal.dir
 
     def checkpoint_state(self) -> dict:
         return {"wal_seq": self.wal.last_seq, "dedup": self.dedup.state(), "counters": self.counters}
 
-    def checkpointed(self) -> None:
-        """The checkpoint holding ``checkpoint_state()`` is in place: start a new log segment."""
+    def checkpointed(self, keep_after: int | None = None) -> None:
+        """The checkpoint holding ``checkpoint_state()`` is in place: start a new log segment, keeping
+        the records after ``keep_after`` (the oldest checkpoint still kept) for a resume from it."""
         self.checkpoint_seq = self.wal.last_seq
-        self.wal.rotate()
+        self.wal.rotate(keep_after)
 
     def load_state(self, state: dict | None) -> None:
         if state:
@@ -83,8 +112,8 @@ class DurableIngest:
         """The batches logged after the loaded checkpoint, in order (de-duplication state rebuilt)."""
         for seq, payload in self.wal.recover(after=self.checkpoint_seq):
             try:
-                message = decode(payload, self.limits) if self.limits else decode(payload)
-            except ProtocolError as exc:  # written by this code, so only if the format changed
+                message = decode(payload, self.limits)
+            except ProtocolError as exc:  # accepted under these limits, so only if they or the format changed
                 self.counters["wal_undecodable"] += 1
                 log.error("write-ahead log record %d does not decode (%s); skipped", seq, exc)
                 continue
@@ -104,6 +133,8 @@ class DurableIngest:
             **self.counters,
             "wal/appended": wal["appended"],
             "wal/corrupt_records": wal["corrupt_records"],
+            "wal/skipped_records": wal["skipped_records"],
+            "wal/skipped_bytes": wal["skipped_bytes"],
             "wal/cut_bytes": wal["cut_bytes"],
             "wal/fsyncs": wal["fsyncs"],
             "wal/seq": self.wal.last_seq,

@@ -38,10 +38,6 @@ class FairQueue(Generic[T]):
         with self._ready:
             return self._size
 
-    def sizes(self) -> dict[str, int]:
-        with self._ready:
-            return {s: len(q) for s, q in self._queues.items()}
-
     def sender_full(self, sender: str) -> bool:
         """Has ``sender`` its ``per_sender`` items waiting (so ``put_nowait`` would raise SenderFull)?"""
         with self._ready:

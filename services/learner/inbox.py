@@ -37,12 +37,14 @@ EXPECTED = {"transitions": TransitionBatch, "demos": DemoBatch, "eval": EvalRepo
 
 @dataclass
 class Received:
-    """One accepted message: the name in its key (actor, source, evaluator), when it arrived."""
+    """One accepted message: the name in its key (actor, source, evaluator), when it arrived, and the
+    bytes it came as (what the write-ahead log stores: the decoded arrays are views of them)."""
 
     channel: str
     name: str
     message: Message
     arrived: float
+    payload: bytes = b""
 
 
 class Inbox:
@@ -73,7 +75,8 @@ class Inbox:
             if parsed.channel == "transitions" and self.transitions.sender_full(parsed.name):
                 self._sender_full(parsed.name)
                 return
-            message = decode(sample.payload.to_bytes(), self.limits)
+            payload = sample.payload.to_bytes()
+            message = decode(payload, self.limits)
             expected = EXPECTED.get(parsed.channel)
             if expected is None or not isinstance(message, expected):
                 raise ProtocolError("kind", f"{message.KIND} message on {parsed.channel}/{parsed.name}")
@@ -83,7 +86,7 @@ class Inbox:
             self.count(f"rejected/{exc.reason}")
             self._warn(exc.reason, f"rejected a message on {sample.key_expr}: {exc}")
             return
-        item = Received(parsed.channel, parsed.name, message, arrived)
+        item = Received(parsed.channel, parsed.name, message, arrived, payload)
         try:
             if parsed.channel == "transitions":
                 self.transitions.put_nowait(parsed.name, item)

@@ -12,7 +12,12 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any
+
+from agents.nirl.config import NIRLConfig
+from agents.nirl.learner import NIRLLearner
+from agents.nirl.weights import WeightHistory
+from protocols.messages import ExplorationSchedule
+from services.common.weights import WeightsBroadcaster
 
 log = logging.getLogger("navlearn.learner.nirl")
 MODEL = "nirl"
@@ -23,11 +28,9 @@ HISTORY_EVERY = 1
 class NIRLTrainer:
     """One NIRL learner fed by the service; ``train(n)`` runs up to n updates when demos exist."""
 
-    def __init__(self, config: Any, experience, demos, session, run: str, sender: str, broadcast_every: int):
-        from agents.nirl.learner import NIRLLearner
-        from agents.nirl.weights import WeightHistory
-        from services.common.weights import WeightsBroadcaster
-
+    def __init__(
+        self, config: NIRLConfig, experience, demos, session, run: str, sender: str, broadcast_every: int
+    ):
         self.learner = NIRLLearner(config, experience=experience, demos=demos)
         self.weights = WeightsBroadcaster(session, run, MODEL, sender)
         self.broadcast_every = max(int(broadcast_every), 1)
@@ -60,9 +63,10 @@ class NIRLTrainer:
     def broadcast(self) -> None:
         if not self.learner.ready():
             return  # no demonstrations yet: nothing learned worth sending
-        architecture = dict(self.learner.q.architecture)
-        architecture["exploration"] = self.learner.exploration_schedule()
-        self.weights.publish(self.learner.get_weights(), self.learner.version, architecture)
+        exploration = ExplorationSchedule(**self.learner.exploration_schedule())
+        self.weights.publish(
+            self.learner.get_weights(), self.learner.version, self.learner.q.architecture, exploration
+        )
 
     def status_fields(self) -> tuple[dict[str, int], dict[str, float]]:
         """(counters, losses) to merge into the LearnerStatus, prefixed ``nirl/``."""
@@ -85,8 +89,6 @@ class NIRLTrainer:
             self.history.save(path / "weights_history.safetensors")
 
     def load(self, path: Path) -> None:
-        from agents.nirl.weights import WeightHistory
-
         if not path.exists():
             log.info("checkpoint has no NIRL state; NIRL starts fresh")
             return

@@ -6,7 +6,9 @@ while the limiter lets it train, broadcasts weights every ``broadcast_every``
 updates, acknowledges each inserted batch to its actor (flow control; the batches
 drained together share one write-ahead-log fsync before their acks go out), keeps the
 status snapshot that the ``status/learner`` queryable serves, writes TensorBoard
-scalars and checkpoints. ``run_learner`` does the process set-up around it. Its settings
+scalars and checkpoints. A failing disk write (write-ahead log or checkpoint) stops intake and
+acknowledgements until a retry works (services.learner.storage); the loop, status and SIGTERM
+go on. ``run_learner`` does the process set-up around it. Its settings
 are in services.learner.config, what a checkpoint holds besides the networks in
 services.learner.state, the status snapshot in services.learner.status.
 """
@@ -14,29 +16,39 @@ services.learner.state, the status snapshot in services.learner.status.
 from __future__ import annotations
 
 import logging
+import pickle
 import queue
 import threading
 import time
 from pathlib import Path
-from typing import Any
 
+import agents.evaluation.policies  # noqa: F401 - save_policy_dir imports it lazily (~2.5 s): not in a checkpoint
+from agents.nirl.config import NIRLConfig
 from agents.nnql.config import NNQLConfig
+from agents.nnql.learner import NNQLLearner
+from agents.replay_files import stored_bytes
 from protocols import keys
 from protocols.codec import encode
 from protocols.flow import Ack
 from protocols.limits import Limits
-from protocols.messages import DemoBatch, EvalReport, LearnerStatus, TransitionBatch
-from services.common.process import Scalars, connect
-from services.common.transport import ZenohSettings, declare_alive
+from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, LearnerStatus
+from services.common.process import Scalars
+from services.common.transport import ZenohSettings, declare_alive, open_session
+from services.common.weights import WeightsBroadcaster
 from services.learner.checkpoint import CheckpointDir
-from services.learner.config import EXPLORATION_FIELDS, LearnerConfig
+from services.learner.config import LearnerConfig
+from services.learner.demo_buffer import DemoBuffer
 from services.learner.durable import DurableIngest
 from services.learner.inbox import Inbox, Received
+from services.learner.nirl import NIRLTrainer
 from services.learner.ratelimit import RateLimiter
-from services.learner.state import load_service_state, write_service_state
-from services.learner.stats import ActorStats, LagWindow, RateWindow
-from services.learner.status import build_status
+from services.learner.state import LearnerParts, checkpoint_wal_seq
+from services.learner.stats import LearnerTally
+from services.learner.status import build_status, progress_line, status_charts
+from services.learner.storage import StorageGuard
 from services.ops.status import eval_summary
+from worlds.config import NavConfig
+from worlds.env import observation_space
 
 log = logging.getLogger("navlearn.learner")
 
@@ -45,10 +57,16 @@ class LearnerService:
     """One NNQL learner behind Zenoh. Built by ``run_learner``; ``run(stop)`` is the main loop."""
 
     def __init__(
-        self, config: LearnerConfig, learner, session, run: str, inbox: Inbox, demos, sender: str, nirl=None
+        self,
+        config: LearnerConfig,
+        learner: NNQLLearner,
+        session,
+        run: str,
+        inbox: Inbox,
+        demos: DemoBuffer,
+        sender: str,
+        nirl: NIRLTrainer | None = None,
     ):
-        from services.common.weights import WeightsBroadcaster
-
         self.config = config
         self.learner = learner
         self.session = session
@@ -56,7 +74,7 @@ class LearnerService:
         self.inbox = inbox
         self.demos = demos
         self.sender = sender
-        self.nirl = nirl  # services.learner.nirl.NIRLTrainer, or None
+        self.nirl = nirl
         self.nnql_ran = 0  # NNQL updates in the last loop (NIRL's pace once warm)
         nnql = learner.config
         self.limiter = RateLimiter(
@@ -68,23 +86,23 @@ class LearnerService:
         if self.checkpoints is not None:
             self.checkpoints.remove_unfinished()
         self.scalars = Scalars(config.tensorboard)
-        self.actors: dict[str, ActorStats] = {}
-        self.lags = LagWindow()
-        self.update_rate = RateWindow()
-        self.insert_rate = RateWindow()
-        self.metrics: dict[str, float] = {}
-        self.last_eval: dict[str, Any] | None = None
-        self.counters: dict[str, int] = {}
+        self.tally = LearnerTally()
         self.status_bytes: bytes = b""
         self.status_seq = 0
         self.ack_seq = 0
         self._unacked: list[tuple[str, int, str]] = []  # (key name, seq, incarnation) awaiting commit
+        self._pending: list[Received] = []  # logged, stored and acknowledged once the log is synced
         self.durable = (
-            DurableIngest(Path(config.checkpoint_dir) / "wal", config.wal_fsync)
+            DurableIngest(Path(config.checkpoint_dir) / "wal", config.wal_fsync, inbox.limits)
             if config.checkpoint_dir
             else None
         )  # write-ahead log + duplicate filter: acknowledged means durably stored
+        self.storage = StorageGuard()
         self._replaying = False
+        self.parts = LearnerParts(
+            learner, demos, self.limiter, inbox, self.tally, self.durable, nirl, self.storage
+        )
+        """the typed view that checkpoints and the status snapshot are made from"""
         self.weights = WeightsBroadcaster(session, run, config.model, sender)
         self._status_queryable = session.declare_queryable(keys.status(run), self._on_status, complete=True)
 
@@ -94,10 +112,18 @@ class LearnerService:
         if self.checkpoints is None:
             return None
         start = time.perf_counter()
-
-        path = self.checkpoints.save(lambda tmp: write_service_state(self, tmp))
+        estimate = stored_bytes(self.learner.replay) + stored_bytes(self.demos.replay)
+        try:
+            path = self.checkpoints.save(self.parts.write, estimate)
+        except Exception as exc:  # ENOSPC, EIO, or a library's own wrapper of them (torch: RuntimeError)
+            self.storage.failed("checkpoint", self.checkpoints.root, exc, time.monotonic())
+            return None
+        self.storage.succeeded()
         if self.durable is not None:
-            self.durable.checkpointed()
+            try:  # keep the log the oldest kept checkpoint needs (a resume from it if newer ones are damaged)
+                self.durable.checkpointed(checkpoint_wal_seq(self.checkpoints.all()[0]))
+            except OSError as exc:
+                self.storage.failed("write-ahead log", self.durable.path, exc, time.monotonic())
         self._count("checkpoints")
         log.info(
             "checkpoint %s (version %d, replay %d) in %.2f s",
@@ -109,7 +135,13 @@ class LearnerService:
         return path
 
     def resume(self, path: Path) -> None:
-        load_service_state(self, path)
+        try:
+            self.parts.load(path)
+        except (ValueError, KeyError, TypeError, OSError, RuntimeError, pickle.UnpicklingError) as exc:
+            raise ValueError(
+                f"checkpoint {path} matches its checksums but does not load here "
+                f"({type(exc).__name__}: {exc}); was it written with other settings?"
+            ) from exc
         log.info(
             "resumed from %s: version %d, replay %d, demos %d",
             path,
@@ -124,12 +156,7 @@ class LearnerService:
             return
         self._replaying = True
         for record in self.durable.replay():
-            item = Received(record.channel, record.name, record.message, time.time())
-            if record.channel == "transitions":
-                self._insert(item)
-            else:
-                self.inbox.other.put(item)
-                self._drain_other()
+            self._insert(Received(record.channel, record.name, record.message, time.time()))
         self._commit()
         self._replaying = False
         log.info("write-ahead log replayed: %s", self.durable.status_counters())
@@ -147,13 +174,18 @@ class LearnerService:
             if cfg.max_updates and self.learner.version >= cfg.max_updates:
                 log.info("reached %d updates", cfg.max_updates)
                 break
-            busy = self._drain_other()
-            busy |= self._ingest(max_batches=16)
+            blocked = self.storage.blocked(time.monotonic())
+            busy = self._drain_other(blocked)
+            busy |= not blocked and self._ingest(max_batches=16)
             busy |= self._train(max_updates=32)
             busy |= self._train_nirl()
-            if not busy:
+            if not busy and blocked:
+                time.sleep(0.05)  # storage is failing: nothing to take in until the retry
+            elif not busy:
                 self._wait_for_data(0.05)
             now = time.monotonic()
+            if self.storage.what == "checkpoint" and not self.storage.blocked(now):
+                next_checkpoint = now  # retry the checkpoint that failed
             if now >= next_status:
                 self.refresh_status()
                 next_status = now + 0.5
@@ -164,7 +196,7 @@ class LearnerService:
                 self.save_checkpoint()
                 next_checkpoint = time.monotonic() + cfg.checkpoint_every
         self.broadcast()
-        self.save_checkpoint()
+        self.save_checkpoint()  # a failure is logged; the write-ahead log holds what was acknowledged
         self.refresh_status()
         return 0
 
@@ -181,7 +213,7 @@ class LearnerService:
 
     def _ingest(self, max_batches: int) -> bool:
         done = 0
-        while done < max_batches and self.limiter.can_insert():
+        while done < max_batches and self.limiter.can_insert() and not self.storage.blocked(time.monotonic()):
             try:
                 item = self.inbox.transitions.get_nowait()
             except queue.Empty:
@@ -192,24 +224,50 @@ class LearnerService:
         return done > 0
 
     def _insert(self, item: Received) -> None:
-        batch: TransitionBatch = item.message
-        obs_dim = self.learner.architecture["obs_dim"]
-        if batch.obs.shape[1] != obs_dim:
+        """A transition or demonstration batch: checked, logged, then stored and acknowledged at the
+        next ``_commit`` (at once when there is no log, or when it comes from the log's replay)."""
+        obs_dim, obs = self.learner.architecture["obs_dim"], item.message.obs
+        if obs.shape[1] != obs_dim:
             self.inbox.reject(
-                "shape", f"batch from {item.name} has obs_dim {batch.obs.shape[1]}, not {obs_dim}"
+                "shape", f"{item.channel} from {item.name} have obs_dim {obs.shape[1]}, not {obs_dim}"
             )
             return
-        if self.durable is not None and not self._replaying and not self.durable.admit(batch):
-            self._ack(item.name, batch.seq, batch.sender)  # a resend of a stored batch: ack it again
+        if self.durable is None or self._replaying:
+            self._store(item)
             return
-        n = self.learner.add(batch)
-        self.limiter.inserted(n)
-        self.insert_rate.add(n)
-        self.lags.add(self.learner.version - batch.policy_version)
-        self.actors.setdefault(item.name, ActorStats()).add(n, batch.seq, item.arrived)
-        self._count("transitions_received", n)
-        self._count("batches_received")
-        self._ack(item.name, batch.seq, batch.sender)
+        try:
+            fresh = self.durable.admit(item.message, item.payload)
+        except OSError as exc:
+            self._storage_failed(exc, also_lost=1)
+            return
+        if fresh:
+            self._pending.append(item)
+        else:  # a resend of a stored batch: acknowledge it again
+            self._ack(item.name, item.message.seq, item.message.sender)
+
+    def _store(self, item: Received) -> None:
+        """Insert a (durably logged) batch into its buffer, count it and queue its acknowledgement."""
+        message = item.message
+        if isinstance(message, DemoBatch):
+            steps = self.demos.add(message)
+            self._count("demo_steps", steps)
+            self._count("demo_batches")
+            self._count(f"demo_steps/{message.source}", steps)
+            self._count(f"demo_episodes/{message.source}", len(message.episode_lengths))
+        else:
+            n = self.learner.add(message)
+            self.limiter.inserted(n)
+            self.tally.inserted(
+                item.name, n, message.seq, item.arrived, self.learner.version - message.policy_version
+            )
+        self._ack(item.name, message.seq, message.sender)
+
+    def _storage_failed(self, exc: OSError, also_lost: int = 0) -> None:
+        """The log could not take the group: none of it is stored or acknowledged (actors resend)."""
+        self.storage.failed("write-ahead log", self.durable.path, exc, time.monotonic())
+        self._count("batches_not_stored", len(self._pending) + also_lost)
+        self._pending.clear()
+        self._unacked.clear()
 
     def _ack(self, actor: str, seq: int, incarnation: str) -> None:
         """Acknowledge batch ``seq`` of ``incarnation`` (its envelope sender, ``<id>#<start>``), so a
@@ -220,10 +278,16 @@ class LearnerService:
     def _commit(self) -> None:
         """Group commit: one write-ahead-log sync for the batches logged since the last commit,
         then their acknowledgements."""
-        if not self._unacked:
-            return
-        if self.durable is not None:
-            self.durable.sync()
+        if self._pending:
+            try:
+                self.durable.sync()
+            except OSError as exc:
+                self._storage_failed(exc)
+                return
+            self.storage.succeeded()
+            for item in self._pending:
+                self._store(item)
+            self._pending.clear()
         for actor, seq, incarnation in self._unacked:
             self.ack_seq += 1
             ack = Ack(
@@ -237,14 +301,18 @@ class LearnerService:
         self._unacked.clear()
 
     def _train(self, max_updates: int) -> bool:
+        """The updates the limiter allows (at most ``max_updates``), several per ``update`` call:
+        each call runs up to the next version a broadcast is due at."""
+        allowed = min(max_updates, self.limiter.updates_allowed(len(self.learner.replay)))
+        every = self.config.broadcast_every
         ran = 0
-        replay_size = len(self.learner.replay)
-        while ran < max_updates and self.limiter.can_update(replay_size):
-            self.metrics = self.learner.update()
-            self.limiter.updated()
-            self.update_rate.add()
-            ran += 1
-            if self.learner.version % self.config.broadcast_every == 0:
+        while ran < allowed:
+            count = min(allowed - ran, every - self.learner.version % every)
+            self.tally.metrics = self.learner.update(count)
+            self.limiter.updated(count)
+            self.tally.update_rate.add(count)
+            ran += count
+            if self.learner.version % every == 0:
                 self.broadcast()
         self.nnql_ran = ran
         return ran > 0
@@ -259,7 +327,9 @@ class LearnerService:
         due = 8 if warming else self.config.nirl_updates * self.nnql_ran
         return self.nirl.train(due) > 0
 
-    def _drain_other(self) -> bool:
+    def _drain_other(self, blocked: bool = False) -> bool:
+        """Demonstrations (dropped and counted while storage is failing: their sender resends) and
+        evaluation reports."""
         busy = False
         while True:
             try:
@@ -269,25 +339,17 @@ class LearnerService:
                 return busy
             busy = True
             if isinstance(item.message, DemoBatch):
-                if item.message.obs.shape[1] != self.learner.architecture["obs_dim"]:
-                    self.inbox.reject("shape", f"demos from {item.name} have the wrong obs_dim")
-                    continue
-                if self.durable is not None and not self._replaying and not self.durable.admit(item.message):
-                    self._ack(item.name, item.message.seq, item.message.sender)  # a resend: ack again
-                    continue
-                steps = self.demos.add(item.message)
-                self._ack(item.name, item.message.seq, item.message.sender)
-                self._count("demo_steps", steps)
-                self._count("demo_batches")
-                self._count(f"demo_steps/{item.message.source}", steps)
-                self._count(f"demo_episodes/{item.message.source}", len(item.message.episode_lengths))
+                if blocked:
+                    self.inbox.count("dropped/storage_error")
+                else:
+                    self._insert(item)
             elif isinstance(item.message, EvalReport):
                 self._on_eval(item)
 
     def _on_eval(self, item: Received) -> None:
         self._count("eval_reports")
-        self.last_eval = eval_summary(item.name, item.message, item.arrived)
-        families = self.last_eval["families"]
+        self.tally.last_eval = eval_summary(item.name, item.message, item.arrived)
+        families = self.tally.last_eval["families"]
         log.info(
             "eval report from %s for version %d: %s",
             item.name,
@@ -296,54 +358,34 @@ class LearnerService:
         )
 
     def broadcast(self) -> None:
-        nnql: NNQLConfig = self.learner.config
-        architecture = dict(self.learner.architecture)
-        architecture["exploration"] = {name: getattr(nnql, name) for name in EXPLORATION_FIELDS}
-        self.weights.publish(self.learner.get_weights(), self.learner.version, architecture)
+        exploration = ExplorationSchedule.of(self.learner.config)
+        self.weights.publish(
+            self.learner.get_weights(), self.learner.version, self.learner.architecture, exploration
+        )
         self._count("weights_broadcast")
         if self.nirl is not None:
             self.nirl.broadcast()
 
     def _count(self, name: str, n: int = 1) -> None:
-        self.counters[name] = self.counters.get(name, 0) + int(n)
+        self.tally.count(name, n)
 
     # ---------------------------------------------------------------- status
 
     def status(self) -> LearnerStatus:
         self.status_seq += 1
-        return build_status(self, self.status_seq)
+        return build_status(self.parts, self.config.model, self.sender, self.status_seq)
 
     def refresh_status(self) -> None:
         status = self.status()
         self.status_bytes = encode(status)
-        charts = {
-            "charts/updates_per_s": status.rates["updates_per_s"],
-            "charts/transitions_per_s": status.rates["transitions_per_s"],
-            "charts/policy_lag": status.rates["policy_lag"],
-            "charts/replay_size": status.replay_sizes["transitions"],
-            "charts/update_to_data": status.rates["update_to_data"],
-        }
-        charts.update({k: v for k, v in self.metrics.items() if k.startswith("losses/")})
-        charts.update({k: v for k, v in status.losses.items() if k.startswith("nirl/")})  # learned reward too
+        charts = status_charts(status, self.tally.metrics)
         self.scalars.add(charts, self.learner.version)
 
     def _on_status(self, query) -> None:
         query.reply(keys.status(self.run_name), self.status_bytes)
 
     def _log_progress(self) -> None:
-        s = self.status()
-        log.info(
-            "version %d | replay %d | %.0f upd/s | %.0f transitions/s | lag %.1f | actors %d | rejected %d"
-            " | td %.4g",
-            self.learner.version,
-            s.replay_sizes["transitions"],
-            s.rates["updates_per_s"],
-            s.rates["transitions_per_s"],
-            s.rates["policy_lag"],
-            len(self.actors),
-            s.counters["transitions_rejected"],
-            self.metrics.get("losses/td_loss", float("nan")),
-        )
+        log.info("%s", progress_line(self.status(), self.tally))
 
     def close(self) -> None:
         self._status_queryable.undeclare()
@@ -360,33 +402,26 @@ def run_learner(
 ) -> int:
     """Process set-up: learner, Zenoh session (hosting the router unless told to connect), the loop.
     ``nirl`` (an agents.nirl NIRLConfig) configures NIRL when ``config.nirl`` is on."""
-    from agents.nnql.learner import NNQLLearner
-    from services.learner.demo_buffer import DemoBuffer
-    from worlds.config import NavConfig
-    from worlds.env import observation_space
-
     nav = NavConfig()
     obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
-    learner = NNQLLearner(nnql, obs_dim, n_actions)
+    learner = NNQLLearner(nnql, obs_dim, n_actions, device=config.device, replay_dir=config.replay_dir)
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
     inbox = Inbox(limits, config.inbox_size, settings.run, log_every=config.log_every)
-    session = connect(settings, stop)
+    session = open_session(settings, stop=stop)
     if session is None:
         return 0
     sender = f"{config.id}#{int(time.time())}"
     trainer = None
     if config.nirl:
-        from agents.nirl.config import NIRLConfig
-        from services.learner.nirl import NIRLTrainer
-
         nirl = nirl or NIRLConfig(seed=nnql.seed)
         trainer = NIRLTrainer(
             nirl, learner.replay, demos.replay, session, settings.run, sender, config.broadcast_every
         )
     service = LearnerService(config, learner, session, settings.run, inbox, demos, sender, nirl=trainer)
     try:
-        if config.resume and service.checkpoints is not None and (latest := service.checkpoints.latest()):
+        latest = service.checkpoints.newest_intact() if config.resume and service.checkpoints else None
+        if latest is not None:
             service.resume(latest)
         service.replay_log()
         subscribers = inbox.subscribe(session)
@@ -404,6 +439,8 @@ def run_learner(
             subscriber.undeclare()
         return code
     finally:
-        service.close()
-        session.close()
-        log.info("learner stopped")
+        try:
+            service.close()
+        finally:
+            session.close()  # even if closing the service failed: a held session keeps the process alive
+            log.info("learner stopped")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Any
 
 
 class RateWindow:
@@ -64,3 +65,46 @@ class LagWindow:
 
     def mean(self) -> float:
         return sum(self._lags) / len(self._lags) if self._lags else 0.0
+
+
+@dataclass
+class LearnerTally:
+    """The learner service's own figures: counters, per-actor totals, rates, policy lag, the newest
+    losses and evaluation (what its status reports and its checkpoint keeps)."""
+
+    counters: dict[str, int] = field(default_factory=dict)
+    actors: dict[str, ActorStats] = field(default_factory=dict)
+    lags: LagWindow = field(default_factory=LagWindow)
+    update_rate: RateWindow = field(default_factory=RateWindow)
+    insert_rate: RateWindow = field(default_factory=RateWindow)
+    metrics: dict[str, float] = field(default_factory=dict)
+    """the newest update's metrics (``losses/...``)"""
+    last_eval: dict[str, Any] | None = None
+    """the newest evaluation summary (services.ops.status.eval_summary)"""
+
+    def count(self, name: str, n: int = 1) -> None:
+        self.counters[name] = self.counters.get(name, 0) + int(n)
+
+    def inserted(self, actor: str, n: int, seq: int, arrived: float, lag: int) -> None:
+        """A batch of ``n`` transitions from ``actor`` went into replay."""
+        self.insert_rate.add(n)
+        self.lags.add(lag)
+        self.actors.setdefault(actor, ActorStats()).add(n, seq, arrived)
+        self.count("transitions_received", n)
+        self.count("batches_received")
+
+    def state(self) -> dict[str, Any]:
+        """The part of ``service.json`` these figures fill (keys unchanged since the first checkpoints)."""
+        return {
+            "counters": self.counters,
+            "actors": {
+                a: {"transitions": s.transitions, "batches": s.batches} for a, s in self.actors.items()
+            },
+            "last_eval": self.last_eval,
+        }
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        self.counters = {k: int(v) for k, v in state["counters"].items()}
+        for actor, saved in state["actors"].items():
+            self.actors[actor] = ActorStats(transitions=saved["transitions"], batches=saved["batches"])
+        self.last_eval = state["last_eval"]

@@ -2,42 +2,74 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 from protocols.messages import LearnerStatus
+from services.learner.state import LearnerParts
+from services.learner.stats import LearnerTally
 
 
-def build_status(service: Any, seq: int) -> LearnerStatus:
+def build_status(parts: LearnerParts, model: str, sender: str, seq: int) -> LearnerStatus:
     """Counters (incl. rejections by reason and the write-ahead log's), rates, versions, replay sizes,
-    per-actor totals and last seen, losses and the last evaluation of a LearnerService."""
-    counters = {**service.counters, **service.inbox.counts(), "updates": service.learner.version}
-    if service.durable is not None:
-        counters.update(service.durable.status_counters())
+    per-actor totals and last seen, losses and the last evaluation of a learner service's parts."""
+    tally, learner = parts.tally, parts.learner
+    counters = {
+        **tally.counters,
+        **parts.inbox.counts(),
+        **parts.storage.counters(),
+        "updates": learner.version,
+    }
+    if parts.durable is not None:
+        counters.update(parts.durable.status_counters())
     counters["transitions_rejected"] = sum(v for k, v in counters.items() if k.startswith("rejected/"))
     rates = {
-        "updates_per_s": service.update_rate.rate(),
-        "transitions_per_s": service.insert_rate.rate(),
-        "policy_lag": service.lags.mean(),
-        "update_to_data": service.limiter.updates / max(service.limiter.inserts, 1),
+        "updates_per_s": tally.update_rate.rate(),
+        "transitions_per_s": tally.insert_rate.rate(),
+        "policy_lag": tally.lags.mean(),
+        "update_to_data": parts.limiter.updates / max(parts.limiter.inserts, 1),
     }
-    for actor, stats in service.actors.items():
+    for actor, stats in tally.actors.items():
         rates[f"transitions_per_s/{actor}"] = stats.rate.rate()
         counters[f"transitions/{actor}"] = stats.transitions
-    versions = {service.config.model: service.learner.version}
-    losses = {k.removeprefix("losses/"): v for k, v in service.metrics.items() if k.startswith("losses/")}
-    if service.nirl is not None:
-        nirl_counters, nirl_losses = service.nirl.status_fields()
+    versions = {model: learner.version}
+    losses = {k.removeprefix("losses/"): v for k, v in tally.metrics.items() if k.startswith("losses/")}
+    if parts.nirl is not None:
+        nirl_counters, nirl_losses = parts.nirl.status_fields()
         counters.update(nirl_counters)
         losses.update(nirl_losses)
-        versions["nirl"] = service.nirl.version
+        versions["nirl"] = parts.nirl.version
     return LearnerStatus(
-        sender=service.sender,
+        sender=sender,
         seq=seq,
         counters=counters,
         rates=rates,
         versions=versions,
-        replay_sizes={"transitions": len(service.learner.replay), "demos": len(service.demos)},
-        actors_last_seen={a: s.last_seen for a, s in service.actors.items() if s.last_seen},
+        replay_sizes={"transitions": len(learner.replay), "demos": len(parts.demos)},
+        actors_last_seen={a: s.last_seen for a, s in tally.actors.items() if s.last_seen},
         losses=losses,
-        last_eval=service.last_eval,
+        last_eval=tally.last_eval,
+    )
+
+
+def status_charts(status: LearnerStatus, metrics: dict[str, float]) -> dict[str, float]:
+    """TensorBoard scalars of a status snapshot and the newest update's losses."""
+    charts = {
+        "charts/updates_per_s": status.rates["updates_per_s"],
+        "charts/transitions_per_s": status.rates["transitions_per_s"],
+        "charts/policy_lag": status.rates["policy_lag"],
+        "charts/replay_size": status.replay_sizes["transitions"],
+        "charts/update_to_data": status.rates["update_to_data"],
+    }
+    charts.update({k: v for k, v in metrics.items() if k.startswith("losses/")})
+    charts.update({k: v for k, v in status.losses.items() if k.startswith("nirl/")})  # learned reward too
+    return charts
+
+
+def progress_line(status: LearnerStatus, tally: LearnerTally) -> str:
+    """The learner's periodic log line."""
+    rates, counters = status.rates, status.counters
+    return (
+        f"version {counters['updates']} | replay {status.replay_sizes['transitions']}"
+        f" | {rates['updates_per_s']:.0f} upd/s | {rates['transitions_per_s']:.0f} transitions/s"
+        f" | lag {rates['policy_lag']:.1f} | actors {len(tally.actors)}"
+        f" | rejected {counters['transitions_rejected']}"
+        f" | td {tally.metrics.get('losses/td_loss', float('nan')):.4g}"
     )

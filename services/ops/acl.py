@@ -23,24 +23,12 @@ to be the id (Zenoh ANDs a subject's attributes): user/password *and* mutual TLS
 from __future__ import annotations
 
 import json
-import os
 import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from protocols import keys
-
-ACTOR_STATUS_PREFIX = "actor:"
-"""an actor answers its status on ``status/actor:<id>`` (the ``status`` channel has one name)"""
-
-
-def actor_status_key(run: str, actor: str) -> str:
-    return f"{keys.prefix(run)}/status/{ACTOR_STATUS_PREFIX}{keys.check_name(actor, 'actor id')}"
-
-
-def all_status_keys(run: str) -> str:
-    """Every status queryable of ``run``: the learner's and each actor's."""
-    return f"{keys.prefix(run)}/status/*"
+from services.ops.secret_files import write_private
 
 
 @dataclass
@@ -107,7 +95,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
     }
     for a in d.actors:
         own = [f"{p}/transitions/{a}", f"{p}/alive/actor/{a}"]
-        status = [actor_status_key(d.run, a)]
+        status = [keys.actor_status(d.run, a)]
         out[f"actor-{a}"] = (
             a,
             [
@@ -123,7 +111,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
                 _rule(f"actor-{a}-answers", ["reply"], "egress", [f"{p}/weights/*"]),
                 _rule(f"actor-{a}-status", ["declare_queryable", "reply"], "ingress", status),
                 # queries reach it as sent: `status/*` (navlearn status --actors) or its own key
-                _rule(f"actor-{a}-status-asked", ["query"], "egress", [all_status_keys(d.run)]),
+                _rule(f"actor-{a}-status-asked", ["query"], "egress", [keys.everything(d.run, "status")]),
             ],
         )
     for ident, source in d.demonstrator_sources():
@@ -156,7 +144,7 @@ def _role_rules(d: Deployment) -> dict[str, tuple[str, list[dict]]]:
             ],
         )
     for o in d.operators:
-        asks = [all_status_keys(d.run), f"{p}/alive/**"]
+        asks = [keys.everything(d.run, "status"), f"{p}/alive/**"]
         out[f"operator-{o}"] = (
             o,
             [
@@ -192,12 +180,6 @@ def access_control(d: Deployment) -> dict:
     }
 
 
-def _write_private(path: Path, text: str) -> None:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-
-
 def write_deployment(out: str | Path, d: Deployment) -> dict[str, Path]:
     """Write users.txt, one <user>.credentials per process (fresh random passwords) and acl.json5."""
     users = d.users()
@@ -205,10 +187,10 @@ def write_deployment(out: str | Path, d: Deployment) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
     passwords = {user: secrets.token_urlsafe(24) for user in users}
     written = {"users.txt": out / "users.txt", "acl.json5": out / "acl.json5"}
-    _write_private(written["users.txt"], "".join(f"{u}:{pw}\n" for u, pw in passwords.items()))
+    write_private(written["users.txt"], "".join(f"{u}:{pw}\n" for u, pw in passwords.items()))
     for user, password in passwords.items():
         written[f"{user}.credentials"] = out / f"{user}.credentials"
-        _write_private(written[f"{user}.credentials"], f"{user}:{password}\n")
+        write_private(written[f"{user}.credentials"], f"{user}:{password}\n")
     header = (
         f"// navlearn access control for run {d.run!r}: navlearn router --auth-dictionary users.txt "
         "--acl acl.json5\n"

@@ -5,16 +5,18 @@
 ``server.key`` (the router's, valid for every name or IP address in ``hosts``) and
 ``<client>.pem``/``<client>.key`` per client (common name = the client name, which
 Zenoh's ACL can match as ``cert_common_names``). Keys are ECDSA P-256, written
-0600. Point routers at ``--tls-root-ca ca.pem --tls-cert server.pem --tls-key
-server.key``, clients at ``--tls-root-ca ca.pem`` (plus their own pair for mTLS).
+0600 (also over an existing file: services.ops.secret_files). Point routers at
+``--tls-root-ca ca.pem --tls-cert server.pem --tls-key server.key``, clients at
+``--tls-root-ca ca.pem`` (plus their own pair for mTLS).
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import ipaddress
-import os
 from pathlib import Path
+
+from services.ops.secret_files import write_private
 
 
 def _key():
@@ -29,9 +31,7 @@ def _write_key(path: Path, key) -> None:
     data = key.private_bytes(
         serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
     )
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "wb") as fh:
-        fh.write(data)
+    write_private(path, data)
 
 
 def _write_cert(path: Path, cert) -> None:

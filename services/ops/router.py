@@ -6,12 +6,11 @@ On one machine the learner hosts the router itself; across machines run
 
 from __future__ import annotations
 
-import json
 import logging
 import threading
 from dataclasses import replace
 
-from services.common.transport import ZenohSettings, build_config, open_session
+from services.common.transport import ZenohSettings, build_config, config_endpoints, open_session
 
 log = logging.getLogger("navlearn.router")
 
@@ -21,9 +20,7 @@ def run_router(settings: ZenohSettings, stop: threading.Event) -> int:
     import zenoh
 
     settings = replace(settings, mode="router")
-    listen = json.loads(build_config(settings).get_json("listen/endpoints"))
-    if isinstance(listen, dict):  # a config file may give endpoints per mode
-        listen = listen.get("router", [])
+    listen = config_endpoints(build_config(settings), "listen")
     with open_session(settings) as session:
         log.info("router %s listening on %s", session.zid(), ", ".join(listen))
 
@@ -31,8 +28,12 @@ def run_router(settings: ZenohSettings, stop: threading.Event) -> int:
             verb = "joined" if event.kind == zenoh.SampleKind.PUT else "left"
             log.info("%s %s %s", event.transport.whatami, event.transport.zid, verb)
 
-        listener = session.info.declare_transport_events_listener(on_transport)
-        stop.wait()
-        listener.undeclare()
+        with session.info.declare_transport_events_listener(on_transport):
+            # Wake up now and then: a SIGTERM delivered to one of Zenoh's threads runs the handler
+            # only when the main thread next runs Python, and an untimed wait never returned then
+            # (1 in 5 routers stopped together with the router they were linked to hung until
+            # SIGKILL).
+            while not stop.wait(0.5):
+                pass
     log.info("router stopped")
     return 0

@@ -64,6 +64,30 @@ def query_alive(session, run: str, timeout: float = 2.0) -> list[tuple[str, str]
     return sorted(found)
 
 
+def learner_runs(session, timeout: float = 1.0) -> list[str]:
+    """Runs in which a learner holds its liveliness token, sorted (empty if none, or if an ACL hides them)."""
+    runs = set()
+    for reply in session.liveliness().get(keys.alive_in_every_run("learner"), timeout=timeout):
+        if reply.ok is None:
+            continue
+        try:
+            runs.add(keys.parse(reply.ok.key_expr).run)
+        except ProtocolError:
+            continue
+    return sorted(runs)
+
+
+def no_learner_hint(run: str, runs: list[str]) -> str:
+    """Why no learner answers on ``run``, from the runs that do have one (``learner_runs``)."""
+    if runs:
+        listed = ", ".join(repr(r) for r in runs)
+        return f"no learner on run {run!r}, but on {listed}: give --run {runs[0]} (or start one on {run!r})"
+    return (
+        f"no learner on run {run!r} holds a liveliness token here: start one (navlearn learner --run {run} "
+        "or navlearn up), or check --connect, --run and the router's ACL"
+    )
+
+
 def status_dict(status: LearnerStatus | None, alive: list[tuple[str, str]], now: float | None = None) -> dict:
     """One JSON-able view of the run: the learner's status (None if it did not answer) and who is alive."""
     now = time.time() if now is None else now
@@ -104,29 +128,50 @@ def _fmt(value: Any, spec: str = ".3g") -> str:
     return str(value)
 
 
-def progress_line(view: dict) -> str:
-    """One line for a live display: version, throughput, replay, lag, actors, last evaluation."""
+def _short(n: float) -> str:
+    """12, 1.2k, 34k, 1.2M: a count in at most 4 characters."""
+    for limit, suffix in ((1e6, "M"), (1e3, "k")):
+        if abs(n) >= limit:
+            scaled = n / limit
+            return f"{scaled:.1f}{suffix}" if scaled < 10 else f"{scaled:.0f}{suffix}"
+    return f"{n:.0f}"
+
+
+def progress_line(view: dict, actors_expected: int | None = None, width: int = 68) -> str:
+    """One line of at most ``width`` characters for a live display: version, updates/s,
+    transitions/s, replay, policy lag, actors if some are missing, rejections if any, and the
+    last evaluation's success per family (first letter: unseen, dynamic, movingai); what does
+    not fit is cut, marked by "..."."""
     learner = view.get("learner")
     if learner is None:
         return "waiting for the learner's status..."
     rates, counters = learner["rates"], learner["counters"]
     version = next(iter(learner["versions"].values()), 0)
     replay = learner["replay_sizes"].get("transitions", 0)
-    line = (
-        f"version {version} | {rates.get('updates_per_s', 0):.0f} upd/s | "
-        f"{rates.get('transitions_per_s', 0):.0f} transitions/s | replay {replay}"
-        f" | lag {rates.get('policy_lag', 0):.1f} | actors {len(view['alive'].get('actor', []))}"
-        f" | rejected {counters.get('transitions_rejected', 0)}"
-    )
+    parts = [f"v{version}"]
+    if counters.get("storage_error"):  # first, so that it is never cut off
+        parts.append("STORAGE ERROR: not acknowledging (see the learner's log)")
+    parts += [
+        f"{rates.get('updates_per_s', 0):.0f} upd/s",
+        f"{_short(rates.get('transitions_per_s', 0))} tr/s",
+        f"replay {_short(replay)}",
+        f"lag {rates.get('policy_lag', 0):.1f}",
+    ]
+    actors = len(view["alive"].get("actor", []))
+    if actors_expected is None or actors < actors_expected:
+        parts.append(f"actors {actors}" + (f"/{actors_expected}" if actors_expected else ""))
+    if counters.get("transitions_rejected", 0):
+        parts.append(f"rejected {_short(counters['transitions_rejected'])}")
     evaluation = learner.get("last_eval")
     if evaluation:
-        parts = [
-            f"{family} {100 * fam['success']:.0f}%"
+        success = " ".join(
+            f"{family[0]}{100 * fam['success']:.0f}%"
             for family, fam in evaluation.get("families", {}).items()
             if fam.get("success") is not None
-        ]
-        line += f" | eval v{evaluation['policy_version']}: " + ", ".join(parts)
-    return line
+        )
+        parts.append(f"eval {success}")
+    line = "  ".join(parts)
+    return line if len(line) <= width else line[: width - 3] + "..."
 
 
 def render(view: dict):

@@ -3,8 +3,9 @@
 It starts the learner (hosting the Zenoh router on a free loopback port), N
 actors and the evaluator as separate processes (``python -m services.cli ...``,
 each logging into ``<out>/logs/``), shows one live progress line read from the
-learner's status, and stops everything in order when the budget is spent, on
-Ctrl-C or SIGTERM, or when a child dies: actors first, then the learner (which
+learner's status, and stops everything in order when the budget is spent (counted
+from the first transition the learner receives), on Ctrl-C or SIGTERM, or when a
+child dies: actors first, then the learner (which
 broadcasts its final weights and writes its checkpoint), then the evaluator
 once it has measured the final version (bounded wait). Outputs in ``<out>``:
 ``checkpoints/``, ``policy/`` (the final weights), ``eval/learning_curve.png``
@@ -24,54 +25,25 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from services.common.transport import TransportError, ZenohSettings, free_port, open_session
+from services.learner.checkpoint import CheckpointDir
+from services.ops.status import query_alive, query_status, status_dict
+from services.ops.up_config import UpConfig
 
 log = logging.getLogger("navlearn.up")
 PR_SET_PDEATHSIG = 1
 MODEL = "nnql"
-
-
-@dataclass
-class UpConfig:
-    """A one-machine run: how many processes, how long, where the outputs go."""
-
-    run: str = "local"
-    """run name (Zenoh keys navlearn/<run>/...); a second `up` with the same run resumes its checkpoint"""
-    out: str = ""
-    """output directory; empty: runs/<run>"""
-    actors: int = 2
-    """actor processes"""
-    envs: int = 8
-    """robots per actor"""
-    maps: str = "mixed:16"
-    """training map spec for the actors (worlds.tasks)"""
-    seed: int = 0
-    """seed of the learner (network, replay sampling); actor i uses seed + i"""
-    duration: float = 90.0
-    """seconds of training, counted from the learner's first status answer (0: no time limit)"""
-    updates: int = 0
-    """stop once the learner has run this many updates in total (0: no limit)"""
-    eval_episodes: int = 20
-    """evaluator episodes per family (unseen and dynamic held-out maps)"""
-    eval_every: int = 0
-    """updates between evaluated versions (0: every new version the evaluator can keep up with)"""
-    checkpoint_every: float = 60.0
-    """seconds between learner checkpoints (one is always written at the end)"""
-    port: int = 0
-    """port of the learner's router; 0: a free one"""
-    listen_all: bool = False
-    """the learner's router listens on 0.0.0.0 (all interfaces), so actors on other hosts can join
-    with --connect tcp/<this host>:<port> (give --port); default: 127.0.0.1 only"""
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
+PHASES = (
+    ("building", "compiling"),
+    ("waiting for a Zenoh router", "awaiting router"),
+    ("waiting for the first weights", "awaiting weights"),
+    ("resumed from", "resuming"),
+    (" up", "up"),
+)
+"""(what a child's log line says, the phase shown): its newest matching line is what it is doing"""
 
 
 def _die_with_parent() -> None:
@@ -87,6 +59,8 @@ class Child:
         self.name = name
         self.log_path = log_dir / f"{name}.log"
         self._log = open(self.log_path, "ab")  # noqa: SIM115 - closed in wait()
+        self._log_start = self._log.tell()
+        """where this launch's lines start (a resumed run appends to the same log)"""
         self.process = subprocess.Popen(
             [sys.executable, "-m", "services.cli", *argv],
             stdout=self._log,
@@ -112,6 +86,17 @@ class Child:
             code = self.process.wait()
         self._log.close()
         return code
+
+    def phase(self) -> str:
+        """What the process is doing: its newest log line of this launch that says (PHASES), or "starting"."""
+        with open(self.log_path, "rb") as fh:
+            fh.seek(max(fh.seek(0, os.SEEK_END) - 8192, self._log_start))
+            lines = fh.read().decode(errors="replace").splitlines()
+        for line in reversed(lines):
+            for marker, phase in PHASES:
+                if marker in line:
+                    return phase
+        return "starting"
 
     def tail(self, lines: int = 15) -> str:
         text = self.log_path.read_text(errors="replace").splitlines()
@@ -141,9 +126,18 @@ class Up:
         self.listen = f"tcp/0.0.0.0:{port}" if config.listen_all else self.endpoint
         self.nnql = nnql
         self.children: dict[str, Child] = {}
+        self.launched = time.time()
+        self.resumed_from = CheckpointDir(self.out / "checkpoints").latest()
+        """the checkpoint the learner resumes from (None: a new run)"""
+        self.training_s = 0.0
+        """seconds from the first transition the learner received to the end of watch()"""
+        self.first_transition_s: float | None = None
+        """seconds from the processes' start to the first transition the learner received"""
+        self._started_at = time.monotonic()
 
     def start(self) -> None:
         cfg, out = self.config, self.out
+        self._started_at = time.monotonic()
         (out / "logs").mkdir(parents=True, exist_ok=True)
         base = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
         base.update({"NAVLEARN_RUN": cfg.run, "PYTHONUNBUFFERED": "1"})
@@ -195,6 +189,8 @@ class Up:
                 str(out / "eval"),
                 "--tensorboard",
                 str(out / "tb"),
+                "--launched",
+                str(self.launched),
             ],
             base,
         )
@@ -205,11 +201,30 @@ class Up:
     def dead_child(self) -> Child | None:
         return next((c for c in self.children.values() if not c.alive()), None)
 
-    def watch(self, stop: threading.Event, show) -> dict[str, Any] | None:
-        """Follow the learner's status until the budget is spent, ``stop`` is set or a child dies."""
-        from services.common.transport import TransportError, ZenohSettings, open_session
-        from services.ops.status import query_alive, query_status, status_dict
+    def phases(self, view: dict[str, Any] | None) -> str:
+        """Before the first transition: what the learner, the actors and the evaluator are doing
+        (liveliness tokens say who joined; a child's own log says why it has not)."""
+        alive = view["alive"] if view else {}
+        learner = "up" if view and view["learner"] else self.children["learner"].phase()
+        if learner == "up" and self.resumed_from is not None:
+            learner = "resumed"
+        actors = [c for n, c in self.children.items() if n.startswith("actor-")]
+        joined = len(alive.get("actor", []))
+        waiting = sorted({c.phase() for c in actors if c.alive()} - {"up"})
+        actor_text = (
+            f"actors {joined}/{len(actors)} up" if joined or not waiting else "actors " + "/".join(waiting)
+        )
+        evaluator = self.children["evaluator"].phase()
+        if evaluator == "up":
+            evaluator = "awaiting weights" if alive.get("evaluator") else "joining"
+        return f"learner {learner}, {actor_text}, eval {evaluator}"
 
+    def watch(self, stop: threading.Event, show) -> dict[str, Any] | None:
+        """Follow the learner's status until the budget is spent, ``stop`` is set or a child dies.
+
+        ``show(view, elapsed, phases)``: ``elapsed`` counts from the first transition the learner
+        received (None before it), ``phases`` says what each process is doing until then.
+        """
         cfg = self.config
         settings = ZenohSettings(mode="client", connect=[self.endpoint], run=cfg.run)
         session = None
@@ -219,27 +234,34 @@ class Up:
             try:
                 session = open_session(settings, connect_timeout=1.0)
             except TransportError:
-                show(None, 0.0)
-        view, started = None, None
-        try:
-            while session is not None and not stop.is_set():
-                if (dead := self.dead_child()) is not None:
-                    raise ChildFailed(dead)
-                status = query_status(session, cfg.run, timeout=2.0)
-                if status is not None:
-                    view = status_dict(status, query_alive(session, cfg.run, timeout=0.5))
-                    started = started or time.monotonic()
-                elapsed = time.monotonic() - started if started else 0.0
-                show(view, elapsed)
-                version = view["learner"]["versions"].get(MODEL, 0) if view else 0
-                if started and cfg.duration and elapsed >= cfg.duration:
-                    break
-                if cfg.updates and version >= cfg.updates:
-                    break
-                stop.wait(1.0)
-        finally:
-            if session is not None:
-                session.close()
+                show(None, None, self.phases(None))
+        view, started, baseline = None, None, None
+        if session is None:
+            return view
+        with session:
+            try:
+                while not stop.is_set():
+                    if (dead := self.dead_child()) is not None:
+                        raise ChildFailed(dead)
+                    status = query_status(session, cfg.run, timeout=2.0)
+                    alive = query_alive(session, cfg.run, timeout=0.5)
+                    view = status_dict(status, alive) if status is not None else view
+                    received = received_transitions(view)
+                    if baseline is None and received is not None:
+                        baseline = received  # a resumed learner's totals include its earlier runs
+                    if started is None and baseline is not None and received > baseline:
+                        started = time.monotonic()
+                        self.first_transition_s = started - self._started_at
+                    elapsed = None if started is None else time.monotonic() - started
+                    show(view, elapsed, None if started else self.phases(view or status_dict(None, alive)))
+                    version = view["learner"]["versions"].get(MODEL, 0) if view else 0
+                    if elapsed is not None and cfg.duration and elapsed >= cfg.duration:
+                        break
+                    if cfg.updates and version >= cfg.updates:
+                        break
+                    stop.wait(1.0)
+            finally:
+                self.training_s = time.monotonic() - started if started else 0.0
         return view
 
     def stop_all(self, eval_wait: float = 60.0) -> dict[str, int]:
@@ -269,8 +291,6 @@ class Up:
         return json.loads((policy / "config.json").read_text())["version"] if policy else None
 
     def latest_policy(self) -> Path | None:
-        from services.learner.checkpoint import CheckpointDir
-
         latest = CheckpointDir(self.out / "checkpoints").latest()
         policy = latest / "nnql" / "policy" if latest else None
         return policy if policy and (policy / "config.json").exists() else None
@@ -294,6 +314,11 @@ class Up:
         summary = {
             "run": self.config.run,
             "wall_time_s": round(wall, 1),
+            "training_s": round(self.training_s, 1),
+            "first_transition_s": None
+            if self.first_transition_s is None
+            else round(self.first_transition_s, 1),
+            "resumed_from": self.resumed_from.name if self.resumed_from else None,
             "final_version": self.final_version(),
             "exit_codes": codes,
             "last_status": view,
@@ -309,6 +334,18 @@ class Up:
         }
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         return summary
+
+
+def received_transitions(view: dict[str, Any] | None) -> int | None:
+    """Transitions the learner has received from all actors (None before it answers)."""
+    if not view or not view.get("learner"):
+        return None
+    return sum(actor["transitions"] for actor in view["learner"]["actors"].values())
+
+
+def checkpoint_number(path: Path) -> int:
+    """N of ``ckpt-0000000N``."""
+    return int(path.name.rsplit("-", 1)[-1])
 
 
 class ChildFailed(RuntimeError):
