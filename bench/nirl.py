@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -346,6 +347,15 @@ def report(path: Path) -> int:
     return 0
 
 
+def code_version() -> str:
+    """The commit the bench runs from, "+dirty" if the tree has uncommitted changes."""
+    root = Path(__file__).resolve().parents[1]
+    git = ["git", "-C", str(root)]
+    commit = subprocess.run([*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout
+    dirty = subprocess.run([*git, "status", "--porcelain", "--untracked-files=no"], capture_output=True)
+    return commit.strip() + ("+dirty" if dirty.stdout.strip() else "")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -372,6 +382,7 @@ def main() -> int:
     if args.report:
         return report(runs)
     nav = NavConfig()
+    code = {"commit": code_version(), "argv": sys.argv[1:]}  # which code and settings made each line
     sets = [make_eval_set(f, args.episodes, seed=0) for f in FAMILIES]
     methods = [m for m in args.methods.split(",") if m]
     unknown = sorted(set(methods) - set(METHODS))
@@ -390,7 +401,7 @@ def main() -> int:
         for method in methods:
             for set_name in ["-"] if method == "nnql" else [s for s in args.sets.split(",") if s]:
                 row = run_one(method, set_name, seed, None if method == "nnql" else demos[set_name],
-                              expert_labels, args, sets, nav)  # fmt: skip
+                              expert_labels, args, sets, nav) | code  # fmt: skip
                 with open(runs, "a") as fh:
                     fh.write(json.dumps(row) + "\n")
                 short = {f: round(row["test"][f]["success"], 3) for f in FAMILIES}
