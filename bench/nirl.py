@@ -46,6 +46,7 @@ import torch
 
 from agents.evaluation import evaluate, make_eval_set
 from agents.evaluation.compare import mcnemar_exact
+from agents.evaluation.metrics import wilson_interval as wilson
 from agents.imitation.config import ImitationConfig
 from agents.imitation.train import train_policy
 from agents.nirl.buffers import demo_buffer, sample
@@ -59,6 +60,7 @@ from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
 from agents.nnql.rollout import VectorRollout
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.planning.demonstrate import generate_demos
+from bench._common import machine_load
 from worlds.config import NavConfig
 
 FAMILIES = ("unseen", "dynamic")
@@ -236,12 +238,6 @@ def mcnemar(a: list[int], b: list[int]) -> tuple[int, int, float]:
     return only_a, only_b, mcnemar_exact(only_a, only_b)
 
 
-def wilson(successes: int, n: int) -> tuple[float, float]:
-    from agents.evaluation.metrics import wilson_interval
-
-    return wilson_interval(successes, n)
-
-
 def first_reaching(curve, target: float):
     return next((steps for steps, success in curve if success >= target - 1e-9), None)
 
@@ -401,7 +397,7 @@ def main() -> int:
         for method in methods:
             for set_name in ["-"] if method == "nnql" else [s for s in args.sets.split(",") if s]:
                 row = run_one(method, set_name, seed, None if method == "nnql" else demos[set_name],
-                              expert_labels, args, sets, nav) | code  # fmt: skip
+                              expert_labels, args, sets, nav) | code | {"load": machine_load()}  # fmt: skip
                 with open(runs, "a") as fh:
                     fh.write(json.dumps(row) + "\n")
                 short = {f: round(row["test"][f]["success"], 3) for f in FAMILIES}
