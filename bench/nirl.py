@@ -344,11 +344,12 @@ def report(path: Path) -> int:
 
 
 def code_version() -> str:
-    """The commit the bench runs from, "+dirty" if the tree has uncommitted changes."""
+    """The commit the bench runs from, "+dirty" if the code has uncommitted changes (runs file aside)."""
     root = Path(__file__).resolve().parents[1]
     git = ["git", "-C", str(root)]
     commit = subprocess.run([*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout
-    dirty = subprocess.run([*git, "status", "--porcelain", "--untracked-files=no"], capture_output=True)
+    tracked = [*git, "status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/nirl_runs.jsonl"]
+    dirty = subprocess.run(tracked, capture_output=True)
     return commit.strip() + ("+dirty" if dirty.stdout.strip() else "")
 
 
