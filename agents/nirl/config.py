@@ -41,7 +41,8 @@ class NIRLConfig:
     chi2_alpha: float = 0.5
     """iq: chi-squared regulariser E[r^2] / (4 chi2_alpha); a demonstrated step earns about 2 chi2_alpha"""
     crash_absorbing: bool = True
-    """iq: a collision leads to an absorbing state valued at IQ-Learn's optimum there (not to nothing)"""
+    """absorbing end states (DAC): iq: a collision leads to one valued at IQ-Learn's optimum there (not
+    to nothing); sqil: the goal is an expert absorbing state (reward 1 forever), a collision earns 0"""
     lr: float = 1e-3
     """Adam learning rate of the Q-network"""
     reward_lr: float = 1e-3

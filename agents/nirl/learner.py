@@ -252,13 +252,21 @@ class NIRLLearner:
         q_taken = q_all.gather(1, labels[:, None]).squeeze(1)
         next_value = soft_value(self.target_q(next_obs), cfg.alpha)
         metrics: dict[str, float] = {}
+        at_goal = goal_reached(next_obs, self.reward.n_beams, self.goal_tolerance, self.max_range)
         if cfg.core == "iq" and cfg.crash_absorbing:
             # a collision leads to an absorbing state (Kostrikov et al. 2019, DAC) told apart from the
             # goal by the observation; its value is IQ-Learn's optimum there (losses.crash_absorbing_value)
-            at_goal = goal_reached(next_obs, self.reward.n_beams, self.goal_tolerance, self.max_range)
             crashed = terminated.bool() & ~at_goal
             next_value = torch.where(crashed, crash_absorbing_value(cfg.chi2_alpha, cfg.gamma), next_value)
             terminated = terminated.bool() & at_goal
+        if cfg.core == "sqil" and cfg.crash_absorbing:
+            # DAC's absorbing states for SQIL: the goal where demonstrations end is an expert absorbing
+            # state (reward 1 forever, 1 / (1 - gamma)); a collision ends with reward 0. Without it, ending
+            # at the goal is worth less than wandering on at reward 1, and the policy avoids the goal
+            reached = terminated.bool() & at_goal
+            forever = torch.full_like(next_value, 1.0 / (1.0 - cfg.gamma))
+            next_value = torch.where(reached, forever, next_value)
+            terminated = terminated.bool() & ~at_goal
         if cfg.core == "iq":
             terms = iq_loss(
                 q_taken, soft_value(q_all, cfg.alpha), next_value, terminated, is_expert, cfg.gamma,
