@@ -226,7 +226,7 @@ def render(view: dict):
         )
     parts = [summary, actors]
     if learner.get("demos"):
-        demos = Table(title="demonstrations stored, per source")
+        demos = Table(title="demos per source")
         for column in ("source", "episodes", "steps"):
             demos.add_column(column, justify="left" if column == "source" else "right")
         for source, count in learner["demos"].items():
