@@ -21,8 +21,10 @@ policy. Everything lands in --out (default runs/<run>): checkpoints/, policy/ (f
 model.safetensors + config.json), eval/learning_curve.png (time axis from the first launch,
 resumes marked) and eval/evaluations.jsonl, tb/ (TensorBoard), logs/, summary.json. Running it
 again with the same --run resumes from its checkpoint ("resumed from checkpoint N"). The NNQL
-flags go to the learner. Exit code 2 for a bad argument (before anything starts), 1 if a
-process fails (its log tail is printed).
+flags go to the learner. With --nirl the learner also trains NIRL, a demonstrator process
+publishes demonstrations (the expert's --demo-episodes, or a --demos dataset once) and the
+evaluator reports NIRL beside NNQL. Exit code 2 for a bad argument (before anything starts), 1 if
+a process fails (its log tail is printed).
 """
 
 

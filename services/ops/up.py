@@ -1,11 +1,13 @@
 """`navlearn up`: the whole system on one machine, as child processes, for a bounded run.
 
 It starts the learner (hosting the Zenoh router on a free loopback port), N
-actors and the evaluator as separate processes (``python -m services.cli ...``,
+actors, the evaluator and with ``--nirl`` a demonstrator (the learner then also trains NIRL and
+the evaluator compares it) as separate processes (``python -m services.cli ...``,
 each logging into ``<out>/logs/``), shows one live progress line read from the
 learner's status, and stops everything in order when the budget is spent (counted
 from the first transition the learner receives), on Ctrl-C or SIGTERM, or when a
-child dies: actors first, then the learner (which
+child dies (a demonstrator that finished its episodes is not a death): actors and the
+demonstrator first, then the learner (which
 broadcasts its final weights and writes its checkpoint), then the evaluator
 once it has measured the final version (bounded wait). Outputs in ``<out>``:
 ``checkpoints/``, ``policy/`` (the final weights), ``eval/learning_curve.png``
