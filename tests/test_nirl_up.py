@@ -12,20 +12,12 @@ import sys
 
 import pytest
 from test_nirl_demos import _bad_datasets as bad_datasets
+from test_nirl_services import SMALL_NIRL
 
 from services.cli import main
 
 SMALL = ["--actors", "1", "--envs", "4", "--eval-episodes", "2", "--hidden-sizes", "16", "--batch-size", "16",
          "--learning-starts", "64", "--maps", "rooms:10"]  # fmt: skip
-SMALL_NIRL = {
-    "hidden_sizes": [16],
-    "reward_hidden_sizes": [16],
-    "batch_size": 16,
-    "demo_batch_size": 16,
-    "warmstart_updates": 40,
-    "q_updates": 20,
-    "reward_updates": 5,
-}
 DEMO_EPISODES = 3
 
 
