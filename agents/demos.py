@@ -314,6 +314,8 @@ def load_demos(path: str | Path) -> list[Demo]:
 
     root, dataset_id = dataset_location(path)
     target = root / dataset_id
+    if not target.exists():
+        raise DemoFormatError(f"{target}: no such demonstration dataset (the directory does not exist)")
     if not (target / "data").is_dir():
         raise DemoFormatError(f"{target}: not a Minari dataset (no data/ directory)")
     try:

@@ -14,6 +14,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 
@@ -33,19 +34,22 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def settings(endpoint: str, run: str, mode: str = "client") -> ZenohSettings:
-    """A router listening on ``endpoint``, or a client connecting to it (scouting off)."""
+def settings(endpoint: str, run: str, mode: str = "client", config_file: str | None = None) -> ZenohSettings:
+    """A router listening on ``endpoint``, or a client connecting to it (scouting off; a client
+    reads its other Zenoh settings from ``config_file`` when given)."""
     if mode == "router":
         return ZenohSettings(mode="router", listen=[endpoint], run=run)
-    return ZenohSettings(mode="client", connect=[endpoint], run=run, connect_timeout=120)
-
-
-def spawn(*argv: str) -> subprocess.Popen:
-    """A child Python process (stdout piped, NAVLEARN_* variables dropped so flags alone rule)."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
-    return subprocess.Popen(
-        [sys.executable, *argv], env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
+    return ZenohSettings(
+        mode="client", connect=[endpoint], run=run, connect_timeout=120, config_file=config_file
     )
+
+
+def spawn(*argv: str, log: IO[str] | None = None) -> subprocess.Popen:
+    """A child Python process (NAVLEARN_* variables dropped so flags alone rule): a helper whose
+    stdout this process reads, or with ``log`` a service whose stdout and stderr go to that file."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
+    out, err = (subprocess.PIPE, subprocess.DEVNULL) if log is None else (log, subprocess.STDOUT)
+    return subprocess.Popen([sys.executable, *argv], env=env, stdout=out, stderr=err, text=True)
 
 
 def stop(process: subprocess.Popen, timeout: float = 60) -> str:
@@ -60,22 +64,27 @@ def stop(process: subprocess.Popen, timeout: float = 60) -> str:
 
 
 def wait_ready(process: subprocess.Popen, timeout: float = 120) -> None:
-    """Reads the child's stdout until it prints ``ready``."""
+    """Reads the child's stdout until it prints ``ready``; RuntimeError if it exits first."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        if process.stdout.readline().strip() == "ready":
+        line = process.stdout.readline()
+        if line.strip() == "ready":
             return
-    raise RuntimeError("helper process did not start")
+        if not line and process.poll() is not None:
+            raise RuntimeError(f"helper process exited with {process.returncode} before it was ready")
+    raise RuntimeError(f"helper process was not ready within {timeout} s")
 
 
-def random_transitions(n: int, rng: np.random.Generator, obs_dim: int = OBS_DIM) -> dict[str, np.ndarray]:
+def random_transitions(
+    n: int, rng: np.random.Generator, terminal_rate: float = 0.02, obs_dim: int = OBS_DIM
+) -> dict[str, np.ndarray]:
     """``n`` transitions in the flat layout ``NNQLLearner.add`` takes."""
     return {
         "obs": rng.random((n, obs_dim), dtype=np.float32),
         "action": rng.integers(0, N_ACTIONS, n),
         "reward": rng.normal(size=n).astype(np.float32),
         "next_obs": rng.random((n, obs_dim), dtype=np.float32),
-        "terminated": rng.random(n) < 0.02,
+        "terminated": rng.random(n) < terminal_rate,
         "truncated": np.zeros(n, bool),
     }
 

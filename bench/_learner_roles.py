@@ -47,7 +47,7 @@ def feeder_main(endpoint: str, batch: int) -> None:
             model="nnql",
             policy_version=0,
             env_ids=np.zeros(batch, np.int32),
-            **random_transitions(batch, rng, LEARNER_OBS_DIM),
+            **random_transitions(batch, rng, obs_dim=LEARNER_OBS_DIM),
         )
         for _ in range(16)
     ]

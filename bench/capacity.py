@@ -39,177 +39,48 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
+import torch
 
-RUN = "capacity"
-OBS_DIM, N_ACTIONS = 11, 5
+from agents.nnql.config import NNQLConfig
+from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
+from bench._capacity_roles import RUN, actor_batch
+from bench._common import N_ACTIONS, OBS_DIM, free_port, process_cpu, settings, spawn, stop, wait_ready
+from protocols.codec import decode, encode
+from protocols.limits import Limits
+from services.actor.status import query_actor_statuses
+from services.common.transport import open_session
+from services.learner.durable import DurableIngest
+
+ROLES = "bench._capacity_roles"
 BATCH_STEPS = 16  # the actor's default --batch-steps
-CLI = [sys.executable, "-m", "services.cli"]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def process_cpu(pid: int) -> float:
-    """User + system CPU seconds of process ``pid`` (all its threads)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-def spawn(*argv: str, log=None) -> subprocess.Popen:
-    """A helper whose stdout this process reads (``log=None``), or a service logging to ``log``."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
-    if log is None:
-        return subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    return subprocess.Popen(argv, env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
-
-
-def wait_line(process: subprocess.Popen, word: str, timeout: float = 180) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        line = process.stdout.readline()
-        if line.strip() == word:
-            return
-        if not line and process.poll() is not None:
-            raise RuntimeError(f"helper exited with {process.returncode} before saying {word!r}")
-    raise RuntimeError(f"helper did not say {word!r} within {timeout} s")
-
-
-def stop(process: subprocess.Popen) -> str:
-    if process.poll() is None:
-        process.send_signal(signal.SIGTERM)
-    try:
-        out, _ = process.communicate(timeout=60)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        out, _ = process.communicate()
-    return out or ""
-
-
-def session_for(endpoint: str, mode: str = "client", config_file: str | None = None):
-    from services.common.transport import ZenohSettings, open_session
-
-    if mode == "router":
-        return open_session(ZenohSettings(mode="router", listen=[endpoint], run=RUN))
-    settings = ZenohSettings(connect=[endpoint], run=RUN, connect_timeout=60, config_file=config_file)
-    return open_session(settings)
-
-
-def actor_batch(rows: int, rng: np.random.Generator):
-    from protocols.messages import TransitionBatch
-
-    return TransitionBatch(
-        sender="bench#1", seq=1, actor="bench", model="nnql", policy_version=1,
-        env_ids=np.arange(rows, dtype=np.int32) % 1024, obs=rng.random((rows, OBS_DIM), dtype=np.float32),
-        action=rng.integers(0, N_ACTIONS, rows), reward=rng.normal(size=rows).astype(np.float32),
-        next_obs=rng.random((rows, OBS_DIM), dtype=np.float32), terminated=rng.random(rows) < 0.05,
-        truncated=np.zeros(rows, bool),
-    )  # fmt: skip
-
-
-# ---------------------------------------------------------------- helper processes
-
-
-def sink_main(endpoint: str) -> None:
-    """A router that serves the default network's weights and acknowledges every batch at once."""
-    from agents.nnql.config import NNQLConfig
-    from agents.nnql.learner import NNQLLearner
-    from protocols import keys
-    from protocols.codec import decode, encode
-    from protocols.flow import Ack
-    from services.common.weights import WeightsBroadcaster
-
-    learner = NNQLLearner(NNQLConfig(), OBS_DIM, N_ACTIONS)
-    with session_for(endpoint, "router") as session:
-        broadcaster = WeightsBroadcaster(session, RUN, "nnql", "sink")
-        broadcaster.publish(learner.get_weights(), 1, learner.architecture)
-
-        def on_batch(sample) -> None:
-            batch = decode(sample.payload.to_bytes())
-            ack = Ack(
-                sender="sink", seq=batch.seq, actor=batch.sender, accepted_seq=batch.seq, policy_version=1
-            )
-            session.put(keys.acks(RUN, batch.actor), encode(ack))
-
-        session.declare_subscriber(keys.everything(RUN, "transitions"), on_batch)
-        done = threading.Event()
-        signal.signal(signal.SIGTERM, lambda *_: done.set())
-        print("ready", flush=True)
-        while not done.wait(0.1):  # a short wait lets the signal handlers run
-            pass
-
-
-def publisher_main(endpoint: str, rows: int, config_file: str | None) -> None:
-    """Puts one encoded actor batch as fast as BLOCK congestion control lets it through."""
-    import zenoh
-
-    from protocols import keys
-    from protocols.codec import encode
-
-    payload = encode(actor_batch(rows, np.random.default_rng(0)))
-    with session_for(endpoint, config_file=config_file) as session:
-        publisher = session.declare_publisher(
-            keys.transitions(RUN, "bench"), congestion_control=zenoh.CongestionControl.BLOCK
-        )
-        done = threading.Event()
-        signal.signal(signal.SIGTERM, lambda *_: done.set())
-        while not publisher.matching_status.matching and not done.is_set():
-            time.sleep(0.05)
-        print("ready", flush=True)
-        while not done.is_set():
-            publisher.put(payload)
-
-
-def subscriber_main(endpoint: str, config_file: str | None) -> None:
-    """Counts messages and bytes; prints the count when asked (SIGUSR1) and at the end."""
-    from protocols import keys
-
-    count = [0, 0]
-
-    def on_sample(sample) -> None:
-        count[0] += 1
-        count[1] += len(sample.payload)
-
-    with session_for(endpoint, config_file=config_file) as session:
-        session.declare_subscriber(keys.everything(RUN, "transitions"), on_sample)
-        done = threading.Event()
-        signal.signal(signal.SIGTERM, lambda *_: done.set())
-        signal.signal(signal.SIGUSR1, lambda *_: print(json.dumps(count), flush=True))
-        print("ready", flush=True)
-        while not done.wait(0.1):  # a short wait lets the signal handlers run
-            pass
+CLI = ["-m", "services.cli"]
+READY_TIMEOUT = 180  # s: a helper's first start may compile
 
 
 # ---------------------------------------------------------------- (a) actor, (b) bytes
 
 
 def bench_actor(envs: int, seconds: float, logs: Path) -> dict:
-    from protocols.codec import encode
-    from services.actor.status import query_actor_statuses
-
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    sink = spawn(sys.executable, "-m", "bench.capacity", "--role", "sink", "--endpoint", endpoint)
+    sink = spawn("-m", ROLES, "sink", "--endpoint", endpoint)
     actor = None
     try:
-        wait_line(sink, "ready")
+        wait_ready(sink, READY_TIMEOUT)
         with open(logs / f"actor-{envs}.log", "w") as log:
             argv = ["--connect", endpoint, "--run", RUN, "--id", "a1", "--envs", str(envs), "--seed", "1"]
             actor = spawn(*CLI, "actor", *argv, log=log)
-        with session_for(endpoint) as session:
+        with open_session(settings(endpoint, RUN)) as session:
 
             def steps() -> tuple[int, int, float]:
                 status = query_actor_statuses(session, RUN, timeout=5.0).get("a1")
@@ -249,16 +120,9 @@ def bench_actor(envs: int, seconds: float, logs: Path) -> dict:
 
 
 def bench_learner(envs: int, seconds: float, wal_dir: Path) -> dict:
-    os.environ.setdefault("RL_LOGGING_LEVEL", "WARNING")  # before torchrl is imported
+    # torchrl was imported at its default INFO level (it reads RL_LOGGING_LEVEL then): quiet it here
+    logging.getLogger("torchrl").setLevel(os.environ.get("RL_LOGGING_LEVEL", "WARNING"))
     warnings.filterwarnings("ignore", message="The given NumPy array is not writable")  # decoded views
-    import torch
-
-    from agents.nnql.config import NNQLConfig
-    from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
-    from protocols.codec import decode, encode
-    from protocols.limits import Limits
-    from services.learner.durable import DurableIngest
-
     config = NNQLConfig()
     learner = NNQLLearner(config, OBS_DIM, N_ACTIONS)
     rng = np.random.default_rng(1)
@@ -292,7 +156,7 @@ def bench_learner(envs: int, seconds: float, wal_dir: Path) -> dict:
                     message = decode(payload, limits)
                     seq += 1
                     message.seq = seq
-                    durable.admit(message)
+                    durable.admit(message, payload)
                     durable.sync()
                     n += len(message)
             rate = n / (time.perf_counter() - start)
@@ -342,7 +206,8 @@ def bench_router(rows: int, seconds: float, two: bool, shm: bool, workdir: Path)
         tls = workdir / "tls"
         if not tls.exists():
             made = ["--out", str(tls), "--hosts", "127.0.0.1", "--clients", "router-a"]
-            subprocess.run([*CLI, "certs", *made], check=True, capture_output=True, timeout=120)
+            certs = [sys.executable, *CLI, "certs", *made]
+            subprocess.run(certs, check=True, capture_output=True, timeout=120)
         link = f"tls/127.0.0.1:{free_port()}"
         ca = [*base, "--tls-root-ca", str(tls / "ca.pem"), "--tls-mtls"]
         b_side = ["--listen", link, "--listen", f"tcp/127.0.0.1:{port_out}", *ca]
@@ -354,12 +219,12 @@ def bench_router(rows: int, seconds: float, two: bool, shm: bool, workdir: Path)
     else:
         port_out = port_in
         routers.append(spawn(*CLI, "router", *base, "--listen", f"tcp/127.0.0.1:{port_in}", log=log))
-    helper = [sys.executable, "-m", "bench.capacity", "--rows", str(rows), *base, "--endpoint"]
-    subscriber = spawn(*helper, f"tcp/127.0.0.1:{port_out}", "--role", "subscriber")
-    publisher = spawn(*helper, f"tcp/127.0.0.1:{port_in}", "--role", "publisher")
+    helper = ["--rows", str(rows), *base, "--endpoint"]
+    subscriber = spawn("-m", ROLES, "subscriber", *helper, f"tcp/127.0.0.1:{port_out}")
+    publisher = spawn("-m", ROLES, "publisher", *helper, f"tcp/127.0.0.1:{port_in}")
     try:
-        wait_line(subscriber, "ready")
-        wait_line(publisher, "ready")
+        wait_ready(subscriber, READY_TIMEOUT)
+        wait_ready(publisher, READY_TIMEOUT)
         time.sleep(1.0)
 
         def snapshot() -> tuple[float, int, int, list[float]]:
@@ -439,10 +304,6 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--role", choices=("sink", "publisher", "subscriber"), help=argparse.SUPPRESS)
-    parser.add_argument("--endpoint", help=argparse.SUPPRESS)
-    parser.add_argument("--zenoh-config", help=argparse.SUPPRESS)
-    parser.add_argument("--rows", type=int, default=1024, help=argparse.SUPPRESS)
     parser.add_argument("--envs", type=int, nargs="+", default=[8, 64], help="actor --envs to measure")
     parser.add_argument("--seconds", type=float, default=8.0, help="length of each measurement window")
     parser.add_argument(
@@ -458,13 +319,6 @@ def main() -> None:
         help="project a learner doing this many updates/s (0: the measured CPU figure)",
     )
     args = parser.parse_args()
-    if args.role == "sink":
-        return sink_main(args.endpoint)
-    if args.role == "publisher":
-        return publisher_main(args.endpoint, args.rows, args.zenoh_config)
-    if args.role == "subscriber":
-        return subscriber_main(args.endpoint, args.zenoh_config)
-
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)

@@ -1,20 +1,34 @@
-"""NIRL benchmark (issue 8, thesis ch. 5): NIRL against imitation on the same demonstrations,
-and NIRL's environment steps against NNQL learning from scratch.
+"""NIRL benchmark (issue 15): NIRL (IQ-Learn core) against every baseline on the same demonstrations
+and the same test episodes, and NIRL's robot-steps against NNQL from scratch.
 
-(a) expert demonstrations on training maps (``mixed:16``): the first 5, 10 and 20 of one
-    clean set, and 20 demonstrations whose every action was, with probability 0.3, a random
-    wall-free one (the recorded actions are what both learners see);
-(b) per set: the imitation policy (behaviour cloning, agents.imitation) and NIRL (warm start
-    + ``--iterations`` rounds of neural policy iteration, ``--steps-per-iteration`` robot-steps
-    each), both evaluated greedily on the same 100 unseen generated maps, static and with 4
-    moving discs: success rate (95% CI) and path length ratio to A*;
-(c) NNQL from scratch (``train --local`` defaults) for ``--nnql-steps`` robot-steps, its
-    greedy policy evaluated on the validation set every ``--nnql-eval-every`` steps; NIRL
-    (20 clean demonstrations) evaluated on the same validation set after every iteration.
-    Figure: robot-steps NIRL needs to reach the validation success NNQL reaches, divided by
-    the robot-steps NNQL needs for it (aim <= 1/3). Demonstration steps are reported apart.
+Demonstrations: the modified-A* expert on training maps (``mixed:16``), per seed s one clean set
+(seed 10000 + s; the first 5, 10 and 20 episodes) and one noisy set of 20 (seed 20000 + s; each
+action, with probability 0.3, a random wall-free one; learners see the recorded actions only).
+Learners, each per (demo set, seed):
 
-    python -m bench.nirl            # human lines, then one JSON object on the last line
+* ``bc``    behaviour cloning (agents.imitation) trained properly: minibatches of 32 (many steps
+            per epoch), early stopping with patience 30 on a validation split of whole episodes;
+* ``sqil``  SQIL (Reddy et al. 2020) on NNQL's Q-network: soft Q-learning, reward 1 on demonstrated
+            steps and 0 on own, 50/50 batches (``NIRLConfig(core="sqil")``), NIRL's env budget;
+* ``dqfd``  NNQL with the demonstrations in replay, DQfD-style (Hester et al. 2018): the environment's
+            reward, demonstrations kept in their own buffer and 25% of each batch, DQfD's large-margin
+            loss (0.8) on them, 500 pre-training updates on demonstrations alone; NIRL's env budget;
+* ``nirl``  NIRL with its default core (IQ-Learn), ``--iterations`` x ``--steps-per-iteration``;
+* ``maxmargin`` the max-margin core with issue 8's settings (gamma 0.95 ...), the same budget;
+* ``nnql``  NNQL from scratch (``train --local`` defaults), ``--nnql-steps``: once per seed, no demos.
+
+Every policy is evaluated greedily on the same ``--episodes`` test episodes per family (seed 0:
+"unseen" static generated maps and "dynamic", the same with 4 moving discs): success with its
+Wilson 95% interval, per-episode outcomes kept so McNemar's exact test compares NIRL with behaviour
+cloning on the same episodes. Learning time: NIRL (20 clean demos) and NNQL from scratch are
+validated on 50 validation-seed episodes along the way; robot-steps to a fixed validation success.
+The grid-world check (``agents.nirl.gridcheck``) measures reward recovery where the true reward is known.
+
+Runs append one JSON line each to ``--runs`` (so the grid can be run in pieces, in the background);
+``--report`` reads them and prints the table, then one JSON object on the last line.
+
+    python -m bench.nirl --methods nirl,bc --sets 20,20noisy --seeds 0,1,2    # a piece
+    python -m bench.nirl --report                                             # the table
 """
 
 from __future__ import annotations
@@ -22,230 +36,374 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation.compare import mcnemar_exact
+from agents.evaluation.metrics import wilson_interval as wilson
 from agents.imitation.config import ImitationConfig
 from agents.imitation.train import train_policy
+from agents.nirl.buffers import demo_buffer, sample
 from agents.nirl.config import NIRLConfig, NIRLRun
+from agents.nirl.learner import NIRLLearner
+from agents.nirl.losses import max_margin_loss
+from agents.nirl.max_margin import Q_KEYS
 from agents.nirl.train_local import train_nirl
+from agents.nnql.config import NNQLConfig
+from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
+from agents.nnql.rollout import VectorRollout
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.planning.demonstrate import generate_demos
+from bench._common import machine_load
 from worlds.config import NavConfig
 
 FAMILIES = ("unseen", "dynamic")
+SETS = ("5", "10", "20", "20noisy")
+METHODS = ("bc", "sqil", "dqfd", "nirl", "maxmargin", "nnql")
+ISSUE8 = {
+    "core": "max_margin", "gamma": 0.95, "target_tau": 0.005, "prior_temperature": 0.1,
+    "relabel_threshold": 0.6, "demo_noise": 0.2, "refine_start": 0, "demo_fraction": 0.25,
+    "temperature_start": 0.3, "temperature_end": 0.02,
+}  # fmt: skip
+"""NIRLConfig of the max-margin learner as issue 8 measured it (its defaults then)"""
+VALIDATION_SEED = 1
 
 
-def figures(result, family: str) -> dict:
-    m = result.metrics[family]
+def demo_sets(seed: int, noise: float, nav: NavConfig) -> tuple[dict[str, list], list[np.ndarray]]:
+    clean, _ = generate_demos("mixed:16", 20, seed=10_000 + seed, config=nav)
+    noisy, _ = generate_demos("mixed:16", 20, seed=20_000 + seed, noise=noise, config=nav)
+    expert_labels = [d.labels.copy() for d in noisy]
+    for demo in noisy:  # the learners see the recorded actions only
+        demo.expert_actions = None
+    return {"5": clean[:5], "10": clean[:10], "20": clean, "20noisy": noisy}, expert_labels
+
+
+def outcomes_of(result, family: str) -> list[int]:
+    return [int(e.outcome == 1) for e in result.episodes[family]]
+
+
+def figures(result) -> dict:
+    out = {}
+    for family in FAMILIES:
+        m = result.metrics[family]
+        out[family] = {
+            "success": m.success.value,
+            "success_ci": [m.success.low, m.success.high],
+            "collision_static": m.collision_static.value,
+            "path_ratio": None if m.path_ratio is None else float(m.path_ratio),
+            "solved": outcomes_of(result, family),
+        }
+    return out
+
+
+def validation_success(policy, episodes: int, nav) -> float:
+    report = evaluate(policy, make_eval_set("unseen", episodes, seed=VALIDATION_SEED), nav)
+    return report.metrics["unseen"].success.value
+
+
+def train_dqfd(demos, seed: int, env_steps: int, nav: NavConfig, margin: float = 0.8):
+    """NNQL with demonstrations in replay, DQfD-style (see the module docstring)."""
+    from worlds.vector_env import NavigationVectorEnv
+
+    cfg = NNQLConfig(seed=seed, learning_starts=256)
+    obs_dim, n_actions = nav.sensors.n_beams + 3, nav.robot.n_actions
+    q = NNQLLearner(cfg, obs_dim, n_actions)
+    store = demo_buffer(50_000, seed + 1)
+    for d in demos:
+        store.extend(
+            transitions_to_tensordict(
+                {"obs": d.observations[:-1], "action": d.actions, "reward": d.rewards,
+                 "next_obs": d.observations[1:], "terminated": d.terminations, "truncated": d.truncations},
+                obs_dim,
+            )
+        )  # fmt: skip
+    margins = torch.full((n_actions, n_actions), margin).fill_diagonal_(0.0)
+    n_demo = cfg.batch_size // 4
+
+    def update(pretrain: bool) -> None:
+        demo = sample(store, cfg.batch_size if pretrain else n_demo).select(*Q_KEYS)
+        batch = (
+            demo if pretrain else torch.cat([sample(q.replay, cfg.batch_size - n_demo).select(*Q_KEYS), demo])
+        )
+        loss = q.loss(batch)["loss"]
+        loss = loss + max_margin_loss(q.network(demo["observation"]), demo["action"], margins)
+        q.optimizer.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(q.loss.parameters(), cfg.grad_clip)
+        q.optimizer.step()
+        q.target_updater.step()
+        q.updates += 1
+
+    for _ in range(500):
+        update(pretrain=True)
+    env = NavigationVectorEnv(16, config=nav, maps="mixed:16", seed=seed)
+    policy = q.policy(seed=seed)
+    policy.explore_as(cfg, q.version)
+    rollout = VectorRollout(env, policy)
+    rollout.reset(seed=seed)
+    while rollout.steps < env_steps:
+        batch, _ = rollout.step()
+        q.add(batch)
+        for _ in range(q.updates_due()):
+            update(pretrain=False)
+            q.update_credit = max(q.update_credit - 1.0, 0.0)
+        policy.set_weights(q.get_weights(), q.version)
+        policy.explore_as(cfg, q.version)
+    env.close()
+    return q.policy(), rollout.steps
+
+
+def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, sets, nav) -> dict:
+    t0 = time.perf_counter()
+    row: dict = {"method": method, "set": set_name, "seed": seed, "episodes": args.episodes}
+    if demos is not None:
+        row["demo_episodes"] = len(demos)
+        row["demo_steps"] = int(sum(len(d) for d in demos))
+    budget = args.iterations * args.steps_per_iteration
+    if method == "bc":
+        config = ImitationConfig(seed=seed, batch_size=32, patience=30, max_epochs=400, val_fraction=0.25)
+        trained = train_policy(demos, config, n_actions=nav.robot.n_actions)
+        policy, row["env_steps"] = trained.policy(), 0
+        row["bc_epochs"], row["bc_best_epoch"] = len(trained.history), trained.best_epoch
+        row["bc_steps_per_epoch"] = math.ceil(trained.train_steps / config.batch_size)
+    elif method in ("nirl", "sqil", "maxmargin"):
+        curve_run = method == "nirl" and set_name == "20"
+        rounds = max(args.iterations, args.curve_iterations) if curve_run else args.iterations
+        core = {"nirl": {"core": "iq"}, "sqil": {"core": "sqil"}, "maxmargin": ISSUE8}[method]
+        config = NIRLConfig(
+            **core, iterations=rounds, steps_per_iteration=args.steps_per_iteration, seed=seed
+        )
+        curve, tested = [], {}
+
+        def on_iteration(point, learner, curve=curve, tested=tested):
+            if curve_run and learner.iteration % args.curve_every == 0:
+                curve.append(
+                    (point["env_steps"], validation_success(learner.policy(), args.val_episodes, nav))
+                )
+            if learner.iteration == args.iterations:
+                tested["policy"], tested["steps"] = learner.policy(), int(point["env_steps"])
+                tested["scale"] = {k: v for k, v in point.items() if k.startswith("nirl/")}
+
+        run = NIRLRun(out="", eval_every=0, final_eval_episodes=0, progress=False)
+        result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
+        policy, row["env_steps"], row["reward_scale"] = tested["policy"], tested["steps"], tested["scale"]
+        if curve_run:
+            row["curve"] = curve
+        if set_name == "20noisy" and method != "sqil":
+            row["map_refinement"] = refinement_rates(result.learner, expert_labels)
+    elif method == "dqfd":
+        policy, row["env_steps"] = train_dqfd(demos, seed, budget, nav)
+    else:  # nnql from scratch
+        result = train_local(
+            LocalTrainConfig(steps=args.nnql_steps, eval_every=args.nnql_eval_every,
+                             eval_episodes=args.val_episodes,
+                             keep_best=False, final_eval_episodes=0, out="", seed=seed, progress=False)
+        )  # fmt: skip
+        policy, row["env_steps"] = result.learner.policy(), result.env_steps
+        row["curve"] = [(p["env_steps"], p["eval_success"]) for p in result.curve if "eval_success" in p]
+    row["train_seconds"] = round(time.perf_counter() - t0, 1)
+    row["test"] = figures(evaluate(policy, sets, nav))
+    row["seconds"] = round(time.perf_counter() - t0, 1)
+    return row
+
+
+def refinement_rates(learner: NIRLLearner, expert_labels: list[np.ndarray]) -> dict:
+    steps, refined = learner.refine_all()
+    expert = torch.as_tensor(np.concatenate(expert_labels)[: len(steps)])
+    recorded = steps["action"]
+    wrong = recorded != expert
+    labels = refined.labels
     return {
-        "success": round(m.success.value, 3),
-        "success_ci": [round(m.success.low, 3), round(m.success.high, 3)],
-        "path_ratio": None if m.path_ratio is None else round(float(m.path_ratio), 3),
-        "collision_static": round(m.collision_static.value, 3),
+        "injected_steps": int(wrong.sum()),
+        "clean_steps": int((~wrong).sum()),
+        "injected_relabelled_to_expert": float((labels[wrong] == expert[wrong]).float().mean()),
+        "injected_changed": float((labels[wrong] != recorded[wrong]).float().mean()),
+        "clean_kept": float((labels[~wrong] == recorded[~wrong]).float().mean()),
     }
 
 
-def recorded_only(demos):
-    """The demonstrations as a learner sees them: the actions taken, not the expert's own labels."""
-    for demo in demos:
-        demo.expert_actions = None
-    return demos
+# ---------------------------------------------------------------- report
 
 
-def first_reaching(curve: list[tuple[float, float]], target: float) -> float | None:
-    """Robot-steps of the first curve point whose success reaches ``target`` (None if none does)."""
+def mcnemar(a: list[int], b: list[int]) -> tuple[int, int, float]:
+    """McNemar's exact test on paired successes (agents.evaluation.compare): (only a, only b, p)."""
+    only_a = sum(x and not y for x, y in zip(a, b, strict=True))
+    only_b = sum(y and not x for x, y in zip(a, b, strict=True))
+    return only_a, only_b, mcnemar_exact(only_a, only_b)
+
+
+def first_reaching(curve, target: float):
     return next((steps for steps, success in curve if success >= target - 1e-9), None)
+
+
+def report(path: Path) -> int:
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    latest = {(r["method"], r["set"], r["seed"]): r for r in rows}  # a re-run replaces its line
+    rows = list(latest.values())
+    table, summary = [], {"bench": "nirl", "cells": {}}
+    print("| learner | demos | seeds | unseen success (pooled) [95% CI] | per seed "
+          "| dynamic success [95% CI] |"
+          " collisions (unseen) |")  # fmt: skip
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for method in METHODS:
+        for set_name in (*SETS, "-"):
+            cell = [r for r in rows if r["method"] == method and r["set"] == set_name]
+            if not cell:
+                continue
+            cell.sort(key=lambda r: r["seed"])
+            entry = {"seeds": [r["seed"] for r in cell]}
+            text = []
+            for family in FAMILIES:
+                solved = sum(sum(r["test"][family]["solved"]) for r in cell)
+                n = sum(len(r["test"][family]["solved"]) for r in cell)
+                low, high = wilson(solved, n)
+                entry[family] = {"success": solved / n, "ci": [low, high], "n": n,
+                                 "per_seed": [r["test"][family]["success"] for r in cell]}  # fmt: skip
+                text.append(f"{solved / n:.1%} [{low:.1%}, {high:.1%}]")
+            per_seed = " / ".join(f"{s:.0%}" for s in entry["unseen"]["per_seed"])
+            collisions = np.mean([r["test"]["unseen"]["collision_static"] for r in cell])
+            print(
+                f"| {method} | {set_name} | {len(cell)} | {text[0]} | {per_seed} | {text[1]} "
+                f"| {collisions:.0%} |"
+            )
+            summary["cells"][f"{method}/{set_name}"] = entry
+            table.append(entry)
+    # paired comparison on the same episodes: NIRL vs behaviour cloning, same demo set and seed
+    comparisons = {}
+    for set_name in SETS:
+        for family in FAMILIES:
+            a, b = [], []
+            for seed in range(10):
+                x, y = latest.get(("nirl", set_name, seed)), latest.get(("bc", set_name, seed))
+                if x and y:
+                    a += x["test"][family]["solved"]
+                    b += y["test"][family]["solved"]
+            if a:
+                only_nirl, only_bc, p = mcnemar(a, b)
+                comparisons[f"{set_name}/{family}"] = {
+                    "nirl": float(np.mean(a)), "bc": float(np.mean(b)), "only_nirl": only_nirl,
+                    "only_bc": only_bc, "p": p, "n": len(a),
+                }  # fmt: skip
+                print(f"McNemar NIRL vs BC, {set_name} demos, {family}: {np.mean(a):.1%} vs "
+                      f"{np.mean(b):.1%}, {only_nirl} episodes only NIRL solved, {only_bc} only BC, "
+                      f"p = {p:.2g} (n = {len(a)})")  # fmt: skip
+    summary["nirl_vs_bc"] = comparisons
+    refinement = [(r["method"], r["map_refinement"]) for r in rows if "map_refinement" in r]
+    if refinement:
+        summary["map_refinement"] = refinement
+        for method, item in refinement:
+            print(f"MAP refinement ({method}, 20 noisy): {item['injected_relabelled_to_expert']:.1%} of "
+                  f"{item['injected_steps']} injected steps relabelled to the expert's action "
+                  f"({item['injected_changed']:.1%} changed), "
+                  f"{item['clean_kept']:.1%} of {item['clean_steps']} clean steps kept")  # fmt: skip
+    scales = [
+        (r["set"], r["seed"], r["reward_scale"])
+        for r in rows
+        if r["method"] == "nirl" and "reward_scale" in r
+    ]
+    summary["reward_scale"] = scales
+    curves = {m: [r["curve"] for r in rows if r["method"] == m and "curve" in r] for m in ("nirl", "nnql")}
+    summary["curves"] = curves
+    learning = {}
+    for target in (0.9, 0.6, 0.5):
+        nirl_steps = [first_reaching(c, target) for c in curves["nirl"]]
+        nnql_steps = [first_reaching(c, target) for c in curves["nnql"]]
+        learning[str(target)] = {"nirl": nirl_steps, "nnql": nnql_steps}
+        print(
+            f"robot-steps to {target:.0%} validation success: NIRL (20 demos) {nirl_steps}, NNQL {nnql_steps}"
+        )
+    summary["steps_to_validation_success"] = learning
+    grid = [r for r in rows if r["method"] == "gridcheck"]
+    if grid:
+        summary["gridcheck"] = grid
+        for g in grid:
+            print(f"grid world (seed {g['seed']}): re-planned under the learned reward, "
+                  f"{g['agreement']:.1%} of "
+                  f"{g['states']} states take a truly optimal action")  # fmt: skip
+
+    def cell(name, family="unseen"):
+        return summary["cells"].get(name, {}).get(family, {}).get("success")
+
+    noisy = comparisons.get("20noisy/unseen", {})
+    summary["targets"] = {
+        "nirl_20_clean_unseen_ge_0.95": cell("nirl/20"),
+        "nirl_20_clean_dynamic_ge_0.90": cell("nirl/20", "dynamic"),
+        "nirl_20_noisy_unseen_ge_0.90": cell("nirl/20noisy"),
+        "nirl_minus_bc_noisy_unseen_ge_0.10": None if not noisy else noisy["nirl"] - noisy["bc"],
+        "mcnemar_p_noisy_unseen_lt_0.01": noisy.get("p"),
+        "gridworld_agreement_ge_0.95": [g["agreement"] for g in grid],
+    }
+    print(json.dumps(summary))
+    return 0
+
+
+def code_version() -> str:
+    """The commit the bench runs from, "+dirty" if the code has uncommitted changes (runs file aside)."""
+    root = Path(__file__).resolve().parents[1]
+    git = ["git", "-C", str(root)]
+    commit = subprocess.run([*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout
+    tracked = [*git, "status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/nirl_runs.jsonl"]
+    dirty = subprocess.run(tracked, capture_output=True)
+    return commit.strip() + ("+dirty" if dirty.stdout.strip() else "")
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes per map type")
+    parser.add_argument("--methods", default=",".join(METHODS), help="comma list of " + ", ".join(METHODS))
+    parser.add_argument("--sets", default=",".join(SETS), help="comma list of demo sets: " + ", ".join(SETS))
+    parser.add_argument("--seeds", default="0,1,2", help="comma list of seeds")
+    parser.add_argument("--episodes", type=int, default=500, help="test episodes per family")
+    parser.add_argument("--iterations", type=int, default=10, help="NIRL/SQIL rounds (and DQfD's env budget)")
+    parser.add_argument("--steps-per-iteration", type=int, default=2048, help="robot-steps per round")
     parser.add_argument(
-        "--iterations", type=int, default=10, help="NIRL policy-iteration rounds per demo set"
+        "--curve-iterations", type=int, default=30, help="NIRL rounds of the learning curve run"
     )
-    parser.add_argument("--steps-per-iteration", type=int, default=2048, help="NIRL robot-steps per round")
-    parser.add_argument("--nnql-steps", type=int, default=60_000, help="NNQL robot-steps from scratch")
-    parser.add_argument("--nnql-eval-every", type=int, default=6_000, help="NNQL validation every N steps")
-    parser.add_argument("--val-episodes", type=int, default=50, help="validation episodes (both curves)")
+    parser.add_argument("--curve-every", type=int, default=3, help="NIRL rounds between validations")
+    parser.add_argument("--nnql-steps", type=int, default=61_440, help="NNQL robot-steps from scratch")
+    parser.add_argument("--nnql-eval-every", type=int, default=6_144, help="NNQL validation every N steps")
+    parser.add_argument("--val-episodes", type=int, default=50, help="validation episodes of the curves")
     parser.add_argument("--noise", type=float, default=0.3, help="random-action probability of the noisy set")
-    parser.add_argument("--seed", type=int, default=0, help="seed of demonstrations and learners")
-    parser.add_argument("--plots", default="bench/plots", help="directory for the PNG plots")
+    parser.add_argument("--gridcheck", action="store_true", help="also run the grid-world reward recovery")
+    parser.add_argument("--runs", default="bench/nirl_runs.jsonl", help="JSON lines file runs append to")
+    parser.add_argument("--report", action="store_true", help="print the table of --runs and stop")
     args = parser.parse_args()
-    start = time.perf_counter()
+    runs = Path(args.runs)
+    if args.report:
+        return report(runs)
     nav = NavConfig()
+    code = {"commit": code_version(), "argv": sys.argv[1:]}  # which code and settings made each line
     sets = [make_eval_set(f, args.episodes, seed=0) for f in FAMILIES]
+    methods = [m for m in args.methods.split(",") if m]
+    unknown = sorted(set(methods) - set(METHODS))
+    if unknown:
+        parser.error(f"unknown methods {unknown}")
+    for seed in (int(s) for s in args.seeds.split(",")):
+        if args.gridcheck:
+            from agents.nirl.gridcheck import check_reward_recovery
 
-    clean, _ = generate_demos("mixed:16", 20, seed=10_000 + args.seed, config=nav)
-    noisy, noisy_stats = generate_demos("mixed:16", 20, seed=20_000 + args.seed, noise=args.noise, config=nav)
-    injected = sum(int((d.expert_actions != d.actions).sum()) for d in noisy if d.expert_actions is not None)
-    noisy_steps = sum(len(d) for d in noisy)
-    print(f"demonstrations: 20 clean ({sum(len(d) for d in clean)} steps), 20 noisy ({noisy_steps} steps, "
-          f"{injected} actions differ from the expert's)")  # fmt: skip
-    expert_labels = np.concatenate([d.labels for d in noisy])
-    conditions = {"5": clean[:5], "10": clean[:10], "20": clean, "20 noisy": recorded_only(noisy)}
-
-    rows, curves = {}, {}
-    for name, demos in conditions.items():
-        t0 = time.perf_counter()
-        imitation = train_policy(demos, ImitationConfig(seed=args.seed), n_actions=nav.robot.n_actions)
-        im_result = evaluate(imitation.policy(), sets, nav)
-        t1 = time.perf_counter()
-        # the 20-demo run goes on to NNQL's budget for the learning-time curve; the table takes
-        # every condition's policy after --iterations rounds
-        rounds = max(args.iterations, math.ceil(args.nnql_steps / args.steps_per_iteration))
-        config = NIRLConfig(
-            iterations=rounds if name == "20" else args.iterations,
-            steps_per_iteration=args.steps_per_iteration,
-            seed=args.seed,
-        )
-        curve: list[tuple[float, float]] = []
-        tested = {}
-
-        def validate(point, learner, curve=curve, tested=tested):
-            if "eval_success" in point:
-                curve.append((point["env_steps"], point["eval_success"]))
-            if learner.iteration == args.iterations:
-                tested["result"] = evaluate(learner.policy(), sets, nav)
-                tested["env_steps"] = int(point["env_steps"])
-
-        run = NIRLRun(out="", eval_every=1 if name == "20" else 0, eval_episodes=args.val_episodes,
-                      final_eval_episodes=0, progress=False)  # fmt: skip
-        nirl = train_nirl(demos, config, run, nav, on_iteration=validate)
-        nirl_result = tested["result"]
-        row = {
-            "demo_episodes": len(demos),
-            "demo_steps": int(sum(len(d) for d in demos)),
-            "nirl_env_steps": tested["env_steps"],
-            "imitation": {f: figures(im_result, f) for f in FAMILIES},
-            "nirl": {f: figures(nirl_result, f) for f in FAMILIES},
-            "seconds": {"imitation": round(t1 - t0, 1), "nirl": round(time.perf_counter() - t1, 1)},
-        }
-        if name == "20 noisy":
-            steps, refined = nirl.learner.refine_all()
-            wrong = steps["action"].numpy() != expert_labels[: len(steps)]
-            labels = refined.labels.numpy()
-            row["map_refinement"] = {
-                "injected_steps": int(wrong.sum()),
-                "injected_relabelled_to_expert": round(
-                    float((labels[wrong] == expert_labels[wrong]).mean()), 3
-                ),
-                "clean_kept": round(float((labels[~wrong] == steps["action"].numpy()[~wrong]).mean()), 3),
-            }
-        if name == "20":
-            curves["nirl"] = curve
-            row["nirl_curve_env_steps"] = nirl.env_steps
-        rows[name] = row
-        for f in FAMILIES:
-            im, ni = row["imitation"][f], row["nirl"][f]
-            print(f"{name:>8} demos | {f:7} | imitation {im['success']:.0%} (path/A* {im['path_ratio']}) | "
-                  f"NIRL {ni['success']:.0%} (path/A* {ni['path_ratio']}) "
-                  f"after {row['nirl_env_steps']} robot-steps")  # fmt: skip
-
-    t0 = time.perf_counter()
-    nnql = train_local(
-        LocalTrainConfig(
-            steps=args.nnql_steps,
-            eval_every=args.nnql_eval_every,
-            eval_episodes=args.val_episodes,
-            final_eval_episodes=0,
-            out="",
-            seed=args.seed,
-            progress=False,
-        )
-    )
-    curves["nnql"] = [(p["env_steps"], p["eval_success"]) for p in nnql.curve if "eval_success" in p]
-    nnql_seconds = time.perf_counter() - t0
-    target = max(s for _, s in curves["nnql"])
-    nnql_steps = first_reaching(curves["nnql"], target)
-    nirl_steps = first_reaching(curves["nirl"], target)
-    ratio = None if nirl_steps is None else nirl_steps / nnql_steps
-    reached = (
-        f"{nirl_steps:.0f}"
-        if nirl_steps is not None
-        else f"never within {rows['20']['nirl_curve_env_steps']}"
-    )
-    print(f"NNQL from scratch: best validation success {target:.0%} first at {nnql_steps:.0f} robot-steps "
-          f"({nnql_seconds:.0f} s); NIRL (20 demos) reaches it at {reached} robot-steps -> ratio "
-          f"{ratio if ratio is None else round(ratio, 3)}")  # fmt: skip
-
-    plots = Path(args.plots)
-    plots.mkdir(parents=True, exist_ok=True)
-    plot(rows, curves, target, plots)
-    best_nirl = max((s for _, s in curves["nirl"]), default=float("nan"))
-    # the reverse view: robot-steps each needs to reach the best validation success NIRL reaches
-    nirl_best_steps = first_reaching(curves["nirl"], best_nirl)
-    nnql_to_nirl_best = first_reaching(curves["nnql"], best_nirl)
-    print(f"NIRL's best validation success {best_nirl:.0%} first at {nirl_best_steps:.0f} robot-steps; "
-          f"NNQL reaches it at {nnql_to_nirl_best} robot-steps")  # fmt: skip
-    summary = {
-        "bench": "nirl",
-        "episodes": args.episodes,
-        "conditions": rows,
-        "noisy_demos_kept": noisy_stats.kept,
-        "nnql": {"target_success": target, "steps_to_target": nnql_steps, "curve": curves["nnql"]},
-        "nirl_curve": curves["nirl"],
-        "nirl_best_validation_success": best_nirl,
-        "nirl_steps_to_own_best": nirl_best_steps,
-        "nnql_steps_to_nirl_best": nnql_to_nirl_best,
-        "nirl_steps_to_nnql_target": nirl_steps,
-        "steps_ratio_nirl_over_nnql": ratio,
-        "aims": {
-            "nirl_20_demos_success_ge_0.95": rows["20"]["nirl"]["unseen"]["success"] >= 0.95,
-            "nirl_beats_imitation_on_noisy": all(
-                rows["20 noisy"]["nirl"][f]["success"] > rows["20 noisy"]["imitation"][f]["success"]
-                for f in FAMILIES
-            ),
-            "steps_ratio_le_1/3": ratio is not None and ratio <= 1 / 3,
-        },
-        "wall_seconds": round(time.perf_counter() - start, 1),
-    }
-    print(json.dumps(summary))
+            g = check_reward_recovery(gamma=0.99, seed=seed)
+            row = {"method": "gridcheck", "set": "-", "seed": seed, **g.__dict__}
+            with open(runs, "a") as fh:
+                fh.write(json.dumps(row) + "\n")
+            print(json.dumps(row), flush=True)
+        demos, expert_labels = demo_sets(seed, args.noise, nav)
+        for method in methods:
+            for set_name in ["-"] if method == "nnql" else [s for s in args.sets.split(",") if s]:
+                row = run_one(method, set_name, seed, None if method == "nnql" else demos[set_name],
+                              expert_labels, args, sets, nav) | code | {"load": machine_load()}  # fmt: skip
+                with open(runs, "a") as fh:
+                    fh.write(json.dumps(row) + "\n")
+                short = {f: round(row["test"][f]["success"], 3) for f in FAMILIES}
+                print(f"{method} {set_name} seed {seed}: {short} in {row['seconds']} s", flush=True)
     return 0
-
-
-def plot(rows: dict, curves: dict, target: float, out: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 3, figsize=(14, 3.8))
-    names = list(rows)
-    x = np.arange(len(names))
-    for ax, family in zip(axes[:2], FAMILIES, strict=True):
-        for offset, learner in ((-0.2, "imitation"), (0.2, "nirl")):
-            values = [rows[n][learner][family]["success"] for n in names]
-            low = [v - rows[n][learner][family]["success_ci"][0] for n, v in zip(names, values, strict=True)]
-            high = [rows[n][learner][family]["success_ci"][1] - v for n, v in zip(names, values, strict=True)]
-            ax.bar(x + offset, values, 0.4, yerr=[low, high], capsize=3, label=learner.upper())
-        ax.set(xticks=x, xticklabels=[f"{n} demos" for n in names], ylim=(0, 1), ylabel="success rate",
-               title=f"{family} maps ({'4 moving discs' if family == 'dynamic' else 'static'})")  # fmt: skip
-        ax.grid(axis="y", alpha=0.3)
-        ax.legend()
-    ax = axes[2]
-    for name, curve in curves.items():
-        ax.plot(
-            *zip(*curve, strict=True),
-            "o-",
-            ms=3,
-            label=f"{name.upper()}" + (" (20 demos)" if name == "nirl" else " (scratch)"),
-        )
-    ax.axhline(target, ls="--", color="gray", lw=1, label="NNQL best")
-    ax.set(
-        xlabel="robot-steps (environment)", ylabel="validation success", ylim=(0, 1), title="learning time"
-    )
-    ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(out / "nirl.png", dpi=110)
-    plt.close(fig)
 
 
 if __name__ == "__main__":

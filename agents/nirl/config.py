@@ -9,25 +9,40 @@ from typing import Any
 
 from agents.nnql.config import ACTIVATION_NAMES, NNQLConfig
 
+CORES = ("iq", "sqil", "max_margin")
+FORMAT_VERSION = 2
+"""saved-state format: 1 = issue 8's max-margin learner (no ``core`` field, gamma 0.95), 2 = cores"""
+
 
 @dataclass
 class NIRLConfig:
-    """Neural inverse RL: reward network, Q-network policy, MAP refinement, max-margin fit, policy iteration.
+    """Neural inverse RL: Q-network policy and reward, MAP refinement, policy iteration (see agents.nirl).
 
-    The Q-learning part (replay, DQNLoss, target network) is NNQL's; ``nnql_config()``
-    hands the matching NNQLConfig to ``agents.nnql.learner.NNQLLearner``.
+    The Q-learning machinery (network, replay, optimiser, target network) is NNQL's;
+    ``nnql_config()`` hands the matching NNQLConfig to ``agents.nnql.learner.NNQLLearner``.
     """
 
+    core: str = "iq"
+    """how the reward is learned: iq (inverse soft-Q learning, Garg et al. 2021: the default), sqil
+    (SQIL's fixed 1/0 rewards, Reddy et al. 2020: a baseline) or max_margin (the thesis-era fit:
+    a reward network by maximum margin planning, then Q-learning under it)"""
     hidden_sizes: tuple[int, ...] = (128, 128)
-    """widths of the Q-network's hidden layers (the policy is softmax(Q / temperature))"""
+    """widths of the Q-network's hidden layers (the policy is softmax(Q / alpha))"""
     activation: str = "relu"
     """hidden activation of both networks: relu, tanh or elu"""
     reward_hidden_sizes: tuple[int, ...] = (64, 64)
     """widths of the reward network's hidden layers (input: state-action features)"""
     reward_scale: float = 2.0
-    """the learned reward is a cost in (-reward_scale, 0): -reward_scale * sigmoid(network output)"""
-    gamma: float = 0.95
-    """discount factor of policy evaluation"""
+    """max_margin: the learned reward is a cost in (-reward_scale, 0); iq/sqil: unused"""
+    gamma: float = 0.99
+    """discount factor (0.99: a 100-step horizon, three times the ~31-step demonstrated paths)"""
+    alpha: float = 0.01
+    """iq/sqil: entropy temperature of the soft Q-function; V = alpha logsumexp(Q / alpha)"""
+    chi2_alpha: float = 0.5
+    """iq: chi-squared regulariser E[r^2] / (4 chi2_alpha); a demonstrated step earns about 2 chi2_alpha"""
+    crash_absorbing: bool = True
+    """absorbing end states (DAC): iq: a collision leads to one valued at IQ-Learn's optimum there (not
+    to nothing); sqil: the goal is an expert absorbing state (reward 1 forever), a collision earns 0"""
     lr: float = 1e-3
     """Adam learning rate of the Q-network"""
     reward_lr: float = 1e-3
@@ -35,49 +50,54 @@ class NIRLConfig:
     reward_weight_decay: float = 1e-4
     """L2 penalty on the reward network (the regulariser of maximum margin planning)"""
     margin: float = 0.5
-    """structured margin scale: a demonstrated action must beat action a by margin * (0.5 + 0.5 * turn gap)"""
+    """max_margin: a demonstrated action must beat action a by margin * (0.5 + 0.5 * turn gap)"""
     rank_coef: float = 1.0
-    """weight of the ranking margin: demonstrated steps must out-score the learner's own experience"""
+    """max_margin: weight of the ranking margin (demonstrated steps out-score the learner's own)"""
     q_margin_coef: float = 0.5
-    """weight of the large-margin term on the Q-network's own values at demo states (0: pure Q-learning)"""
+    """max_margin: weight of the large-margin term on the Q-network's values at demo states"""
     refine: bool = True
     """MAP refinement of demonstrations (False: every demonstrated action kept with weight 1)"""
-    demo_noise: float = 0.2
-    """prior probability that a demonstrated action is a random one (MAP refinement's observation noise)"""
-    prior_temperature: float = 0.1
-    """temperature of the policy prior softmax(Q / T) used by MAP refinement"""
-    relabel_threshold: float = 0.6
+    refine_start: int = 500
+    """Q updates fitted to the recorded actions before MAP refinement starts (EM needs a trained prior:
+    an untrained one relabels at random and its own relabels then confirm it)"""
+    demo_noise: float = 0.1
+    """probability that a demonstrated action is a random one (MAP refinement's observation noise), for
+    demonstrations whose dataset does not record it (a recorded ``noise``, 0 for a clean expert, wins)"""
+    prior_temperature: float = 0.002
+    """temperature of the policy prior softmax(Q / T) of MAP refinement: alpha / 5, sharper than the
+    policy, as a policy fitted to noisy steps spreads the noise over every action and explains it away"""
+    relabel_threshold: float = 0.9
     """relabel a demonstrated step to the MAP action when that action's posterior reaches this"""
     batch_size: int = 128
-    """transitions per Q-learning update"""
-    demo_fraction: float = 0.25
-    """share of each Q-learning batch drawn from the demonstrations (relabelled like the rest)"""
+    """transitions per Q update (demonstrated plus own)"""
+    demo_fraction: float = 0.5
+    """share of each update's batch drawn from the demonstrations (IQ-Learn and SQIL: 50/50)"""
     demo_batch_size: int = 128
-    """demonstration steps per reward update and per margin term"""
+    """max_margin: demonstration steps per reward update and per margin term"""
     replay_capacity: int = 100_000
     """experience replay size in transitions"""
     demo_capacity: int = 200_000
     """demonstration steps kept (own buffer: experience never evicts demonstrations)"""
     warmstart_updates: int = 500
-    """updates warm-starting both networks from the demonstrations before the first iteration"""
+    """updates on the demonstrations alone (offline IQ-Learn) before the first iteration"""
     iterations: int = 40
     """policy-iteration rounds of the local trainer"""
     steps_per_iteration: int = 2_048
     """environment steps collected with the current stochastic policy per iteration (local trainer)"""
     reward_updates: int = 50
-    """reward-network updates per iteration (maximum margin step)"""
+    """reward-network updates per iteration (iq/sqil: regression on the Q-function's implicit reward)"""
     q_updates: int = 256
-    """Q-learning updates per iteration (policy evaluation under the learned reward)"""
-    temperature_start: float = 0.3
+    """Q-network updates per iteration"""
+    temperature_start: float = 0.02
     """Boltzmann temperature of the behaviour policy at iteration 0"""
-    temperature_end: float = 0.02
+    temperature_end: float = 0.005
     """... after temperature_decay_iterations (geometric decay)"""
     temperature_decay_iterations: int = 30
     """iterations over which the temperature decays"""
-    target_tau: float = 0.005
-    """Polyak factor of the Q target network"""
+    target_tau: float = 0.05
+    """Polyak factor of the Q target network (0.005 propagated values along 30-step paths too slowly)"""
     double_q: bool = True
-    """double Q-learning in policy evaluation"""
+    """max_margin: double Q-learning in policy evaluation"""
     grad_clip: float = 10.0
     """max global gradient norm of each network's update (0 disables clipping)"""
     seed: int = 0
@@ -88,6 +108,12 @@ class NIRLConfig:
     def __post_init__(self) -> None:
         self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)
         self.reward_hidden_sizes = tuple(int(h) for h in self.reward_hidden_sizes)
+        if self.core not in CORES:
+            raise ValueError(f"NIRLConfig.core={self.core!r}: expected one of {CORES}")
+        if self.alpha <= 0 or self.chi2_alpha <= 0:
+            raise ValueError(
+                f"NIRLConfig: need alpha > 0 and chi2_alpha > 0, got {self.alpha}, {self.chi2_alpha}"
+            )
         if self.activation not in ACTIVATION_NAMES:
             raise ValueError(f"NIRLConfig.activation={self.activation!r}: expected one of {ACTIVATION_NAMES}")
         if not self.hidden_sizes or not self.reward_hidden_sizes:
@@ -148,11 +174,14 @@ class NIRLConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> NIRLConfig:
-        """Inverse of to_dict; unknown keys are an error so typos do not pass silently."""
+        """Inverse of to_dict; unknown keys are an error so typos do not pass silently. A config saved
+        before cores existed (format 1, no ``core``) was the max-margin learner's, and reads as one."""
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names)
         if unknown:
             raise ValueError(f"NIRLConfig: unknown field(s) {unknown}")
+        data = dict(data)
+        data.setdefault("core", "max_margin")
         return cls(**data)
 
 
@@ -172,5 +201,7 @@ class NIRLRun:
     """episodes of each periodic evaluation ("unseen" family, validation seed)"""
     final_eval_episodes: int = 100
     """episodes of the final evaluation ("unseen" family, seed 0: the reported set)"""
+    tensorboard: str = ""
+    """TensorBoard log directory (empty: none): losses, nirl/learned_reward, path length, collision value"""
     progress: bool = True
     """show a progress bar"""

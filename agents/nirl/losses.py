@@ -1,4 +1,5 @@
-"""The maths of NIRL as pure functions: structured margins, the max-margin loss, MAP refinement.
+"""The maths of NIRL as pure functions: inverse soft-Q learning (IQ-Learn), MAP refinement,
+and the max-margin terms of the optional max-margin fit.
 
 All take and return torch tensors, hold no state and are unit-tested alone
 (tests/test_nirl_losses.py).
@@ -12,6 +13,99 @@ import torch
 
 KEEP, REWEIGHT, RELABEL = 0, 1, 2
 """What MAP refinement did with a demonstrated step."""
+
+
+def soft_value(q_values: torch.Tensor, alpha: float) -> torch.Tensor:
+    """Soft state value ``V(s) = alpha * logsumexp(Q(s, .) / alpha)`` (N,) of the policy
+    ``softmax(Q / alpha)``: the maximum-entropy value IQ-Learn's Q-function carries."""
+    return alpha * torch.logsumexp(q_values / alpha, dim=1)
+
+
+def implicit_reward(
+    q_taken: torch.Tensor, next_value: torch.Tensor, terminated: torch.Tensor, gamma: float
+) -> torch.Tensor:
+    """The reward a soft Q-function holds, by the inverse soft Bellman operator (Garg et al. 2021,
+    eq. 6): ``r(s, a, s') = Q(s, a) - gamma * (1 - terminated) * V(s')``. After a termination
+    nothing follows (an absorbing state of value 0); time-limit truncations bootstrap."""
+    return q_taken - gamma * (~terminated.bool()).to(q_taken.dtype) * next_value
+
+
+class IQLoss(NamedTuple):
+    """The terms of IQ-Learn's objective (to minimise: ``loss``) and the rewards they saw."""
+
+    loss: torch.Tensor
+    expert_term: torch.Tensor
+    """``-E_expert[w r]``: demonstrated steps must earn a high implicit reward"""
+    value_term: torch.Tensor
+    """``E_rho[V(s) - gamma V(s')]``: the sampled form of ``(1 - gamma) E[V(s_0)]``"""
+    chi2_term: torch.Tensor
+    """``E[r^2] / (4 chi2_alpha)``: the chi-squared divergence's regulariser (bounds the reward)"""
+    reward: torch.Tensor
+    """(N,) implicit rewards of the batch (detached)"""
+
+
+def iq_loss(
+    q_taken: torch.Tensor,
+    value: torch.Tensor,
+    next_value: torch.Tensor,
+    terminated: torch.Tensor,
+    is_expert: torch.Tensor,
+    gamma: float,
+    chi2_alpha: float,
+    expert_weights: torch.Tensor | None = None,
+) -> IQLoss:
+    """Inverse soft-Q learning's objective with the chi-squared divergence (Garg et al., NeurIPS
+    2021, eq. 10 and its online form, sec. 5.1), for one mixed batch of expert and own steps:
+
+    ``-E_expert[w (Q(s,a) - gamma V(s'))] + E_all[V(s) - gamma V(s')] + E_all[r^2] / (4 chi2_alpha)``
+
+    ``q_taken`` (N,) is ``Q(s, a)``, ``value`` (N,) ``V(s)`` and ``next_value`` (N,) ``V(s')``
+    (soft values, see :func:`soft_value`); ``is_expert`` (N,) bool marks demonstrated steps, whose
+    weights ``expert_weights`` (N,) come from MAP refinement (1 when None; other rows ignored).
+    The value term over every step ("online" IQ-Learn) pushes values down where the learner goes
+    without the expert; with no own steps it is the offline form over expert states.
+    """
+    is_expert = is_expert.bool().reshape(-1)
+    if not bool(is_expert.any()):
+        raise ValueError("iq_loss needs at least one expert step in the batch")
+    next_term = gamma * (~terminated.bool()).to(q_taken.dtype) * next_value
+    reward = q_taken - next_term
+    weights = (
+        torch.ones_like(reward) if expert_weights is None else expert_weights.reshape(-1).to(reward.dtype)
+    )
+    expert_term = -(weights * reward)[is_expert].sum() / weights[is_expert].sum().clamp_min(1e-8)
+    value_term = (value - next_term).mean()
+    chi2_term = (reward**2).mean() / (4.0 * chi2_alpha)
+    loss = expert_term + value_term + chi2_term
+    return IQLoss(loss, expert_term.detach(), value_term.detach(), chi2_term.detach(), reward.detach())
+
+
+def crash_absorbing_value(chi2_alpha: float, gamma: float) -> float:
+    """Value of the absorbing state a collision leads to, at the optimum of IQ-Learn's objective there.
+
+    Only the learner's own episodes reach it, and it only loops on itself: each visit adds
+    ``V - gamma V`` (value term) and ``r^2 / (4 chi2_alpha)`` with ``r = (1 - gamma) V`` (regulariser)
+    and no expert term, minimised at ``r = -2 chi2_alpha``: ``V = -2 chi2_alpha / (1 - gamma)``.
+    Treating a crash as "nothing follows" (value 0) instead made it about as good as a demonstrated
+    path at IQ-Learn's reward scale (issue 15: collision values near 0 and above)."""
+    return -2.0 * chi2_alpha / (1.0 - gamma)
+
+
+def sqil_rewards(is_expert: torch.Tensor) -> torch.Tensor:
+    """SQIL's fixed rewards (Reddy, Dragan & Levine, ICLR 2020): 1 on demonstrated steps, 0 on own."""
+    return is_expert.to(torch.float32).reshape(-1)
+
+
+def soft_td_loss(
+    q_taken: torch.Tensor,
+    reward: torch.Tensor,
+    next_value: torch.Tensor,
+    terminated: torch.Tensor,
+    gamma: float,
+) -> torch.Tensor:
+    """Soft Q-learning's squared TD error ``(Q(s,a) - r - gamma (1 - d) V_target(s'))^2`` (mean)."""
+    target = reward + gamma * (~terminated.bool()).to(q_taken.dtype) * next_value
+    return ((q_taken - target.detach()) ** 2).mean()
 
 
 def crash_value(scale: float, gamma: float) -> float:
@@ -97,17 +191,18 @@ def margin_violations(q_values: torch.Tensor, actions: torch.Tensor, margins: to
     return (augmented.max(dim=1).values > demonstrated + 1e-6).float().mean()
 
 
-def map_posterior(prior: torch.Tensor, observed: torch.Tensor, noise: float) -> torch.Tensor:
+def map_posterior(prior: torch.Tensor, observed: torch.Tensor, noise: float | torch.Tensor) -> torch.Tensor:
     """Posterior over the intended action given the demonstrated one (Bayes' rule), (N, A).
 
     The demonstrator meant action ``a*`` (prior ``prior[i, a*]``, the current policy's
-    probabilities) and recorded it, except with probability ``noise`` a uniformly random
-    action: ``P(observed | a*) = (1 - noise) [observed = a*] + noise / A``.
+    probabilities) and recorded it, except with probability ``noise`` (a number, or (N,) per
+    step) a uniformly random action: ``P(observed | a*) = (1 - noise) [observed = a*] + noise / A``.
     """
     n_actions = prior.shape[1]
     observed = observed.long().reshape(-1)
-    likelihood = torch.full_like(prior, noise / n_actions)
-    likelihood.scatter_add_(1, observed[:, None], torch.full_like(prior[:, :1], 1.0 - noise))
+    noise = torch.as_tensor(noise, dtype=prior.dtype).reshape(-1, 1).expand(len(observed), 1)
+    likelihood = (noise / n_actions).expand_as(prior).clone()
+    likelihood.scatter_add_(1, observed[:, None], 1.0 - noise)
     joint = prior * likelihood
     return joint / joint.sum(dim=1, keepdim=True).clamp_min(1e-12)
 

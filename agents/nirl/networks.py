@@ -6,9 +6,10 @@ the free range straight ahead *after* the turn of ``a`` (the beam readings inter
 at the turn angle) and the sine and cosine of the goal bearing relative to that new
 heading. They need no transition model - only the robot's own geometry (beam and turn
 angles) - and they are what lets a reward learned from a few demonstrations transfer to
-maps it never saw. The network maps features to a cost: ``R(s, a) = -scale * sigmoid(f(phi))``.
-Costs keep the learned reward below zero, so that, as in maximum margin planning's cost
-maps, reaching the goal (which ends the episode) is always worth it.
+maps it never saw. Two output forms: ``cost`` (the max-margin core's
+``R(s, a) = -scale * sigmoid(f(phi))``: costs below zero, as in maximum margin planning's cost
+maps, so that reaching the goal is always worth it) and ``linear`` (``R(s, a) = f(phi)``, the
+IQ-Learn and SQIL cores' explicit model of the reward their Q-function implies).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from torchrl.modules import MLP
 from agents.nnql.networks import ACTIVATIONS
 from worlds.perception import observation_dim
 
+REWARD_OUTPUTS = ("cost", "linear")
 N_ACTION_FEATURES = 3
 """range along the new heading, sin and cos of the goal bearing from the new heading"""
 
@@ -93,7 +95,8 @@ class RewardNetwork(nn.Module):
     """``R(s, .)``: the learned cost of every action in a batch of states, ``(N, A)``.
 
     ``architecture`` (JSON-able) rebuilds it: obs_dim, n_actions, hidden_sizes,
-    activation, scale, n_beams, turns, beam_angles, full_circle.
+    activation, scale, n_beams, turns, beam_angles, full_circle, output (``cost`` or ``linear``;
+    files written before ``linear`` existed lack it and are ``cost``).
     """
 
     def __init__(
@@ -107,8 +110,11 @@ class RewardNetwork(nn.Module):
         turns: np.ndarray | list[float],
         beam_angles: np.ndarray | list[float],
         full_circle: bool,
+        output: str = "cost",
     ):
         super().__init__()
+        if output not in REWARD_OUTPUTS:
+            raise ValueError(f"reward output {output!r}: expected one of {REWARD_OUTPUTS}")
         if activation not in ACTIVATIONS:
             raise ValueError(f"unknown activation {activation!r}; expected one of {sorted(ACTIVATIONS)}")
         turns = np.asarray(turns, dtype=np.float64)
@@ -126,7 +132,9 @@ class RewardNetwork(nn.Module):
             "turns": [float(t) for t in turns],
             "beam_angles": [float(b) for b in beam_angles],
             "full_circle": bool(full_circle),
+            "output": output,
         }
+        self.output = output
         self.scale = float(scale)
         self.n_beams = int(n_beams)
         self.register_buffer("turns", torch.as_tensor(turns, dtype=torch.float32), persistent=False)
@@ -140,7 +148,9 @@ class RewardNetwork(nn.Module):
         )
 
     @classmethod
-    def for_navigation(cls, nav: Any, hidden_sizes, activation: str, scale: float) -> RewardNetwork:
+    def for_navigation(
+        cls, nav: Any, hidden_sizes, activation: str, scale: float, output: str = "cost"
+    ) -> RewardNetwork:
         """The reward network for a ``worlds.config.NavConfig``'s robot, sensors and observation
         (its structured features read the newest frame's readings and goal, which lead every frame)."""
         sensors = nav.sensors
@@ -154,6 +164,7 @@ class RewardNetwork(nn.Module):
             turns=nav.robot.turns,
             beam_angles=sensors.beam_angles,
             full_circle=math.isclose(sensors.fov, 2 * math.pi),
+            output=output,
         )
 
     @classmethod
@@ -164,4 +175,5 @@ class RewardNetwork(nn.Module):
         return state_action_features(obs, self.turns, self.range_weights, self.n_beams)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return -self.scale * torch.sigmoid(self.mlp(self.features(obs)).squeeze(-1))
+        out = self.mlp(self.features(obs)).squeeze(-1)
+        return out if self.output == "linear" else -self.scale * torch.sigmoid(out)

@@ -3,12 +3,16 @@
 Neural policy iteration, each round:
 1. collect ``steps_per_iteration`` robot-steps with the current stochastic policy
    (softmax over Q, temperature decaying by iteration) into the experience replay;
-2. ``NIRLLearner.iterate()``: MAP-refined max-margin reward updates, then Q-learning
-   on replayed experience relabelled with the learned reward (policy evaluation);
-3. the policy takes the new Q-network (policy improvement), and the weights of both
-   networks are recorded (iteration 0 of the history is the warm-started pair).
+2. ``NIRLLearner.iterate()``: soft policy evaluation under the reward the Q-function holds
+   (IQ-Learn on 50/50 batches of MAP-refined demonstrations and own experience; or the
+   configured core), then the reward network's fit;
+3. the policy takes the new Q-network (policy improvement: softmax over Q), and the weights
+   of both networks are recorded (iteration 0 of the history is the warm-started pair).
 The environment's own reward is never used for learning; the greedy policy is evaluated
-on held-out maps to draw the learning curve.
+on held-out maps to draw the learning curve. With ``NIRLRun.tensorboard`` every iteration's
+losses and the learned reward's scale (``nirl/learned_reward`` per demonstrated step,
+``nirl/path_return`` over a demonstrated path of ``nirl/path_length`` steps,
+``nirl/collision_value``) go to TensorBoard.
 """
 
 from __future__ import annotations
@@ -79,6 +83,7 @@ def train_nirl(
     rollout.reset(seed=config.seed)
     recent: deque[EpisodeEnd] = deque(maxlen=200)
     bar = _progress_bar(run, config)
+    writer = _tensorboard(run)
     for it in range(config.iterations):
         policy.set_weights(learner.get_weights(), learner.version)
         policy.temperature = config.temperature_at(it)
@@ -97,6 +102,10 @@ def train_nirl(
             report = evaluate_greedy(learner, run.eval_episodes, VALIDATION_SEED, nav)
             point["eval_success"] = report.metrics["unseen"].success.value
         result.curve.append(point)
+        if writer is not None:
+            for name, value in point.items():
+                if name.startswith(("losses/", "charts/", "nirl/")) or name.endswith("_success"):
+                    writer.add_scalar(name, value, global_step=int(point["env_steps"]))
         if on_iteration is not None:
             on_iteration(point, learner)
         if bar is not None:
@@ -104,6 +113,8 @@ def train_nirl(
             bar.set_postfix_str(_postfix(point))
     if bar is not None:
         bar.close()
+    if writer is not None:
+        writer.close()
     env.close()
     result.env_steps = rollout.steps
     if run.final_eval_episodes > 0:
@@ -127,8 +138,16 @@ def _curve_point(learner, env_steps, wall, recent, metrics) -> dict[str, float]:
         "wall_time": float(wall),
         "train_success": float(np.mean([o == SUCCESS_OUTCOME for o in outcomes])) if outcomes else 0.0,
     }
-    point.update({k: float(v) for k, v in metrics.items() if k.startswith(("losses/", "charts/"))})
+    point.update({k: float(v) for k, v in metrics.items() if k.startswith(("losses/", "charts/", "nirl/"))})
     return point
+
+
+def _tensorboard(run: NIRLRun):
+    if not run.tensorboard:
+        return None
+    from torch.utils.tensorboard import SummaryWriter
+
+    return SummaryWriter(run.tensorboard, flush_secs=10)
 
 
 def _progress_bar(run: NIRLRun, config: NIRLConfig):
@@ -142,7 +161,7 @@ def _progress_bar(run: NIRLRun, config: NIRLConfig):
 def _postfix(point: dict[str, float]) -> str:
     text = (
         f"steps {point['env_steps']:.0f} train success {point['train_success']:.0%} "
-        f"margin {point.get('losses/reward_margin', float('nan')):.3f} "
+        f"reward/step {point.get('nirl/learned_reward', float('nan')):.3f} "
         f"relabel {point.get('charts/refine_relabel', 0.0):.0%}"
     )
     if "eval_success" in point:

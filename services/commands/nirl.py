@@ -23,8 +23,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     parser = subparsers.add_parser(
         "nirl",
-        help="train NIRL from demonstrations in one process, or plot its weight changes",
-        description="Neural inverse reinforcement learning (thesis ch. 5): `nirl train`, `nirl weights`.",
+        help="train NIRL from demonstrations in one process, plot its weight changes or its learned reward",
+        description="Neural inverse reinforcement learning (thesis ch. 5): `nirl train`, `nirl weights`, "
+        "`nirl reward`.",
     )
     sub = parser.add_subparsers(dest="nirl_command", metavar="SUBCOMMAND", required=True)
     train = sub.add_parser(
@@ -52,11 +53,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     weights.add_argument("--out", default="weights.png", help="PNG to write")
     weights.set_defaults(func=run_weights)
 
+    reward = sub.add_parser(
+        "reward",
+        help="draw a run's learned reward over a map beside the true geodesic cost",
+        description="Put the robot at every free cell of a task from --map (8 headings each), score every "
+        "action with RUN/reward.safetensors and draw the best action's reward beside the geodesic distance "
+        "to the goal; prints their Spearman rank correlation over the reachable cells.",
+    )
+    reward.add_argument("--run", required=True, help="NIRL run directory (reward.safetensors + config.json)")
+    reward.add_argument("--map", required=True, help="map spec (FAMILY:N or a map file) of the task to draw")
+    reward.add_argument("--seed", type=int, default=0, help="seed of the task drawn from --map")
+    reward.add_argument("--headings", type=int, default=8, help="headings averaged per cell")
+    reward.add_argument("--out", default="reward.png", help="PNG to write")
+    reward.set_defaults(func=run_reward)
+
 
 def run_train(args: argparse.Namespace) -> int:
     import sys
 
-    from agents.demos import DemoFormatError, load_demos
+    from agents.demos import DemoFormatError
+    from agents.nirl.buffers import load_demonstrations
     from agents.nirl.config import NIRLConfig, NIRLRun
     from agents.nirl.train_local import train_nirl
     from services.common.options import OptionError, options_from_args
@@ -68,7 +84,7 @@ def run_train(args: argparse.Namespace) -> int:
         if run.envs < 1:
             raise OptionError("--envs must be positive")
         parse_map_spec(run.maps)
-        demos = load_demos(args.demos)
+        demos = load_demonstrations(args.demos)
     except (OptionError, DemoFormatError, ValueError) as exc:
         print(f"navlearn nirl train: {exc}", file=sys.stderr)
         return 2
@@ -103,4 +119,28 @@ def run_weights(args: argparse.Namespace) -> int:
         print(f"navlearn nirl weights: {exc}", file=sys.stderr)
         return 2
     print(f"{len(history)} iterations -> {out}")
+    return 0
+
+
+def run_reward(args: argparse.Namespace) -> int:
+    import sys
+
+    import numpy as np
+
+    from agents.nirl.reward_map import load_reward_network, plot_reward_map, reward_map
+    from worlds.tasks import parse_map_spec
+
+    try:
+        network = load_reward_network(args.run)
+        task = parse_map_spec(args.map)(np.random.default_rng(args.seed))
+        if args.headings < 1:
+            raise ValueError("--headings must be positive")
+    except ValueError as exc:
+        print(f"navlearn nirl reward: {exc}", file=sys.stderr)
+        return 2
+    result = reward_map(network, task, headings=args.headings)
+    out = plot_reward_map(result, args.out, title=f"{args.run} on {task.map_id or args.map}")
+    print(
+        f"Spearman(learned reward, -geodesic cost) = {result.spearman:.3f} over the reachable cells -> {out}"
+    )
     return 0

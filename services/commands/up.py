@@ -21,8 +21,10 @@ policy. Everything lands in --out (default runs/<run>): checkpoints/, policy/ (f
 model.safetensors + config.json), eval/learning_curve.png (time axis from the first launch,
 resumes marked) and eval/evaluations.jsonl, tb/ (TensorBoard), logs/, summary.json. Running it
 again with the same --run resumes from its checkpoint ("resumed from checkpoint N"). The NNQL
-flags go to the learner. Exit code 2 for a bad argument (before anything starts), 1 if a
-process fails (its log tail is printed).
+flags go to the learner. With --nirl the learner also trains NIRL, a demonstrator process
+publishes demonstrations (the expert's --demo-episodes, or a --demos dataset once) and the
+evaluator reports NIRL beside NNQL. Exit code 2 for a bad argument (before anything starts), 1 if
+a process fails (its log tail is printed).
 """
 
 
@@ -78,9 +80,13 @@ def main(args: argparse.Namespace) -> int:
         f"{config.updates} updates" * bool(config.updates),
     ]
     budget = " or ".join(b for b in limits if b) or "until Ctrl-C"
+    demonstrator = ""
+    if config.nirl:
+        demonstrator = f" + demonstrator ({config.demos or config.demonstrator})"
     console.print(
-        f"navlearn up: run [bold]{config.run}[/bold], learner + {config.actors} actors x {config.envs} "
-        f"robots + evaluator on {up.endpoint}; budget {budget} from the first transition; "
+        f"navlearn up: run [bold]{config.run}[/bold], learner{' (NNQL + NIRL)' * config.nirl} + "
+        f"{config.actors} actors x {config.envs} robots{demonstrator} + evaluator on {up.endpoint}; "
+        f"budget {budget} from the first transition; "
         f"outputs in {up.out}/",
         soft_wrap=True,
     )
@@ -149,15 +155,14 @@ def main(args: argparse.Namespace) -> int:
         )
         return 1
     bad = {name: code for name, code in codes.items() if code not in (0, -15)}
-    final = summary["last_evaluation"]
     console.print(
         f"final policy version {summary['final_version']} after {summary['training_s']:.0f} s of "
         f"training ({summary['wall_time_s']:.0f} s in all)"
     )
-    if final:
+    for model, final in summary["last_evaluations"].items():
         for family, m in final["metrics"].items():
             console.print(
-                f"  {family}: success {100 * m['success']['value']:.0f}% "
+                f"  {model} {family}: success {100 * m['success']['value']:.0f}% "
                 f"[{100 * m['success']['low']:.0f}, {100 * m['success']['high']:.0f}], SPL {m['spl']:.2f} "
                 f"(version {final['policy_version']}, {m['episodes']} held-out episodes)"
             )

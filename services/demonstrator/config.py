@@ -29,6 +29,9 @@ class DemonstratorConfig:
     """episode i resets the environment with seed SEED + i"""
     file: str = ""
     """file: the demonstration dataset directory to publish"""
+    record: str = ""
+    """also write every episode it published to this Minari dataset directory when it stops (e.g.
+    demos/human-v0: a person's demonstrations for `navlearn nirl train --demos`); empty: none"""
     batch_episodes: int = 1
     """episodes per DemoBatch"""
     keep_failures: bool = False

@@ -31,8 +31,9 @@ import time
 from collections.abc import Iterable
 
 import numpy as np
+from gymnasium import spaces
 
-from agents.demos import Demo
+from agents.demos import Demo, write_demos
 from protocols import keys
 from protocols.codec import encode
 from protocols.messages import DemoBatch, EpisodeMeta
@@ -40,8 +41,10 @@ from services.common.outbox import Outbox, decode_ack
 from services.common.transport import Presence, ZenohSettings, declare_alive, open_session
 from services.common.waiting import WaitLog
 from services.demonstrator.config import DemonstratorConfig
-from services.demonstrator.episodes import check_file, expert_episodes, file_episodes
+from services.demonstrator.episodes import check_file, expert_episodes, file_episodes, nav_config
 from services.demonstrator.teleop import drive
+from worlds.config import observation_settings
+from worlds.env import observation_space
 
 log = logging.getLogger("navlearn.demonstrator")
 
@@ -109,6 +112,8 @@ class DemoPublisher:
         self.seq = 0
         self.episodes = 0
         self.steps = 0
+        self.published: list[Demo] = []
+        """every episode published, kept for --record"""
 
     def _on_ack(self, sample) -> None:
         ack = decode_ack(
@@ -137,6 +142,8 @@ class DemoPublisher:
         self.outbox.flush(self.stop)
         self.episodes += len(demos)
         self.steps += int(batch.episode_lengths.sum())
+        if self.config.record:
+            self.published.extend(demos)
         log.debug("published %d episodes (%d steps) as batch %d", len(demos), len(batch.actions), self.seq)
         return True
 
@@ -204,4 +211,15 @@ def run_demonstrator(config: DemonstratorConfig, settings: ZenohSettings, stop: 
             publisher.episodes,
             publisher.steps,
         )
+        if config.record and publisher.published:
+            record(config, publisher.published)
         return 0
+
+
+def record(config: DemonstratorConfig, demos: list[Demo]) -> None:
+    """The published episodes as the Minari dataset ``config.record`` (``navlearn nirl train --demos``)."""
+    nav = nav_config(config)
+    path = write_demos(config.record, demos, observation_space(nav), spaces.Discrete(nav.robot.n_actions),
+                       description=f"navlearn demonstrator --source {config.source}",
+                       extra_metadata={"observation": observation_settings(nav)})  # fmt: skip
+    log.info("%d episodes recorded in %s", len(demos), path)

@@ -87,6 +87,8 @@ class NIRLTrainer:
         losses = {
             f"nirl/{k.removeprefix('losses/')}": v for k, v in self.metrics.items() if k.startswith("losses/")
         }
+        # the learned reward's scale beside what it must value (path length, collision value)
+        losses.update({k: v for k, v in self.metrics.items() if k.startswith("nirl/")})
         return counters, losses
 
     def save(self, path: Path) -> None:

@@ -59,6 +59,7 @@ def status_charts(status: LearnerStatus, metrics: dict[str, float]) -> dict[str,
         "charts/update_to_data": status.rates["update_to_data"],
     }
     charts.update({k: v for k, v in metrics.items() if k.startswith("losses/")})
+    charts.update({k: v for k, v in status.losses.items() if k.startswith("nirl/")})  # learned reward too
     return charts
 
 

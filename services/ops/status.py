@@ -115,9 +115,20 @@ def status_dict(status: LearnerStatus | None, alive: list[tuple[str, str]], now:
         "rates": {k: v for k, v in status.rates.items() if not k.startswith("transitions_per_s/")},
         "losses": {k: (v if math.isfinite(v) else str(v)) for k, v in status.losses.items()},
         "actors": actors,
+        "demos": demos_per_source(status.counters),
         "last_eval": status.last_eval,
     }
     return out
+
+
+def demos_per_source(counters: dict[str, int]) -> dict[str, dict[str, int]]:
+    """Source (astar, human, file) -> demonstration episodes and steps the learner has stored."""
+    sources: dict[str, dict[str, int]] = {}
+    for name, value in counters.items():
+        kind, _, source = name.partition("/")
+        if kind in ("demo_episodes", "demo_steps") and source:
+            sources.setdefault(source, {"episodes": 0, "steps": 0})[kind.removeprefix("demo_")] = value
+    return dict(sorted(sources.items()))
 
 
 def _fmt(value: Any, spec: str = ".3g") -> str:
@@ -149,6 +160,9 @@ def progress_line(view: dict, actors_expected: int | None = None, width: int = 6
     version = next(iter(learner["versions"].values()), 0)
     replay = learner["replay_sizes"].get("transitions", 0)
     parts = [f"v{version}"]
+    if "nirl" in learner["versions"]:
+        demos = _short(learner["replay_sizes"].get("demos", 0))
+        parts.append(f"nirl v{learner['versions']['nirl']} demos {demos}")
     if counters.get("storage_error"):  # first, so that it is never cut off
         parts.append("STORAGE ERROR: not acknowledging (see the learner's log)")
     parts += [
@@ -169,7 +183,8 @@ def progress_line(view: dict, actors_expected: int | None = None, width: int = 6
             for family, fam in evaluation.get("families", {}).items()
             if fam.get("success") is not None
         )
-        parts.append(f"eval {success}")
+        model = evaluation.get("model", "")
+        parts.append(f"eval{' ' + model if model and model != 'nnql' else ''} {success}")
     line = "  ".join(parts)
     return line if len(line) <= width else line[: width - 3] + "..."
 
@@ -210,6 +225,13 @@ def render(view: dict):
             _fmt(actor["last_seen_s_ago"]),
         )
     parts = [summary, actors]
+    if learner.get("demos"):
+        demos = Table(title="demos per source")
+        for column in ("source", "episodes", "steps"):
+            demos.add_column(column, justify="left" if column == "source" else "right")
+        for source, count in learner["demos"].items():
+            demos.add_row(source, str(count["episodes"]), str(count["steps"]))
+        parts.append(demos)
     evaluation = learner.get("last_eval")
     if evaluation:
         table = Table(

@@ -1,11 +1,13 @@
 """`navlearn up`: the whole system on one machine, as child processes, for a bounded run.
 
 It starts the learner (hosting the Zenoh router on a free loopback port), N
-actors and the evaluator as separate processes (``python -m services.cli ...``,
+actors, the evaluator and with ``--nirl`` a demonstrator (the learner then also trains NIRL and
+the evaluator compares it) as separate processes (``python -m services.cli ...``,
 each logging into ``<out>/logs/``), shows one live progress line read from the
 learner's status, and stops everything in order when the budget is spent (counted
 from the first transition the learner receives), on Ctrl-C or SIGTERM, or when a
-child dies: actors first, then the learner (which
+child dies (a demonstrator that finished its episodes is not a death): actors and the
+demonstrator first, then the learner (which
 broadcasts its final weights and writes its checkpoint), then the evaluator
 once it has measured the final version (bounded wait). Outputs in ``<out>``:
 ``checkpoints/``, ``policy/`` (the final weights), ``eval/learning_curve.png``
@@ -36,6 +38,8 @@ from services.ops.up_config import UpConfig
 log = logging.getLogger("navlearn.up")
 PR_SET_PDEATHSIG = 1
 MODEL = "nnql"
+DEMO_SEED = 10_000
+"""the expert demonstrator's episodes start at this seed (+ --seed), apart from the actors' seeds"""
 PHASES = (
     ("building", "compiling"),
     ("waiting for a Zenoh router", "awaiting router"),
@@ -154,9 +158,14 @@ class Up:
                 str(cfg.checkpoint_every),
                 "--tensorboard",
                 str(out / "tb"),
+                *(["--nirl"] if cfg.nirl else []),
+                *(["--nirl-config", cfg.nirl_config] if cfg.nirl_config else []),
             ],
             learner_env,
         )
+        if cfg.nirl:
+            argv = ["demonstrator", "--connect", self.endpoint, *demonstrator_argv(cfg)]
+            self._spawn("demonstrator", argv, base)
         for i in range(cfg.actors):
             self._spawn(
                 f"actor-{i + 1}",
@@ -191,6 +200,8 @@ class Up:
                 str(out / "tb"),
                 "--launched",
                 str(self.launched),
+                *(["--compare", "nirl"] if cfg.nirl else []),
+                *(["--imitation", cfg.imitation] if cfg.imitation else []),
             ],
             base,
         )
@@ -199,7 +210,11 @@ class Up:
         self.children[name] = Child(name, argv, self.out / "logs", env)
 
     def dead_child(self) -> Child | None:
-        return next((c for c in self.children.values() if not c.alive()), None)
+        """A child that exited, but for a demonstrator done with its episodes (exit code 0)."""
+        return next(
+            (c for c in self.children.values() if not c.alive() and not finished_demonstrator(c)),
+            None,
+        )
 
     def phases(self, view: dict[str, Any] | None) -> str:
         """Before the first transition: what the learner, the actors and the evaluator are doing
@@ -267,7 +282,7 @@ class Up:
     def stop_all(self, eval_wait: float = 60.0) -> dict[str, int]:
         """Actors, then the learner (final checkpoint), then the evaluator after its last report."""
         codes = {}
-        actors = [c for n, c in self.children.items() if n.startswith("actor-")]
+        actors = [c for n, c in self.children.items() if n.startswith(("actor-", "demonstrator"))]
         for child in actors:
             child.terminate()
         for child in actors:
@@ -299,7 +314,8 @@ class Up:
         path = self.out / "eval" / "evaluations.jsonl"
         if not path.exists():
             return set()
-        return {json.loads(line)["policy_version"] for line in path.read_text().splitlines() if line.strip()}
+        lines = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+        return {line["policy_version"] for line in lines if line.get("model", MODEL) == MODEL}
 
     def write_outputs(
         self, view: dict[str, Any] | None, codes: dict[str, int], wall: float
@@ -311,6 +327,7 @@ class Up:
         evaluations = (
             [json.loads(x) for x in lines.read_text().splitlines() if x.strip()] if lines.exists() else []
         )
+        last_by_model = {line.get("model", MODEL): line for line in evaluations}  # nnql, nirl, reference
         summary = {
             "run": self.config.run,
             "wall_time_s": round(wall, 1),
@@ -322,7 +339,8 @@ class Up:
             "final_version": self.final_version(),
             "exit_codes": codes,
             "last_status": view,
-            "last_evaluation": evaluations[-1] if evaluations else None,
+            "last_evaluation": last_by_model.get(MODEL),
+            "last_evaluations": last_by_model,
             "outputs": {
                 "policy": str(self.out / "policy") if policy else None,
                 "checkpoints": str(self.out / "checkpoints"),
@@ -334,6 +352,20 @@ class Up:
         }
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         return summary
+
+
+def demonstrator_argv(config: UpConfig) -> list[str]:
+    """The demonstrator of an ``up --nirl`` run: the --demos dataset once, or the expert on --maps."""
+    if config.demos:
+        return ["--id", "demonstrator", "--source", "file", "--file", config.demos]
+    return [
+        "--id", "demonstrator", "--source", config.demonstrator, "--maps", config.maps,
+        "--episodes", str(config.demo_episodes), "--rate", "0", "--seed", str(DEMO_SEED + config.seed),
+    ]  # fmt: skip
+
+
+def finished_demonstrator(child: Child) -> bool:
+    return child.name == "demonstrator" and child.process.returncode == 0
 
 
 def received_transitions(view: dict[str, Any] | None) -> int | None:

@@ -38,6 +38,21 @@ class UpConfig:
     """seconds between learner checkpoints (one is always written at the end)"""
     port: int = 0
     """port of the learner's router; 0: a free one"""
+    nirl: bool = False
+    """also train NIRL (thesis ch. 5) beside NNQL: the learner runs with --nirl, a demonstrator process
+    publishes demonstrations (--demos or --demonstrator) and the evaluator compares nirl with nnql"""
+    demos: str = ""
+    """with --nirl: a demonstration dataset (Minari, `navlearn demos generate`) the demonstrator
+    publishes once; empty: live demonstrations from --demonstrator"""
+    demonstrator: str = "astar"
+    """with --nirl and no --demos: the live demonstrator (astar: the modified-A* expert on --maps;
+    a human one needs a terminal of its own: `navlearn demonstrator --source human --connect ...`)"""
+    demo_episodes: int = 20
+    """with --demonstrator astar: expert episodes it publishes, then it exits (0: until the run stops)"""
+    nirl_config: str = ""
+    """with --nirl: a JSON file of NIRLConfig fields for the learner (`navlearn learner --nirl-config`)"""
+    imitation: str = ""
+    """a saved behaviour-cloning policy (`navlearn imitate train`) the evaluator reports beside them"""
     listen_all: bool = False
     """the learner's router listens on 0.0.0.0 (all interfaces), so actors on other hosts can join
     with --connect tcp/<this host>:<port> (give --port); default: 127.0.0.1 only"""
@@ -73,6 +88,30 @@ def check_config(config: UpConfig) -> None:
         parse_map_spec(config.maps)
     except (ValueError, OSError) as exc:
         raise ValueError(f"--maps: {exc}") from None
+    check_nirl(config)
     out = Path(config.out or f"runs/{config.run}")
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out}: is a file; give a directory")
+
+
+def check_nirl(config: UpConfig) -> None:
+    """--demos, --demonstrator and --demo-episodes belong to --nirl; a --demos dataset must be one a
+    NIRL learner can use (agents.nirl.buffers.load_demonstrations names the file if not)."""
+    for name in ("demos", "nirl_config"):
+        if getattr(config, name) and not config.nirl:
+            raise ValueError(f"--{name.replace('_', '-')} {getattr(config, name)}: is for NIRL; add --nirl")
+    if config.demonstrator != "astar":
+        raise ValueError(
+            f"--demonstrator {config.demonstrator}: `up` starts astar (the expert); a human demonstrator "
+            "needs its own terminal: navlearn demonstrator --source human --connect <the learner's endpoint>"
+        )
+    if config.demo_episodes < 0:
+        raise ValueError(f"--demo-episodes {config.demo_episodes}: must be 0 or more")
+    if config.demos:
+        from agents.nirl.buffers import load_demonstrations  # torch: only when there is a dataset
+
+        load_demonstrations(config.demos)
+    if config.nirl_config and not Path(config.nirl_config).is_file():
+        raise ValueError(f"--nirl-config {config.nirl_config}: no such file")
+    if config.imitation and not Path(config.imitation, "config.json").exists():
+        raise ValueError(f"--imitation {config.imitation}: no saved policy there (no config.json)")
