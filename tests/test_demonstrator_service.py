@@ -194,8 +194,9 @@ def test_human_teleop_through_a_pseudo_terminal(network, tmp_path):
     assert bool(batch.terminations[-1])
     # --record: the episode is a Minari dataset that NIRL takes like the expert's
     from agents.nirl.buffers import load_demonstrations
+    from worlds.config import LEARNING_NAV
 
-    recorded = load_demonstrations(str(tmp_path / "human-v0"))
+    recorded = load_demonstrations(str(tmp_path / "human-v0"), LEARNING_NAV)  # what the learner takes
     assert len(recorded) == 1 and recorded[0].actions.tolist() == actions
     deadline = time.monotonic() + 30  # and the learner took it into its demonstration buffer
     status = None

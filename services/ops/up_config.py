@@ -109,8 +109,9 @@ def check_nirl(config: UpConfig) -> None:
         raise ValueError(f"--demo-episodes {config.demo_episodes}: must be 0 or more")
     if config.demos:
         from agents.nirl.buffers import load_demonstrations  # torch: only when there is a dataset
+        from worlds.config import LEARNING_NAV
 
-        load_demonstrations(config.demos)
+        load_demonstrations(config.demos, LEARNING_NAV)  # a file demonstrator sends it to the learner
     if config.nirl_config and not Path(config.nirl_config).is_file():
         raise ValueError(f"--nirl-config {config.nirl_config}: no such file")
     if config.imitation and not Path(config.imitation, "config.json").exists():
