@@ -12,14 +12,13 @@ from tensordict import TensorDict
 from torchrl.data import LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
 
 from agents.demos import Demo, DemoFormatError, load_demos
+from worlds.config import NavConfig
 
 
 def load_demonstrations(path: str, nav: Any = None) -> list[Demo]:
     """The demonstrations of the Minari dataset ``path``, checked for a NIRL learner of ``nav``'s
     observation and actions. Anything unusable - no such dataset, an empty one, steps without
     actions, observations of another size - raises one DemoFormatError naming ``path``."""
-    from worlds.config import NavConfig
-
     nav = nav or NavConfig()
     demos = load_demos(path)
     if not demos:
@@ -61,9 +60,11 @@ def demo_steps(observations: np.ndarray, actions: np.ndarray, terminations, trun
     }
 
 
-def sample(buffer: TensorDictReplayBuffer, n: int) -> TensorDict:
+def sample(buffer: TensorDictReplayBuffer, n: int, device: torch.device | None = None) -> TensorDict:
     """``n`` transitions from ``buffer``, whatever batch size the buffer was built with (TorchRL
-    warns when the two differ; NIRL draws several batch sizes from the same buffers on purpose)."""
+    warns when the two differ; NIRL draws several batch sizes from the same buffers on purpose),
+    moved to ``device`` when it is not the CPU (the buffers stay in host memory)."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="Got conflicting batch_sizes", category=UserWarning)
-        return buffer.sample(n)
+        batch = buffer.sample(n)
+    return batch if device is None or device.type == "cpu" else batch.to(device, non_blocking=True)

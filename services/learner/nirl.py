@@ -26,12 +26,21 @@ HISTORY_EVERY = 1
 
 
 class NIRLTrainer:
-    """One NIRL learner fed by the service; ``train(n)`` runs up to n updates when demos exist."""
+    """One NIRL learner fed by the service; ``train(n)`` runs up to n updates when demos exist.
+    Its networks live on ``device`` (the learner's ``--device``), the shared buffers in host memory."""
 
     def __init__(
-        self, config: NIRLConfig, experience, demos, session, run: str, sender: str, broadcast_every: int
+        self,
+        config: NIRLConfig,
+        experience,
+        demos,
+        session,
+        run: str,
+        sender: str,
+        broadcast_every: int,
+        device: str = "cpu",
     ):
-        self.learner = NIRLLearner(config, experience=experience, demos=demos)
+        self.learner = NIRLLearner(config, experience=experience, demos=demos, device=device)
         self.weights = WeightsBroadcaster(session, run, MODEL, sender)
         self.broadcast_every = max(int(broadcast_every), 1)
         self.history = WeightHistory()
