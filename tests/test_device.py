@@ -12,6 +12,8 @@ from agents.nirl.config import NIRLConfig
 from agents.nirl.learner import NIRLLearner
 from agents.nnql.learner import NNQLLearner
 from services.cli import main
+from services.common.transport import ZenohSettings, free_port, open_session
+from services.learner.nirl import NIRLTrainer
 from tests.test_nirl_learner import SMALL, Episode, goal_seeking_steps
 from tests.test_nnql_replay import N_ACTIONS, OBS_DIM, random_batch, small_config
 
@@ -168,3 +170,27 @@ def test_nirl_on_cuda_and_back(core, tmp_path):
         np.testing.assert_array_equal(nirl_weights(on_cpu)[name], value)
     on_cpu.update()
     assert on_cpu.version == 11
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=needs_gpu)])
+def test_learner_services_nirl_trainer_on_the_learners_device(device, tmp_path):
+    """The learner service's NIRL trainer (services.learner.run passes it the learner's --device):
+    networks on the device, the service's shared buffers in host memory, broadcasts from numpy."""
+    source = nirl_learner("iq")  # the service's buffers: a demonstration buffer and the experience
+    settings = ZenohSettings(mode="router", listen=[f"tcp/127.0.0.1:{free_port()}"], connect=[], run="dev")
+    with open_session(settings) as session:
+        config = NIRLConfig(**SMALL, warmstart_updates=2, q_updates=2, reward_updates=1)
+        trainer = NIRLTrainer(config, source.experience, source.demos, session, "dev", "test", 1, device)
+        try:
+            assert trainer.train(6) == 6 and trainer.version == 6
+            assert all(p.device.type == device for p in trainer.learner.reward.parameters())
+            assert all(p.device.type == device for p in trainer.learner.q.loss.parameters())
+            assert source.demos.storage._storage.device.type == "cpu"
+            trainer.save(tmp_path / "nirl")
+            on_cpu = NIRLTrainer(config, source.experience, source.demos, session, "dev", "test2", 1)
+            on_cpu.load(tmp_path / "nirl")
+            for name, value in trainer.learner.get_weights().items():
+                np.testing.assert_array_equal(on_cpu.learner.get_weights()[name], value)
+            on_cpu.close()
+        finally:
+            trainer.close()
