@@ -25,7 +25,8 @@ validated on 50 validation-seed episodes along the way; robot-steps to a fixed v
 The grid-world check (``agents.nirl.gridcheck``) measures reward recovery where the true reward is known.
 
 Runs append one JSON line each to ``--runs`` (so the grid can be run in pieces, in the background);
-``--report`` reads them and prints the table, then one JSON object on the last line.
+``--report`` reads them and prints the table (``bench/_nirl_report.py``), then one JSON object on the
+last line.
 
     python -m bench.nirl --methods nirl,bc --sets 20,20noisy --seeds 0,1,2    # a piece
     python -m bench.nirl --report                                             # the table
@@ -45,8 +46,6 @@ import numpy as np
 import torch
 
 from agents.evaluation import evaluate, make_eval_set
-from agents.evaluation.compare import mcnemar_exact
-from agents.evaluation.metrics import wilson_interval as wilson
 from agents.imitation.config import ImitationConfig
 from agents.imitation.train import train_policy
 from agents.nirl.buffers import demo_buffer, sample
@@ -61,11 +60,9 @@ from agents.nnql.rollout import VectorRollout
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.planning.demonstrate import generate_demos
 from bench._common import machine_load
+from bench._nirl_report import FAMILIES, METHODS, SETS, report
 from worlds.config import NavConfig
 
-FAMILIES = ("unseen", "dynamic")
-SETS = ("5", "10", "20", "20noisy")
-METHODS = ("bc", "sqil", "dqfd", "nirl", "maxmargin", "nnql")
 ISSUE8 = {
     "core": "max_margin", "gamma": 0.95, "target_tau": 0.005, "prior_temperature": 0.1,
     "relabel_threshold": 0.6, "demo_noise": 0.2, "refine_start": 0, "demo_fraction": 0.25,
@@ -226,121 +223,6 @@ def refinement_rates(learner: NIRLLearner, expert_labels: list[np.ndarray]) -> d
         "injected_changed": float((labels[wrong] != recorded[wrong]).float().mean()),
         "clean_kept": float((labels[~wrong] == recorded[~wrong]).float().mean()),
     }
-
-
-# ---------------------------------------------------------------- report
-
-
-def mcnemar(a: list[int], b: list[int]) -> tuple[int, int, float]:
-    """McNemar's exact test on paired successes (agents.evaluation.compare): (only a, only b, p)."""
-    only_a = sum(x and not y for x, y in zip(a, b, strict=True))
-    only_b = sum(y and not x for x, y in zip(a, b, strict=True))
-    return only_a, only_b, mcnemar_exact(only_a, only_b)
-
-
-def first_reaching(curve, target: float):
-    return next((steps for steps, success in curve if success >= target - 1e-9), None)
-
-
-def report(path: Path) -> int:
-    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    latest = {(r["method"], r["set"], r["seed"]): r for r in rows}  # a re-run replaces its line
-    rows = list(latest.values())
-    table, summary = [], {"bench": "nirl", "cells": {}}
-    print("| learner | demos | seeds | unseen success (pooled) [95% CI] | per seed "
-          "| dynamic success [95% CI] |"
-          " collisions (unseen) |")  # fmt: skip
-    print("| --- | --- | --- | --- | --- | --- | --- |")
-    for method in METHODS:
-        for set_name in (*SETS, "-"):
-            cell = [r for r in rows if r["method"] == method and r["set"] == set_name]
-            if not cell:
-                continue
-            cell.sort(key=lambda r: r["seed"])
-            entry = {"seeds": [r["seed"] for r in cell]}
-            text = []
-            for family in FAMILIES:
-                solved = sum(sum(r["test"][family]["solved"]) for r in cell)
-                n = sum(len(r["test"][family]["solved"]) for r in cell)
-                low, high = wilson(solved, n)
-                entry[family] = {"success": solved / n, "ci": [low, high], "n": n,
-                                 "per_seed": [r["test"][family]["success"] for r in cell]}  # fmt: skip
-                text.append(f"{solved / n:.1%} [{low:.1%}, {high:.1%}]")
-            per_seed = " / ".join(f"{s:.0%}" for s in entry["unseen"]["per_seed"])
-            collisions = np.mean([r["test"]["unseen"]["collision_static"] for r in cell])
-            print(
-                f"| {method} | {set_name} | {len(cell)} | {text[0]} | {per_seed} | {text[1]} "
-                f"| {collisions:.0%} |"
-            )
-            summary["cells"][f"{method}/{set_name}"] = entry
-            table.append(entry)
-    # paired comparison on the same episodes: NIRL vs behaviour cloning, same demo set and seed
-    comparisons = {}
-    for set_name in SETS:
-        for family in FAMILIES:
-            a, b = [], []
-            for seed in range(10):
-                x, y = latest.get(("nirl", set_name, seed)), latest.get(("bc", set_name, seed))
-                if x and y:
-                    a += x["test"][family]["solved"]
-                    b += y["test"][family]["solved"]
-            if a:
-                only_nirl, only_bc, p = mcnemar(a, b)
-                comparisons[f"{set_name}/{family}"] = {
-                    "nirl": float(np.mean(a)), "bc": float(np.mean(b)), "only_nirl": only_nirl,
-                    "only_bc": only_bc, "p": p, "n": len(a),
-                }  # fmt: skip
-                print(f"McNemar NIRL vs BC, {set_name} demos, {family}: {np.mean(a):.1%} vs "
-                      f"{np.mean(b):.1%}, {only_nirl} episodes only NIRL solved, {only_bc} only BC, "
-                      f"p = {p:.2g} (n = {len(a)})")  # fmt: skip
-    summary["nirl_vs_bc"] = comparisons
-    refinement = [(r["method"], r["map_refinement"]) for r in rows if "map_refinement" in r]
-    if refinement:
-        summary["map_refinement"] = refinement
-        for method, item in refinement:
-            print(f"MAP refinement ({method}, 20 noisy): {item['injected_relabelled_to_expert']:.1%} of "
-                  f"{item['injected_steps']} injected steps relabelled to the expert's action "
-                  f"({item['injected_changed']:.1%} changed), "
-                  f"{item['clean_kept']:.1%} of {item['clean_steps']} clean steps kept")  # fmt: skip
-    scales = [
-        (r["set"], r["seed"], r["reward_scale"])
-        for r in rows
-        if r["method"] == "nirl" and "reward_scale" in r
-    ]
-    summary["reward_scale"] = scales
-    curves = {m: [r["curve"] for r in rows if r["method"] == m and "curve" in r] for m in ("nirl", "nnql")}
-    summary["curves"] = curves
-    learning = {}
-    for target in (0.9, 0.6, 0.5):
-        nirl_steps = [first_reaching(c, target) for c in curves["nirl"]]
-        nnql_steps = [first_reaching(c, target) for c in curves["nnql"]]
-        learning[str(target)] = {"nirl": nirl_steps, "nnql": nnql_steps}
-        print(
-            f"robot-steps to {target:.0%} validation success: NIRL (20 demos) {nirl_steps}, NNQL {nnql_steps}"
-        )
-    summary["steps_to_validation_success"] = learning
-    grid = [r for r in rows if r["method"] == "gridcheck"]
-    if grid:
-        summary["gridcheck"] = grid
-        for g in grid:
-            print(f"grid world (seed {g['seed']}): re-planned under the learned reward, "
-                  f"{g['agreement']:.1%} of "
-                  f"{g['states']} states take a truly optimal action")  # fmt: skip
-
-    def cell(name, family="unseen"):
-        return summary["cells"].get(name, {}).get(family, {}).get("success")
-
-    noisy = comparisons.get("20noisy/unseen", {})
-    summary["targets"] = {
-        "nirl_20_clean_unseen_ge_0.95": cell("nirl/20"),
-        "nirl_20_clean_dynamic_ge_0.90": cell("nirl/20", "dynamic"),
-        "nirl_20_noisy_unseen_ge_0.90": cell("nirl/20noisy"),
-        "nirl_minus_bc_noisy_unseen_ge_0.10": None if not noisy else noisy["nirl"] - noisy["bc"],
-        "mcnemar_p_noisy_unseen_lt_0.01": noisy.get("p"),
-        "gridworld_agreement_ge_0.95": [g["agreement"] for g in grid],
-    }
-    print(json.dumps(summary))
-    return 0
 
 
 def code_version() -> str:

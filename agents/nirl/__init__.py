@@ -63,8 +63,9 @@ The max-margin fit, kept as an option (``core = "max_margin"``, ``max_margin.py`
     (Ratliff, Bagnell & Zinkevich 2006), then Q-learning under it with NNQL's DQNLoss.
 
 Modules: config (NIRLConfig, NIRLRun) - networks - losses (pure maths) - buffers (datasets
-checked for the learner, demo buffer) - learner (NIRLLearner) - max_margin - persistence
-(policy files, checkpoints; format 1 files of the max-margin learner load into that core) -
+checked for the learner, demo buffer) - learner (NIRLLearner) - soft_q (the iq and sqil cores) -
+max_margin - persistence (policy files, learner state, checkpoints; format 1 files of the
+max-margin learner load into that core) -
 weights (history and plot) - gridcheck (reward recovery where the reward is known) - reward_map
 (`navlearn nirl reward`) - train_local (`navlearn nirl train`).
 """

@@ -61,9 +61,11 @@ def demo_steps(observations: np.ndarray, actions: np.ndarray, terminations, trun
     }
 
 
-def sample(buffer: TensorDictReplayBuffer, n: int) -> TensorDict:
+def sample(buffer: TensorDictReplayBuffer, n: int, device: torch.device | None = None) -> TensorDict:
     """``n`` transitions from ``buffer``, whatever batch size the buffer was built with (TorchRL
-    warns when the two differ; NIRL draws several batch sizes from the same buffers on purpose)."""
+    warns when the two differ; NIRL draws several batch sizes from the same buffers on purpose),
+    moved to ``device`` when it is not the CPU (the buffers stay in host memory)."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="Got conflicting batch_sizes", category=UserWarning)
-        return buffer.sample(n)
+        batch = buffer.sample(n)
+    return batch if device is None or device.type == "cpu" else batch.to(device, non_blocking=True)

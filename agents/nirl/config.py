@@ -205,3 +205,5 @@ class NIRLRun:
     """TensorBoard log directory (empty: none): losses, nirl/learned_reward, path length, collision value"""
     progress: bool = True
     """show a progress bar"""
+    device: str = "cpu"
+    """where the learner's networks, losses and sampled batches live: cpu, cuda (cuda:N) or auto"""

@@ -11,7 +11,10 @@ The default core (``iq``) trains the Q-network by inverse soft-Q learning on 50/
 of refined demonstration steps and own experience; the reward it holds,
 ``r = Q(s, a) - gamma V(s')``, is logged (``nirl/learned_reward``) and distilled into the
 reward network, which `navlearn nirl reward` draws. ``sqil`` is the SQIL baseline on the same
-machinery; ``max_margin`` the thesis-era fit (``agents.nirl.max_margin``).
+machinery (both in ``agents.nirl.soft_q``); ``max_margin`` the thesis-era fit
+(``agents.nirl.max_margin``). Networks and optimisers live on ``device``
+(``agents.device.resolve_device``), sampled batches are moved to it, the buffers stay in host
+memory and weights come back as numpy arrays on the CPU.
 """
 
 from __future__ import annotations
@@ -26,25 +29,13 @@ import torch
 from tensordict import TensorDict
 from torchrl.data import TensorDictReplayBuffer
 
-from agents.nirl.buffers import demo_buffer, demo_steps, sample
-from agents.nirl.config import FORMAT_VERSION, NIRLConfig
-from agents.nirl.losses import (
-    KEEP,
-    RELABEL,
-    REWEIGHT,
-    Refinement,
-    crash_absorbing_value,
-    implicit_reward,
-    iq_loss,
-    map_posterior,
-    refine_steps,
-    soft_td_loss,
-    soft_value,
-    sqil_rewards,
-    structured_margins,
-)
+from agents.nirl import persistence
+from agents.nirl.buffers import demo_buffer, demo_steps
+from agents.nirl.config import NIRLConfig
+from agents.nirl.losses import KEEP, Refinement, map_posterior, refine_steps, structured_margins
 from agents.nirl.max_margin import MaxMarginFit
-from agents.nirl.networks import RewardNetwork, goal_reached
+from agents.nirl.networks import RewardNetwork
+from agents.nirl.soft_q import SoftQFit
 from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
 from agents.nnql.policy import NNQLPolicy
 from worlds.config import NavConfig, observation_settings
@@ -69,16 +60,20 @@ class NIRLLearner:
         *,
         experience: TensorDictReplayBuffer | None = None,
         demos: TensorDictReplayBuffer | None = None,
+        device: str = "cpu",
     ):
         self.config = config
         nav = nav or NavConfig()
         obs_dim, n_actions = observation_dim(nav), nav.robot.n_actions
         observation = observation_settings(nav)
-        self.q = NNQLLearner(config.nnql_config(), obs_dim, n_actions, observation=observation)  # seeds torch
+        self.q = NNQLLearner(
+            config.nnql_config(), obs_dim, n_actions, device=device, observation=observation
+        )  # seeds torch
+        self.device = self.q.device
         output = "cost" if config.core == "max_margin" else "linear"
         self.reward = RewardNetwork.for_navigation(
             nav, config.reward_hidden_sizes, config.activation, config.reward_scale, output
-        )
+        ).to(self.device)
         self.reward_optimizer = torch.optim.Adam(
             self.reward.parameters(), lr=config.reward_lr, weight_decay=config.reward_weight_decay
         )
@@ -95,11 +90,25 @@ class NIRLLearner:
             self.demos,
             self.experience,
             self.refine,
-            structured_margins(torch.as_tensor(nav.robot.turns), config.margin),
+            structured_margins(torch.as_tensor(nav.robot.turns), config.margin).to(self.device),
             self.goal_tolerance,
             self.max_range,
             self._clip_step,
             self._freeze_prior,
+        )
+        self.soft_q_fit = SoftQFit(
+            config,
+            self.reward,
+            self.reward_optimizer,
+            self.q,
+            self.demos,
+            self.experience,
+            self.refine,
+            self.goal_tolerance,
+            self.max_range,
+            self._clip_step,
+            self._freeze_prior,
+            lambda: self.demo_path_steps / max(self.demo_episodes, 1),
         )
         self.prior_network: torch.nn.Module | None = None
         self.demo_episodes = 0
@@ -193,7 +202,7 @@ class NIRLLearner:
         ``refine_start`` Q updates."""
         actions = actions.long().reshape(-1)
         if not self.config.refine or self.q.updates < self.config.refine_start:
-            ones = torch.ones(len(actions))
+            ones = torch.ones(len(actions), device=actions.device)
             return Refinement(actions, ones, torch.full_like(actions, KEEP))
         noise = self.config.demo_noise if noise is None else noise
         posterior = map_posterior(self.prior(obs), actions, noise)
@@ -201,7 +210,7 @@ class NIRLLearner:
 
     def refine_all(self) -> tuple[TensorDict, Refinement]:
         """Every stored demonstration step and its refinement (for reports and tests)."""
-        steps = self.demos.storage.get(torch.arange(len(self.demos)))
+        steps = self.demos.storage.get(torch.arange(len(self.demos))).to(self.device)
         return steps, self.refine(steps["observation"], steps["action"], steps.get("noise", None))
 
     # ------------------------------------------------------------ updates
@@ -214,135 +223,13 @@ class NIRLLearner:
         optimizer.step()
         return float(norm)
 
-    def _mixed_batch(self, offline: bool) -> tuple[TensorDict, torch.Tensor]:
-        """Demonstration steps and own experience, ``demo_fraction`` of the batch demonstrated
-        (all of it offline or while no experience exists); returns the batch and its expert mask."""
-        cfg = self.config
-        n_demo = cfg.batch_size
-        if not offline and len(self.experience):
-            n_demo = max(1, round(cfg.batch_size * cfg.demo_fraction))
-        keys = ("observation", "action", ("next", "observation"), ("next", "terminated"))
-        demos = sample(self.demos, n_demo)
-        noise = demos.get("noise", torch.full((n_demo,), cfg.demo_noise))
-        parts = [demos.select(*keys)]
-        if cfg.batch_size > n_demo:
-            parts.append(sample(self.experience, cfg.batch_size - n_demo).select(*keys))
-        batch = torch.cat(parts) if len(parts) > 1 else parts[0]
-        batch.set("noise", torch.cat([noise, torch.zeros(cfg.batch_size - n_demo)]))
-        is_expert = torch.zeros(cfg.batch_size, dtype=torch.bool)
-        is_expert[:n_demo] = True
-        return batch, is_expert
-
-    def target_q(self, obs: torch.Tensor) -> torch.Tensor:
-        """Q-values of the target network (DQNLoss's target parameters, Polyak-averaged)."""
-        loss = self.q.loss
-        with torch.no_grad(), loss.target_value_network_params.to_module(loss.value_network):
-            return self.q.network(obs)
-
-    def q_step(self, offline: bool = False) -> dict[str, float]:
-        """One Q-network update of the configured core (iq or sqil) on a mixed batch."""
-        cfg = self.config
-        batch, is_expert = self._mixed_batch(offline)
-        obs, next_obs = batch["observation"], batch[("next", "observation")]
-        terminated = batch[("next", "terminated")].reshape(-1)
-        labels = batch["action"].long().reshape(-1).clone()
-        weights = torch.ones(len(labels))
-        refined = self.refine(obs[is_expert], labels[is_expert], batch["noise"][is_expert])
-        labels[is_expert], weights[is_expert] = refined.labels, refined.weights
-        q_all = self.q.network(obs)
-        q_taken = q_all.gather(1, labels[:, None]).squeeze(1)
-        next_value = soft_value(self.target_q(next_obs), cfg.alpha)
-        metrics: dict[str, float] = {}
-        at_goal = goal_reached(next_obs, self.reward.n_beams, self.goal_tolerance, self.max_range)
-        if cfg.core == "iq" and cfg.crash_absorbing:
-            # a collision leads to an absorbing state (Kostrikov et al. 2019, DAC) told apart from the
-            # goal by the observation; its value is IQ-Learn's optimum there (losses.crash_absorbing_value)
-            crashed = terminated.bool() & ~at_goal
-            next_value = torch.where(crashed, crash_absorbing_value(cfg.chi2_alpha, cfg.gamma), next_value)
-            terminated = terminated.bool() & at_goal
-        if cfg.core == "sqil" and cfg.crash_absorbing:
-            # DAC's absorbing states for SQIL: the goal where demonstrations end is an expert absorbing
-            # state (reward 1 forever, 1 / (1 - gamma)); a collision ends with reward 0. Without it, ending
-            # at the goal is worth less than wandering on at reward 1, and the policy avoids the goal
-            reached = terminated.bool() & at_goal
-            forever = torch.full_like(next_value, 1.0 / (1.0 - cfg.gamma))
-            next_value = torch.where(reached, forever, next_value)
-            terminated = terminated.bool() & ~at_goal
-        if cfg.core == "iq":
-            terms = iq_loss(
-                q_taken, soft_value(q_all, cfg.alpha), next_value, terminated, is_expert, cfg.gamma,
-                cfg.chi2_alpha, weights,
-            )  # fmt: skip
-            loss, reward = terms.loss, terms.reward
-            metrics.update({
-                "losses/iq_loss": float(terms.loss.detach()),
-                "losses/iq_expert": float(terms.expert_term),
-                "losses/iq_value": float(terms.value_term),
-                "losses/iq_chi2": float(terms.chi2_term),
-            })  # fmt: skip
-        else:  # sqil
-            loss = soft_td_loss(q_taken, sqil_rewards(is_expert), next_value, terminated, cfg.gamma)
-            reward = implicit_reward(q_taken.detach(), next_value, terminated, cfg.gamma)
-            metrics["losses/td_loss"] = float(loss.detach())
-        norm = self._clip_step(loss, self.q.loss.parameters(), self.q.optimizer)
-        self.q.target_updater.step()
-        self.q.updates += 1
-        self._freeze_prior()
-        metrics.update(self._reward_scale(reward, q_taken.detach(), q_all.detach(), batch, is_expert))
-        decisions = refined.decisions
-        metrics.update({
-            "losses/grad_norm": norm,
-            "charts/refine_keep": float((decisions == KEEP).float().mean()),
-            "charts/refine_reweight": float((decisions == REWEIGHT).float().mean()),
-            "charts/refine_relabel": float((decisions == RELABEL).float().mean()),
-            "charts/demo_weight": float(refined.weights.mean()),
-            "charts/version": float(self.q.updates),
-        })  # fmt: skip
-        return metrics
-
-    def _reward_scale(self, reward, q_taken, q_all, batch, is_expert) -> dict[str, float]:
-        """The learned reward beside what it must value: per demonstrated step, what a demonstrated
-        path earns at that rate, the path length, and the value of a crash (Q of a collision step)."""
-        cfg = self.config
-        per_step = float(reward[is_expert].mean())
-        length = self.demo_path_steps / max(self.demo_episodes, 1)
-        out = {
-            "nirl/learned_reward": per_step,
-            "nirl/path_length": length,
-            "nirl/path_return": per_step * (1 - cfg.gamma**length) / (1 - cfg.gamma),
-            "nirl/expert_value": float(soft_value(q_all[is_expert], cfg.alpha).mean()),
-        }
-        own = ~is_expert
-        if own.any():
-            out["nirl/learned_reward_own"] = float(reward[own].mean())
-            terminated = batch[("next", "terminated")].reshape(-1).bool()
-            at_goal = goal_reached(
-                batch[("next", "observation")], self.reward.n_beams, self.goal_tolerance, self.max_range
-            )
-            crashed = own & terminated & ~at_goal
-            if crashed.any():
-                out["nirl/collision_value"] = float(q_taken[crashed].mean())
-        return out
-
     def reward_step(self, myopic: bool = False) -> dict[str, float]:
         """One reward-network update. iq/sqil: regression of ``R(s, a)`` on the Q-function's implicit
         reward ``Q(s, a) - gamma V(s')`` over a mixed batch; max_margin: its margin fit."""
         if self.config.core == "max_margin":
             metrics = self.margin_fit.reward_step(myopic)
         else:
-            cfg = self.config
-            batch, _ = self._mixed_batch(offline=False)
-            obs, actions = batch["observation"], batch["action"].long().reshape(-1)
-            with torch.no_grad():
-                q_taken = self.q.network(obs).gather(1, actions[:, None]).squeeze(1)
-                next_value = soft_value(self.target_q(batch[("next", "observation")]), cfg.alpha)
-                target = implicit_reward(
-                    q_taken, next_value, batch[("next", "terminated")].reshape(-1), cfg.gamma
-                )
-            predicted = self.reward(obs).gather(1, actions[:, None]).squeeze(1)
-            loss = torch.nn.functional.mse_loss(predicted, target)
-            norm = self._clip_step(loss, self.reward.parameters(), self.reward_optimizer)
-            metrics = {"losses/reward_fit": float(loss.detach()), "losses/reward_grad_norm": norm}
+            metrics = self.soft_q_fit.reward_step()
         self.reward_steps += 1
         return metrics
 
@@ -363,13 +250,13 @@ class NIRLLearner:
             metrics = self.margin_fit.warm_step()
             self.reward_steps += 1
         else:
-            metrics = self.q_step(offline=True)
+            metrics = self.soft_q_fit.q_step(offline=True)
         self.warm_updates += 1
         self.metrics.update(metrics)
         return metrics
 
     def _q_update(self) -> dict[str, float]:
-        return self.margin_fit.q_step() if self.config.core == "max_margin" else self.q_step()
+        return self.margin_fit.q_step() if self.config.core == "max_margin" else self.soft_q_fit.q_step()
 
     def iterate(self) -> dict[str, float]:
         """One round of neural policy iteration's learning. iq/sqil: ``q_updates`` soft policy
@@ -440,69 +327,20 @@ class NIRLLearner:
 
     def save_policy(self, path: str | Path, **metadata: Any) -> Path:
         """model.safetensors + config.json (model "nirl", kind "q_network") and reward.safetensors."""
-        from agents.nirl.persistence import save_policy_files
-
-        return save_policy_files(self, path, **metadata)
+        return persistence.save_policy_files(self, path, **metadata)
 
     def state_dict(self) -> dict[str, Any]:
         """Reward network, its optimiser and NIRL's counters (the Q side is NNQLLearner's)."""
-        return {
-            "format": FORMAT_VERSION,
-            "config": self.config.to_dict(),
-            "reward_architecture": self.reward.architecture,
-            "reward": self.reward.state_dict(),
-            "reward_optimizer": self.reward_optimizer.state_dict(),
-            "prior_network": None if self.prior_network is None else self.prior_network.state_dict(),
-            "counters": {
-                "iteration": self.iteration,
-                "reward_steps": self.reward_steps,
-                "warm_updates": self.warm_updates,
-                "reward_credit": self.reward_credit,
-                "demo_episodes": self.demo_episodes,
-                "demo_path_steps": self.demo_path_steps,
-            },
-        }
+        return persistence.nirl_state(self)
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
-        """Inverse of state_dict. A state saved before cores existed (format 1) was the max-margin
-        learner's: it loads into a learner with ``core="max_margin"`` and is refused, with the fix
-        named, by the others."""
-        version = int(state.get("format", 1))
-        saved_core = state["config"].get("core", "max_margin")
-        if version > FORMAT_VERSION:
-            raise ValueError(
-                f"NIRL state format {version} is newer than this version reads ({FORMAT_VERSION})"
-            )
-        if saved_core != self.config.core:
-            raise ValueError(
-                f"NIRL state was saved by the {saved_core!r} core (format {version}); this learner runs "
-                f"{self.config.core!r}: load it with NIRLConfig(core={saved_core!r}) or start a fresh run"
-            )
-        saved = RewardNetwork.from_architecture(state["reward_architecture"]).architecture
-        if saved != self.reward.architecture:
-            raise ValueError(
-                f"NIRL state's reward network {saved} differs from this learner's {self.reward.architecture}"
-            )
-        self.reward.load_state_dict(state["reward"])
-        self.reward_optimizer.load_state_dict(state["reward_optimizer"])
-        if state.get("prior_network") is not None:
-            self.prior_network = copy.deepcopy(self.q.network).requires_grad_(False)
-            self.prior_network.load_state_dict(state["prior_network"])
-        counters = state["counters"]
-        self.iteration = int(counters["iteration"])
-        self.reward_steps = int(counters["reward_steps"])
-        self.warm_updates = int(counters["warm_updates"])
-        self.reward_credit = float(counters["reward_credit"])
-        self.demo_episodes = int(counters["demo_episodes"])
-        self.demo_path_steps = int(counters.get("demo_path_steps", 0))
+        """Inverse of state_dict (format 1 states are the max-margin core's: persistence.load_nirl_state)."""
+        persistence.load_nirl_state(self, state)
 
     def save_checkpoint(self, path: str | Path) -> Path:
         """Directory with q/ (NNQLLearner checkpoint), nirl.pt and demos/ (if this learner owns them)."""
-        from agents.nirl.persistence import save_checkpoint
-
-        return save_checkpoint(self, path)
+        return persistence.save_checkpoint(self, path)
 
     def load_checkpoint(self, path: str | Path) -> None:
-        from agents.nirl.persistence import load_checkpoint
-
-        load_checkpoint(self, path)
+        """Inverse of save_checkpoint, onto this learner's device whichever device saved it."""
+        persistence.load_checkpoint(self, path)

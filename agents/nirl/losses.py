@@ -200,7 +200,8 @@ def map_posterior(prior: torch.Tensor, observed: torch.Tensor, noise: float | to
     """
     n_actions = prior.shape[1]
     observed = observed.long().reshape(-1)
-    noise = torch.as_tensor(noise, dtype=prior.dtype).reshape(-1, 1).expand(len(observed), 1)
+    noise = torch.as_tensor(noise, dtype=prior.dtype, device=prior.device)
+    noise = noise.reshape(-1, 1).expand(len(observed), 1)
     likelihood = (noise / n_actions).expand_as(prior).clone()
     likelihood.scatter_add_(1, observed[:, None], 1.0 - noise)
     joint = prior * likelihood

@@ -59,6 +59,7 @@ class MaxMarginFit:
 
     Handed its parts by ``NIRLLearner``: the reward network and its optimiser, NNQL's learner,
     both buffers, the refinement function, the margin matrix and the goal test's constants.
+    Sampled batches go to the Q-learner's device (as the networks and the margin matrix).
     """
 
     def __init__(
@@ -93,7 +94,7 @@ class MaxMarginFit:
         """One maximum-margin update of the reward network on refined demonstration steps
         (``myopic``: the warm start, before any Q exists, uses ``C = 0``)."""
         cfg = self.config
-        batch = sample(self.demos, cfg.demo_batch_size)
+        batch = sample(self.demos, cfg.demo_batch_size, self.q.device)
         obs = batch["observation"]
         refined = self.refine(obs, batch["action"])
         reward = self.reward(obs)
@@ -106,7 +107,7 @@ class MaxMarginFit:
         loss = margin = max_margin_loss(q_hat, refined.labels, self.margins, refined.weights)
         rank = torch.zeros(())
         if not myopic and cfg.rank_coef > 0 and len(self.experience):
-            own = sample(self.experience, cfg.demo_batch_size)
+            own = sample(self.experience, cfg.demo_batch_size, self.q.device)
             own_reward = self.reward(own["observation"]).gather(1, own["action"].long()[:, None])
             demo_reward = reward.gather(1, refined.labels[:, None])
             rank = ranking_margin_loss(demo_reward, own_reward, cfg.margin, refined.weights)
@@ -135,9 +136,9 @@ class MaxMarginFit:
             n_demo = cfg.batch_size
         parts = []
         if cfg.batch_size - n_demo > 0:
-            parts.append(sample(self.experience, cfg.batch_size - n_demo).select(*Q_KEYS))
+            parts.append(sample(self.experience, cfg.batch_size - n_demo, self.q.device).select(*Q_KEYS))
         if n_demo > 0:
-            parts.append(sample(self.demos, n_demo).select(*Q_KEYS))
+            parts.append(sample(self.demos, n_demo, self.q.device).select(*Q_KEYS))
         batch = torch.cat(parts) if len(parts) > 1 else parts[0]
         with torch.no_grad():
             learned = self.reward(batch["observation"]).gather(1, batch["action"].long()[:, None]).squeeze(1)
@@ -158,7 +159,7 @@ class MaxMarginFit:
         loss = td_loss = q.loss(batch)["loss"]
         margin = torch.zeros(())
         if coef > 0 and len(self.demos):
-            demo = sample(self.demos, self.config.demo_batch_size)
+            demo = sample(self.demos, self.config.demo_batch_size, self.q.device)
             refined = self.refine(demo["observation"], demo["action"])
             margin = max_margin_loss(
                 q.network(demo["observation"]), refined.labels, self.margins, refined.weights

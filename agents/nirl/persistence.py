@@ -1,9 +1,12 @@
-"""NIRL on disk: the policy directory (shared format + the reward network) and checkpoints."""
+"""NIRL on disk: the policy directory (shared format + the reward network), the learner's state
+(reward network, optimiser, frozen prior, counters) and checkpoints, loadable on any device."""
 
 from __future__ import annotations
 
+import copy
 import os
 import shutil
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +14,8 @@ import torch
 from safetensors.numpy import save_file
 
 from agents.mlp import save_policy
+from agents.nirl.config import FORMAT_VERSION
+from agents.nirl.networks import RewardNetwork
 from agents.replay_files import load_replay, save_replay
 
 MODEL_NAME = "nirl"
@@ -41,6 +46,59 @@ def save_policy_files(learner: Any, path: str | Path, **metadata: Any) -> Path:
     )
 
 
+def nirl_state(learner: Any) -> dict[str, Any]:
+    """Reward network, its optimiser, the frozen prior and NIRL's counters (the Q side is NNQLLearner's)."""
+    return {
+        "format": FORMAT_VERSION,
+        "config": learner.config.to_dict(),
+        "reward_architecture": learner.reward.architecture,
+        "reward": learner.reward.state_dict(),
+        "reward_optimizer": learner.reward_optimizer.state_dict(),
+        "prior_network": None if learner.prior_network is None else learner.prior_network.state_dict(),
+        "counters": {
+            "iteration": learner.iteration,
+            "reward_steps": learner.reward_steps,
+            "warm_updates": learner.warm_updates,
+            "reward_credit": learner.reward_credit,
+            "demo_episodes": learner.demo_episodes,
+            "demo_path_steps": learner.demo_path_steps,
+        },
+    }
+
+
+def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
+    """Inverse of nirl_state. A state saved before cores existed (format 1) was the max-margin
+    learner's: it loads into a learner with ``core="max_margin"`` and is refused, with the fix
+    named, by the others."""
+    version = int(state.get("format", 1))
+    saved_core = state["config"].get("core", "max_margin")
+    core = learner.config.core
+    if version > FORMAT_VERSION:
+        raise ValueError(f"NIRL state format {version} is newer than this version reads ({FORMAT_VERSION})")
+    if saved_core != core:
+        raise ValueError(
+            f"NIRL state was saved by the {saved_core!r} core (format {version}); this learner runs "
+            f"{core!r}: load it with NIRLConfig(core={saved_core!r}) or start a fresh run"
+        )
+    saved = RewardNetwork.from_architecture(state["reward_architecture"]).architecture
+    if saved != learner.reward.architecture:
+        raise ValueError(
+            f"NIRL state's reward network {saved} differs from this learner's {learner.reward.architecture}"
+        )
+    learner.reward.load_state_dict(state["reward"])
+    learner.reward_optimizer.load_state_dict(state["reward_optimizer"])
+    if state.get("prior_network") is not None:
+        learner.prior_network = copy.deepcopy(learner.q.network).requires_grad_(False)
+        learner.prior_network.load_state_dict(state["prior_network"])
+    counters = state["counters"]
+    learner.iteration = int(counters["iteration"])
+    learner.reward_steps = int(counters["reward_steps"])
+    learner.warm_updates = int(counters["warm_updates"])
+    learner.reward_credit = float(counters["reward_credit"])
+    learner.demo_episodes = int(counters["demo_episodes"])
+    learner.demo_path_steps = int(counters.get("demo_path_steps", 0))
+
+
 def save_checkpoint(learner: Any, path: str | Path) -> Path:
     """A directory with q/ (the NNQLLearner checkpoint), nirl.pt (reward network, optimiser,
     counters) and demos/ when the learner owns its demonstration buffer; replaced atomically."""
@@ -63,6 +121,7 @@ def save_checkpoint(learner: Any, path: str | Path) -> Path:
 def load_checkpoint(learner: Any, path: str | Path) -> None:
     path = Path(path)
     learner.q.load_checkpoint(path / "q")
-    learner.load_state_dict(torch.load(path / STATE_FILE, weights_only=True))
+    state = torch.load(path / STATE_FILE, map_location=learner.device, weights_only=True)
+    learner.load_state_dict(state)
     if learner.owns_demos and (path / "demos").exists():
         load_replay(learner.demos, path / "demos")

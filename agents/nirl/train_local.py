@@ -27,10 +27,12 @@ from typing import Any
 
 import numpy as np
 
+from agents.evaluation.runner import evaluate, make_eval_set
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.learner import NIRLLearner
 from agents.nirl.weights import HISTORY_FILE, WeightHistory, plot_weight_changes
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
+from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
 VALIDATION_SEED = 1
@@ -52,8 +54,6 @@ class NIRLResult:
 
 def evaluate_greedy(learner: NIRLLearner, episodes: int, seed: int, nav: Any = None) -> Any:
     """Greedy policy on the shared held-out "unseen" set -> agents.evaluation EvalResult."""
-    from agents.evaluation.runner import evaluate, make_eval_set
-
     return evaluate(learner.policy(), make_eval_set("unseen", episodes, seed=seed), config=nav)
 
 
@@ -65,13 +65,12 @@ def train_nirl(
     on_iteration: Callable[[dict[str, float], NIRLLearner], None] | None = None,
 ) -> NIRLResult:
     """Warm-start on ``demos`` (``agents.demos.Demo`` list), then ``config.iterations`` rounds of
-    neural policy iteration. ``on_iteration(point, learner)`` sees each curve point."""
-    from worlds.vector_env import NavigationVectorEnv
-
+    neural policy iteration (the learner on ``run.device``). ``on_iteration(point, learner)`` sees
+    each curve point."""
     config = config or NIRLConfig()
     run = run or NIRLRun()
     start = time.perf_counter()
-    learner = NIRLLearner(config, nav)
+    learner = NIRLLearner(config, nav, device=run.device)
     learner.add_demos(demos)
     learner.warm_start()
     history = WeightHistory()

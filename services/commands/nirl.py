@@ -72,6 +72,7 @@ def run_train(args: argparse.Namespace) -> int:
     import sys
 
     from agents.demos import DemoFormatError
+    from agents.device import resolve_device
     from agents.nirl.buffers import load_demonstrations
     from agents.nirl.config import NIRLConfig, NIRLRun
     from agents.nirl.train_local import train_nirl
@@ -81,6 +82,7 @@ def run_train(args: argparse.Namespace) -> int:
     try:
         config = options_from_args(NIRLConfig, args, "NAVLEARN_NIRL")
         run = options_from_args(NIRLRun, args, "NAVLEARN_NIRL_RUN", progress=not args.no_progress)
+        resolve_device(run.device)  # cuda without a GPU: one sentence, before anything starts
         if run.envs < 1:
             raise OptionError("--envs must be positive")
         parse_map_spec(run.maps)

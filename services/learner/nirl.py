@@ -27,7 +27,8 @@ HISTORY_EVERY = 1
 
 
 class NIRLTrainer:
-    """One NIRL learner fed by the service; ``train(n)`` runs up to n updates when demos exist."""
+    """One NIRL learner fed by the service; ``train(n)`` runs up to n updates when demos exist.
+    Its networks live on ``device`` (the learner's ``--device``), the shared buffers in host memory."""
 
     def __init__(
         self,
@@ -39,8 +40,9 @@ class NIRLTrainer:
         run: str,
         sender: str,
         broadcast_every: int,
+        device: str = "cpu",
     ):
-        self.learner = NIRLLearner(config, nav, experience=experience, demos=demos)
+        self.learner = NIRLLearner(config, nav, experience=experience, demos=demos, device=device)
         self.weights = WeightsBroadcaster(session, run, MODEL, sender)
         self.broadcast_every = max(int(broadcast_every), 1)
         self.history = WeightHistory()

@@ -65,6 +65,7 @@ def run_learner(
             settings.run,
             sender,
             config.broadcast_every,
+            device=config.device,
         )
     # The session closes last, even if closing the service fails: a held session keeps the
     # process alive.

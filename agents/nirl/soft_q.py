@@ -1,0 +1,203 @@
+"""The soft-Q cores (``NIRLConfig.core = "iq"`` or ``"sqil"``): Q updates on mixed batches, the reward fit.
+
+``iq`` trains the Q-network by inverse soft-Q learning (Garg et al. 2021) on batches of refined
+demonstration steps and own experience; the reward it holds, ``r = Q(s, a) - gamma V(s')``, is
+logged beside what it must value (``reward_scale``) and distilled into the reward network by
+regression. ``sqil`` is the SQIL baseline (reward 1 on demonstrated steps, 0 on own ones) on the
+same machinery. Sampled batches are moved to the Q-learner's device; the buffers stay on the CPU.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import torch
+from tensordict import TensorDict
+from torchrl.data import TensorDictReplayBuffer
+
+from agents.nirl.buffers import sample
+from agents.nirl.config import NIRLConfig
+from agents.nirl.losses import (
+    KEEP,
+    RELABEL,
+    REWEIGHT,
+    Refinement,
+    crash_absorbing_value,
+    implicit_reward,
+    iq_loss,
+    soft_td_loss,
+    soft_value,
+    sqil_rewards,
+)
+from agents.nirl.networks import RewardNetwork, goal_reached
+from agents.nnql.learner import NNQLLearner
+
+BATCH_KEYS = ("observation", "action", ("next", "observation"), ("next", "terminated"))
+ClipStep = Callable[[torch.Tensor, Any, torch.optim.Optimizer], float]
+
+
+class SoftQFit:
+    """Q updates of the iq or sqil core and the reward network's regression on the implicit reward.
+
+    Handed its parts by ``NIRLLearner`` (as ``MaxMarginFit`` is): the reward network and its
+    optimiser, NNQL's learner, both buffers, the refinement function, the goal test's constants,
+    the clipped optimiser step, what runs after each Q update and the demonstrated path length.
+    """
+
+    def __init__(
+        self,
+        config: NIRLConfig,
+        reward: RewardNetwork,
+        reward_optimizer: torch.optim.Optimizer,
+        q: NNQLLearner,
+        demos: TensorDictReplayBuffer,
+        experience: TensorDictReplayBuffer,
+        refine: Callable[[torch.Tensor, torch.Tensor, torch.Tensor | None], Refinement],
+        goal_tolerance: float,
+        max_range: float,
+        clip_step: ClipStep,
+        after_update: Callable[[], None],
+        path_length: Callable[[], float],
+    ):
+        self.config = config
+        self.reward = reward
+        self.reward_optimizer = reward_optimizer
+        self.q = q
+        self.demos = demos
+        self.experience = experience
+        self.refine = refine
+        self.goal_tolerance = goal_tolerance
+        self.max_range = max_range
+        self.clip_step = clip_step
+        self.after_update = after_update
+        self.path_length = path_length
+
+    def mixed_batch(self, offline: bool) -> tuple[TensorDict, torch.Tensor]:
+        """Demonstration steps and own experience, ``demo_fraction`` of the batch demonstrated
+        (all of it offline or while no experience exists), on the Q-learner's device; returns the
+        batch and its expert mask."""
+        cfg = self.config
+        n_demo = cfg.batch_size
+        if not offline and len(self.experience):
+            n_demo = max(1, round(cfg.batch_size * cfg.demo_fraction))
+        demos = sample(self.demos, n_demo)
+        noise = demos.get("noise", torch.full((n_demo,), cfg.demo_noise))
+        parts = [demos.select(*BATCH_KEYS)]
+        if cfg.batch_size > n_demo:
+            parts.append(sample(self.experience, cfg.batch_size - n_demo).select(*BATCH_KEYS))
+        batch = torch.cat(parts) if len(parts) > 1 else parts[0]
+        batch.set("noise", torch.cat([noise, torch.zeros(cfg.batch_size - n_demo)]))
+        is_expert = torch.zeros(cfg.batch_size, dtype=torch.bool)
+        is_expert[:n_demo] = True
+        device = self.q.device
+        if device.type == "cpu":
+            return batch, is_expert
+        return batch.to(device, non_blocking=True), is_expert.to(device, non_blocking=True)
+
+    def target_q(self, obs: torch.Tensor) -> torch.Tensor:
+        """Q-values of the target network (DQNLoss's target parameters, Polyak-averaged)."""
+        loss = self.q.loss
+        with torch.no_grad(), loss.target_value_network_params.to_module(loss.value_network):
+            return self.q.network(obs)
+
+    def q_step(self, offline: bool = False) -> dict[str, float]:
+        """One Q-network update of the configured core (iq or sqil) on a mixed batch."""
+        cfg = self.config
+        batch, is_expert = self.mixed_batch(offline)
+        obs, next_obs = batch["observation"], batch[("next", "observation")]
+        terminated = batch[("next", "terminated")].reshape(-1)
+        labels = batch["action"].long().reshape(-1).clone()
+        weights = torch.ones(len(labels), device=labels.device)
+        refined = self.refine(obs[is_expert], labels[is_expert], batch["noise"][is_expert])
+        labels[is_expert], weights[is_expert] = refined.labels, refined.weights
+        q_all = self.q.network(obs)
+        q_taken = q_all.gather(1, labels[:, None]).squeeze(1)
+        next_value = soft_value(self.target_q(next_obs), cfg.alpha)
+        metrics: dict[str, float] = {}
+        at_goal = goal_reached(next_obs, self.reward.n_beams, self.goal_tolerance, self.max_range)
+        if cfg.core == "iq" and cfg.crash_absorbing:
+            # a collision leads to an absorbing state (Kostrikov et al. 2019, DAC) told apart from the
+            # goal by the observation; its value is IQ-Learn's optimum there (losses.crash_absorbing_value)
+            crashed = terminated.bool() & ~at_goal
+            next_value = torch.where(crashed, crash_absorbing_value(cfg.chi2_alpha, cfg.gamma), next_value)
+            terminated = terminated.bool() & at_goal
+        if cfg.core == "sqil" and cfg.crash_absorbing:
+            # DAC's absorbing states for SQIL: the goal where demonstrations end is an expert absorbing
+            # state (reward 1 forever, 1 / (1 - gamma)); a collision ends with reward 0. Without it, ending
+            # at the goal is worth less than wandering on at reward 1, and the policy avoids the goal
+            reached = terminated.bool() & at_goal
+            forever = torch.full_like(next_value, 1.0 / (1.0 - cfg.gamma))
+            next_value = torch.where(reached, forever, next_value)
+            terminated = terminated.bool() & ~at_goal
+        if cfg.core == "iq":
+            terms = iq_loss(
+                q_taken, soft_value(q_all, cfg.alpha), next_value, terminated, is_expert, cfg.gamma,
+                cfg.chi2_alpha, weights,
+            )  # fmt: skip
+            loss, reward = terms.loss, terms.reward
+            metrics.update({
+                "losses/iq_loss": float(terms.loss.detach()),
+                "losses/iq_expert": float(terms.expert_term),
+                "losses/iq_value": float(terms.value_term),
+                "losses/iq_chi2": float(terms.chi2_term),
+            })  # fmt: skip
+        else:  # sqil
+            loss = soft_td_loss(q_taken, sqil_rewards(is_expert), next_value, terminated, cfg.gamma)
+            reward = implicit_reward(q_taken.detach(), next_value, terminated, cfg.gamma)
+            metrics["losses/td_loss"] = float(loss.detach())
+        norm = self.clip_step(loss, self.q.loss.parameters(), self.q.optimizer)
+        self.q.target_updater.step()
+        self.q.updates += 1
+        self.after_update()
+        metrics.update(self.reward_scale(reward, q_taken.detach(), q_all.detach(), batch, is_expert))
+        decisions = refined.decisions
+        metrics.update({
+            "losses/grad_norm": norm,
+            "charts/refine_keep": float((decisions == KEEP).float().mean()),
+            "charts/refine_reweight": float((decisions == REWEIGHT).float().mean()),
+            "charts/refine_relabel": float((decisions == RELABEL).float().mean()),
+            "charts/demo_weight": float(refined.weights.mean()),
+            "charts/version": float(self.q.updates),
+        })  # fmt: skip
+        return metrics
+
+    def reward_scale(self, reward, q_taken, q_all, batch, is_expert) -> dict[str, float]:
+        """The learned reward beside what it must value: per demonstrated step, what a demonstrated
+        path earns at that rate, the path length, and the value of a crash (Q of a collision step)."""
+        cfg = self.config
+        per_step = float(reward[is_expert].mean())
+        length = self.path_length()
+        out = {
+            "nirl/learned_reward": per_step,
+            "nirl/path_length": length,
+            "nirl/path_return": per_step * (1 - cfg.gamma**length) / (1 - cfg.gamma),
+            "nirl/expert_value": float(soft_value(q_all[is_expert], cfg.alpha).mean()),
+        }
+        own = ~is_expert
+        if own.any():
+            out["nirl/learned_reward_own"] = float(reward[own].mean())
+            terminated = batch[("next", "terminated")].reshape(-1).bool()
+            at_goal = goal_reached(
+                batch[("next", "observation")], self.reward.n_beams, self.goal_tolerance, self.max_range
+            )
+            crashed = own & terminated & ~at_goal
+            if crashed.any():
+                out["nirl/collision_value"] = float(q_taken[crashed].mean())
+        return out
+
+    def reward_step(self) -> dict[str, float]:
+        """One reward-network update: regression of ``R(s, a)`` on the Q-function's implicit reward
+        ``Q(s, a) - gamma V(s')`` over a mixed batch."""
+        cfg = self.config
+        batch, _ = self.mixed_batch(offline=False)
+        obs, actions = batch["observation"], batch["action"].long().reshape(-1)
+        with torch.no_grad():
+            q_taken = self.q.network(obs).gather(1, actions[:, None]).squeeze(1)
+            next_value = soft_value(self.target_q(batch[("next", "observation")]), cfg.alpha)
+            terminated = batch[("next", "terminated")].reshape(-1)
+            target = implicit_reward(q_taken, next_value, terminated, cfg.gamma)
+        predicted = self.reward(obs).gather(1, actions[:, None]).squeeze(1)
+        loss = torch.nn.functional.mse_loss(predicted, target)
+        norm = self.clip_step(loss, self.reward.parameters(), self.reward_optimizer)
+        return {"losses/reward_fit": float(loss.detach()), "losses/reward_grad_norm": norm}
