@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-import torch
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import torch
 
 DEVICES = ("cpu", "cuda", "auto")
 """Accepted device names; ``cuda:N`` picks one GPU of several."""
@@ -10,6 +13,8 @@ DEVICES = ("cpu", "cuda", "auto")
 
 def resolve_device(name: str) -> torch.device:
     """The torch device ``name`` asks for; ``auto`` is the first GPU when torch sees one, else the CPU."""
+    import torch  # here, not at the top: the CLI's parsers read DEVICES, and torch costs seconds
+
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if name != "cpu" and name != "cuda" and not name.startswith("cuda:"):

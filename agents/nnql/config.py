@@ -6,6 +6,9 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+STORAGES = ("memory", "memmap")
+"""Where a replay keeps its transitions (agents.nnql.replay_storage): RAM or memory-mapped files."""
+
 TARGET_UPDATES = ("soft", "hard")
 EXPLORATIONS = ("boltzmann", "epsilon")
 LOSS_FUNCTIONS = ("l2", "smooth_l1", "l1")

@@ -33,7 +33,6 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictReplayBuffer
 
-STORAGES = ("memory", "memmap")
 STATE_FILE = "memmap.json"
 
 

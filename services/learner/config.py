@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agents.device import DEVICES
-from agents.nnql.replay_storage import STORAGES
+from agents.nnql.config import STORAGES
 
 
 @dataclass
