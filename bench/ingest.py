@@ -44,7 +44,7 @@ import numpy as np
 from protocols import keys
 from protocols.codec import decode, encode
 from protocols.flow import Ack
-from protocols.messages import LearnerStatus, TransitionBatch
+from protocols.messages import StatusReport, TransitionBatch
 from services.actor.config import ActorConfig
 from services.common.outbox import Outbox
 from services.common.transport import ZenohSettings, free_port, open_session
@@ -143,7 +143,7 @@ class PacedActor:
         self.publisher.undeclare()
 
 
-def fresh_status(session, run: str, after_seq: int, timeout: float = 5.0) -> tuple[float, LearnerStatus]:
+def fresh_status(session, run: str, after_seq: int, timeout: float = 5.0) -> tuple[float, StatusReport]:
     """The learner refreshes its snapshot every 0.5 s: poll until a newer one than ``after_seq``
     appears, so its time is known to a poll interval (20 ms) instead of 0.5 s."""
     deadline = time.monotonic() + timeout

@@ -7,8 +7,8 @@ key                        from -> to                  payload
 ``demos/<source>``         demonstrator -> learner     DemoBatch
 ``weights/<model>``        learner -> actors, eval     WeightsUpdate
 ``eval/<evaluator>``       evaluator -> learner        EvalReport
-``status/learner``         queryable                   LearnerStatus
-``status/actor:<actor>``   queryable (each actor)      LearnerStatus (the actor's figures)
+``status/learner``         queryable                   StatusReport
+``status/actor:<actor>``   queryable (each actor)      StatusReport (the actor's figures)
 ``acks/<actor>``           learner -> actor            acknowledgements
 ``alive/<role>/<id>``      liveliness tokens           (none)
 =========================  ==========================  =================

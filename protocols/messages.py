@@ -342,8 +342,9 @@ class EvalReport(Message):
 
 @register
 @dataclass(kw_only=True, eq=False)
-class LearnerStatus(Message):
-    """The learner's answer to a status query."""
+class StatusReport(Message):
+    """A service's answer to a status query: the learner's on ``status/learner``, an actor's on
+    ``status/actor:<id>`` (each fills the maps that apply to it)."""
 
     KIND: ClassVar[str] = "status"
     VERSION: ClassVar[int] = 1
@@ -370,8 +371,8 @@ __all__ = [
     "EpisodeMeta",
     "EvalReport",
     "ExplorationSchedule",
-    "LearnerStatus",
     "Message",
+    "StatusReport",
     "TransitionBatch",
     "WeightsUpdate",
     "register",

@@ -16,6 +16,7 @@ from services.common.transport import ZenohSettings, free_port, open_session
 from services.learner.nirl import NIRLTrainer
 from tests.test_nirl_learner import SMALL, Episode, goal_seeking_steps
 from tests.test_nnql_replay import N_ACTIONS, OBS_DIM, random_batch, small_config
+from worlds.config import NavConfig
 
 HAS_CUDA = torch.cuda.is_available()
 needs_no_gpu = pytest.mark.skipif(HAS_CUDA, reason="a CUDA GPU is present: 'cuda' is not an error here")
@@ -180,14 +181,18 @@ def test_learner_services_nirl_trainer_on_the_learners_device(device, tmp_path):
     settings = ZenohSettings(mode="router", listen=[f"tcp/127.0.0.1:{free_port()}"], connect=[], run="dev")
     with open_session(settings) as session:
         config = NIRLConfig(**SMALL, warmstart_updates=2, q_updates=2, reward_updates=1)
-        trainer = NIRLTrainer(config, source.experience, source.demos, session, "dev", "test", 1, device)
+        trainer = NIRLTrainer(
+            config, NavConfig(), source.experience, source.demos, session, "dev", "test", 1, device
+        )
         try:
             assert trainer.train(6) == 6 and trainer.version == 6
             assert all(p.device.type == device for p in trainer.learner.reward.parameters())
             assert all(p.device.type == device for p in trainer.learner.q.loss.parameters())
             assert source.demos.storage._storage.device.type == "cpu"
             trainer.save(tmp_path / "nirl")
-            on_cpu = NIRLTrainer(config, source.experience, source.demos, session, "dev", "test2", 1)
+            on_cpu = NIRLTrainer(
+                config, NavConfig(), source.experience, source.demos, session, "dev", "test2", 1
+            )
             on_cpu.load(tmp_path / "nirl")
             for name, value in trainer.learner.get_weights().items():
                 np.testing.assert_array_equal(on_cpu.learner.get_weights()[name], value)

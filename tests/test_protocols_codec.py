@@ -26,7 +26,7 @@ from protocols.arrays import pack_array, unpack_array
 from protocols.codec import decode, encode
 from protocols.errors import REASONS, ProtocolError
 from protocols.limits import Limits
-from protocols.messages import KINDS, DemoBatch, EpisodeMeta, EvalReport, LearnerStatus, TransitionBatch
+from protocols.messages import KINDS, DemoBatch, EpisodeMeta, EvalReport, StatusReport, TransitionBatch
 
 LIMITS = Limits(n_actions=N_ACTIONS)
 
@@ -105,10 +105,10 @@ def test_numpy_scalars_in_json_fields_encode_as_numbers() -> None:
 
 
 def test_status_losses_may_be_nan_but_rates_may_not() -> None:
-    ok = decode(encode(LearnerStatus(losses={"td": math.nan})), LIMITS)
+    ok = decode(encode(StatusReport(losses={"td": math.nan})), LIMITS)
     assert math.isnan(ok.losses["td"])
     with pytest.raises(ProtocolError) as err:
-        decode(encode(LearnerStatus(rates={"rx": math.inf})), LIMITS)
+        decode(encode(StatusReport(rates={"rx": math.inf})), LIMITS)
     assert err.value.reason == "nonfinite"
 
 
@@ -211,7 +211,7 @@ def test_size_and_nesting_limits() -> None:
     for _ in range(20):
         deep = {"x": deep}
     assert rejected(encode(EvalReport(model="m", policy_version=0, metrics={"f": deep}))).reason == "oversize"
-    many = LearnerStatus(counters={f"c{i}": i for i in range(100)})
+    many = StatusReport(counters={f"c{i}": i for i in range(100)})
     assert rejected(encode(many), Limits(max_items=50)).reason == "oversize"
     assert (
         rejected(b"\x91" * 100_000 + b"\x00").reason == "malformed"

@@ -13,7 +13,7 @@ from wire_helpers import N_ACTIONS, any_message, raw_envelope, small_transitions
 from protocols.codec import decode, encode
 from protocols.errors import REASONS, ProtocolError
 from protocols.limits import Limits
-from protocols.messages import DemoBatch, EpisodeMeta, EvalReport, LearnerStatus, Message, WeightsUpdate
+from protocols.messages import DemoBatch, EpisodeMeta, EvalReport, Message, StatusReport, WeightsUpdate
 
 LIMITS = Limits(n_actions=N_ACTIONS, max_message_bytes=1 << 20)
 FUZZ = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -55,7 +55,7 @@ CORPUS = [
             architecture={"hidden": [4], "activation": "relu"},
         ),
         EvalReport(model="nnql", policy_version=3, metrics={"unseen": {"success": 0.5, "ci": [0.4, 0.6]}}),
-        LearnerStatus(counters={"rx": 5}, rates={"rx": 1.5}, losses={"td": 0.1}, last_eval={"unseen": 0.5}),
+        StatusReport(counters={"rx": 5}, rates={"rx": 1.5}, losses={"td": 0.1}, last_eval={"unseen": 0.5}),
     )
 ]
 corpus = st.sampled_from(CORPUS)

@@ -234,10 +234,10 @@ def test_the_learning_curve_starts_at_launch_and_does_not_join_a_resumed_run(tmp
 
 
 def test_status_shows_nirl_version_and_demonstrations_per_source():
-    from protocols.messages import LearnerStatus
+    from protocols.messages import StatusReport
     from services.ops.status import render, status_dict
 
-    status = LearnerStatus(
+    status = StatusReport(
         sender="learner",
         counters={"demo_episodes/astar": 20, "demo_steps/astar": 487, "demo_episodes/human": 2,
                   "demo_steps/human": 61, "demo_steps": 548, "updates": 900},

@@ -20,7 +20,7 @@ from wire_helpers import N_ACTIONS, REPO, same, small_transitions, start, stop, 
 from protocols import keys
 from protocols.codec import decode, encode
 from protocols.limits import Limits
-from protocols.messages import DemoBatch, EpisodeMeta, EvalReport, LearnerStatus, WeightsUpdate
+from protocols.messages import DemoBatch, EpisodeMeta, EvalReport, StatusReport, WeightsUpdate
 from services.common.transport import Presence, TransportError, ZenohSettings, open_session
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
@@ -82,7 +82,7 @@ def one_of_each(seq: int) -> dict[str, object]:
         keys.evaluation(RUN, "ev1"): EvalReport(
             model="nnql", policy_version=seq, metrics={"unseen": {"spl": 0.5}}
         ),
-        keys.status(RUN): LearnerStatus(counters={"rx": seq}),
+        keys.status(RUN): StatusReport(counters={"rx": seq}),
     }
     for message in messages.values():
         message.sender, message.seq = "tester", seq
@@ -122,7 +122,7 @@ def test_pubsub_of_every_kind_with_exact_counts(router: str) -> None:
 
 
 def test_a_queryable_answers_a_get(router: str) -> None:
-    status = LearnerStatus(counters={"transitions": 1234}, versions={"nnql": 7}, sender="learner", seq=3)
+    status = StatusReport(counters={"transitions": 1234}, versions={"nnql": 7}, sender="learner", seq=3)
 
     def on_query(query) -> None:
         query.reply(query.key_expr, encode(status))

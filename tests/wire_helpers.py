@@ -20,8 +20,8 @@ from protocols.messages import (
     DemoBatch,
     EpisodeMeta,
     EvalReport,
-    LearnerStatus,
     Message,
+    StatusReport,
     TransitionBatch,
     WeightsUpdate,
 )
@@ -139,10 +139,10 @@ def eval_reports(draw) -> EvalReport:
 
 
 @st.composite
-def learner_statuses(draw) -> LearnerStatus:
+def learner_statuses(draw) -> StatusReport:
     ints = st.dictionaries(names, st.integers(-(2**63), 2**63 - 1), max_size=4)
     floats = st.dictionaries(names, st.floats(allow_nan=False, allow_infinity=False), max_size=4)
-    return LearnerStatus(
+    return StatusReport(
         counters=draw(ints),
         rates=draw(floats),
         versions=draw(ints),

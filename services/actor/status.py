@@ -1,6 +1,6 @@
 """An actor's own status, answered on ``navlearn/<run>/status/actor:<id>`` (``navlearn status --actors``).
 
-The answer is the status message kind (protocols' LearnerStatus: counters, rates,
+The answer is the status message kind (protocols' StatusReport: counters, rates,
 versions) filled with the actor's figures: its outbox (held, bound, unacknowledged,
 sent, acknowledged, resent), the time it spent waiting for the learner, whether it
 is slowed down by back-pressure now, its robot-steps and the weights it follows.
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from protocols import keys
 from protocols.keys import ACTOR_STATUS_PREFIX
-from protocols.messages import LearnerStatus
+from protocols.messages import StatusReport
 from services.common.outbox import Outbox
 from services.ops.status import status_replies
 
@@ -65,7 +65,7 @@ class ActorView:
     steps_per_s: float
 
 
-def actor_status(view: ActorView, outbox: Outbox, blocked: BlockedShare, seq: int) -> LearnerStatus:
+def actor_status(view: ActorView, outbox: Outbox, blocked: BlockedShare, seq: int) -> StatusReport:
     """An actor's status (called on a Zenoh thread)."""
     blocked.add(outbox.blocked_s)  # the actor may be inside a long wait: count it up to now
     share = blocked.share()
@@ -90,12 +90,12 @@ def actor_status(view: ActorView, outbox: Outbox, blocked: BlockedShare, seq: in
     rates = {"waiting_for_learner_share": share, "robot_steps_per_s": view.steps_per_s}
     if successes:
         rates["success_rate"] = sum(successes) / len(successes)
-    return LearnerStatus(
+    return StatusReport(
         sender=view.sender, seq=seq, counters=counters, rates=rates, versions={view.model: view.version}
     )
 
 
-def query_actor_statuses(session, run: str, timeout: float = 2.0) -> dict[str, LearnerStatus]:
+def query_actor_statuses(session, run: str, timeout: float = 2.0) -> dict[str, StatusReport]:
     """Every actor's answer on ``status/actor:<id>``, by actor id."""
     return {
         name.removeprefix(ACTOR_STATUS_PREFIX): message
@@ -104,7 +104,7 @@ def query_actor_statuses(session, run: str, timeout: float = 2.0) -> dict[str, L
     }
 
 
-def actor_status_dicts(statuses: dict[str, LearnerStatus]) -> dict[str, dict]:
+def actor_status_dicts(statuses: dict[str, StatusReport]) -> dict[str, dict]:
     """JSON-able: actor id -> its counters, rates and weights versions."""
     return {
         actor: {"sender": s.sender, "counters": s.counters, "rates": s.rates, "versions": s.versions}

@@ -80,7 +80,7 @@ class NIRLTrainer:
         )
 
     def status_fields(self) -> tuple[dict[str, int], dict[str, float]]:
-        """(counters, losses) to merge into the LearnerStatus, prefixed ``nirl/``."""
+        """(counters, losses) to merge into the StatusReport, prefixed ``nirl/``."""
         counters = {
             "nirl/iterations": self.learner.iteration,
             "nirl/warm_updates": self.learner.warm_updates,

@@ -29,7 +29,7 @@ from agents.replay_files import stored_bytes
 from protocols import keys
 from protocols.codec import encode
 from protocols.flow import Ack
-from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, LearnerStatus
+from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, StatusReport
 from services.common.process import Scalars
 from services.common.weights import WeightsBroadcaster
 from services.learner.checkpoint import CheckpointDir
@@ -375,7 +375,7 @@ class LearnerService:
 
     # ---------------------------------------------------------------- status
 
-    def status(self) -> LearnerStatus:
+    def status(self) -> StatusReport:
         self.status_seq += 1
         return build_status(self.parts, self.config.model, self.sender, self.status_seq)
 

@@ -1,13 +1,13 @@
-"""The learner's status snapshot (protocols' LearnerStatus), answered on ``status/learner``."""
+"""The learner's status snapshot (protocols' StatusReport), answered on ``status/learner``."""
 
 from __future__ import annotations
 
-from protocols.messages import LearnerStatus
+from protocols.messages import StatusReport
 from services.learner.state import LearnerParts
 from services.learner.stats import LearnerTally
 
 
-def build_status(parts: LearnerParts, model: str, sender: str, seq: int) -> LearnerStatus:
+def build_status(parts: LearnerParts, model: str, sender: str, seq: int) -> StatusReport:
     """Counters (incl. rejections by reason and the write-ahead log's), rates, versions, replay sizes,
     per-actor totals and last seen, losses and the last evaluation of a learner service's parts."""
     tally, learner = parts.tally, parts.learner
@@ -36,7 +36,7 @@ def build_status(parts: LearnerParts, model: str, sender: str, seq: int) -> Lear
         counters.update(nirl_counters)
         losses.update(nirl_losses)
         versions["nirl"] = parts.nirl.version
-    return LearnerStatus(
+    return StatusReport(
         sender=sender,
         seq=seq,
         counters=counters,
@@ -49,7 +49,7 @@ def build_status(parts: LearnerParts, model: str, sender: str, seq: int) -> Lear
     )
 
 
-def status_charts(status: LearnerStatus, metrics: dict[str, float]) -> dict[str, float]:
+def status_charts(status: StatusReport, metrics: dict[str, float]) -> dict[str, float]:
     """TensorBoard scalars of a status snapshot and the newest update's losses."""
     charts = {
         "charts/updates_per_s": status.rates["updates_per_s"],
@@ -63,7 +63,7 @@ def status_charts(status: LearnerStatus, metrics: dict[str, float]) -> dict[str,
     return charts
 
 
-def progress_line(status: LearnerStatus, tally: LearnerTally) -> str:
+def progress_line(status: StatusReport, tally: LearnerTally) -> str:
     """The learner's periodic log line."""
     rates, counters = status.rates, status.counters
     return (

@@ -10,7 +10,7 @@ from typing import Any
 from protocols import keys
 from protocols.codec import decode
 from protocols.errors import ProtocolError
-from protocols.messages import EvalReport, LearnerStatus
+from protocols.messages import EvalReport, StatusReport
 
 
 def eval_summary(evaluator: str, report: EvalReport, arrived: float) -> dict[str, Any]:
@@ -33,8 +33,8 @@ def eval_summary(evaluator: str, report: EvalReport, arrived: float) -> dict[str
     }
 
 
-def status_replies(session, key: str, timeout: float) -> Iterator[tuple[str, LearnerStatus]]:
-    """(last key chunk, status) of each valid LearnerStatus answer to a get on ``key``."""
+def status_replies(session, key: str, timeout: float) -> Iterator[tuple[str, StatusReport]]:
+    """(last key chunk, status) of each valid StatusReport answer to a get on ``key``."""
     for reply in session.get(key, timeout=timeout):
         if reply.ok is None:
             continue
@@ -42,11 +42,11 @@ def status_replies(session, key: str, timeout: float) -> Iterator[tuple[str, Lea
             message = decode(reply.ok.payload.to_bytes())
         except ProtocolError:
             continue
-        if isinstance(message, LearnerStatus):
+        if isinstance(message, StatusReport):
             yield str(reply.ok.key_expr).rsplit("/", 1)[-1], message
 
 
-def query_status(session, run: str, timeout: float = 3.0) -> LearnerStatus | None:
+def query_status(session, run: str, timeout: float = 3.0) -> StatusReport | None:
     """The learner's answer on ``status/learner``, or None if no learner answered in time."""
     return next((message for _, message in status_replies(session, keys.status(run), timeout)), None)
 
@@ -88,7 +88,7 @@ def no_learner_hint(run: str, runs: list[str]) -> str:
     )
 
 
-def status_dict(status: LearnerStatus | None, alive: list[tuple[str, str]], now: float | None = None) -> dict:
+def status_dict(status: StatusReport | None, alive: list[tuple[str, str]], now: float | None = None) -> dict:
     """One JSON-able view of the run: the learner's status (None if it did not answer) and who is alive."""
     now = time.time() if now is None else now
     processes: dict[str, list[str]] = {}
