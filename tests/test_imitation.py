@@ -14,6 +14,8 @@ from agents.planning.demonstrate import generate_demos
 from worlds.config import NavConfig
 from worlds.generators import generate_task
 
+TOY_OBS = 11  # the width of the 8-beam observation a policy saved without observation settings reads
+
 
 def _toy_demos(n: int, rng: np.random.Generator) -> list:
     """Synthetic episodes whose correct action is a function of the observation."""
@@ -21,7 +23,7 @@ def _toy_demos(n: int, rng: np.random.Generator) -> list:
     demos = []
     for _ in range(n):
         steps = 12
-        obs = rng.uniform(-1, 1, (steps + 1, 4)).astype(np.float32)
+        obs = rng.uniform(-1, 1, (steps + 1, TOY_OBS)).astype(np.float32)
         actions = (obs[:-1, 0] > 0).astype(int) + 2 * (obs[:-1, 1] > 0)
         demos.append(make_demo(obs, actions, np.zeros(steps), np.zeros(steps), np.zeros(steps),
                                np.zeros((steps + 1, 3)), task, "file", None, 0.0, 1))  # fmt: skip
@@ -36,7 +38,7 @@ def test_split_and_extraction():
         split_episodes(1, 0.2, seed=0)
     demos = _toy_demos(3, np.random.default_rng(0))
     x, y = extract_dataset(demos)
-    assert x.shape == (36, 4) and y.shape == (36,)
+    assert x.shape == (36, TOY_OBS) and y.shape == (36,)
     np.testing.assert_array_equal(x[:12], demos[0].observations[:-1])
 
 
@@ -50,7 +52,7 @@ def test_training_learns_a_separable_rule_and_stops_early(tmp_path):
     again = train_policy(demos, config, n_actions=4)  # seeded: same run
     assert again.history == result.history
     policy = load_policy(save_trained(tmp_path / "p", result, config))
-    obs = np.random.default_rng(2).uniform(-1, 1, (100, 4)).astype(np.float32)
+    obs = np.random.default_rng(2).uniform(-1, 1, (100, TOY_OBS)).astype(np.float32)
     np.testing.assert_array_equal(policy(obs), result.policy()(obs))
 
 

@@ -59,19 +59,19 @@ def run_router(settings: ZenohSettings, stop: threading.Event) -> int:
     warning = exposure_warning(settings)
     if warning:
         log.warning("%s", warning)
-    with open_session(settings) as session:
+
+    def on_transport(event) -> None:
+        verb = "joined" if event.kind == zenoh.SampleKind.PUT else "left"
+        log.info("%s %s %s", event.transport.whatami, event.transport.zid, verb)
+
+    with open_session(settings) as session, session.info.declare_transport_events_listener(on_transport):
+        # "listening" is said once the listener is declared: whoever connects after it is logged
         log.info("router %s listening on %s", session.zid(), ", ".join(listen))
-
-        def on_transport(event) -> None:
-            verb = "joined" if event.kind == zenoh.SampleKind.PUT else "left"
-            log.info("%s %s %s", event.transport.whatami, event.transport.zid, verb)
-
-        with session.info.declare_transport_events_listener(on_transport):
-            # Wake up now and then: a SIGTERM delivered to one of Zenoh's threads runs the handler
-            # only when the main thread next runs Python, and an untimed wait never returned then
-            # (1 in 5 routers stopped together with the router they were linked to hung until
-            # SIGKILL).
-            while not stop.wait(0.5):
-                pass
+        # Wake up now and then: a SIGTERM delivered to one of Zenoh's threads runs the handler
+        # only when the main thread next runs Python, and an untimed wait never returned then
+        # (1 in 5 routers stopped together with the router they were linked to hung until
+        # SIGKILL).
+        while not stop.wait(0.5):
+            pass
     log.info("router stopped")
     return 0
