@@ -238,17 +238,19 @@ def _potential(dist, cell, x, y):
 
 @njit(cache=True)
 def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal, goal_cell, base, rays,
-             ray_c, ray_s, params, occ, visits, blocked, dirty, waypoint, last, geo, pgeo, stack, out,
-             reward):  # fmt: skip
+             ray_c, ray_s, params, occ, visits, blocked, dirty, waypoint, last, plan_x, plan_y, stamp, version,
+             geo, pgeo, stack, out, reward):  # fmt: skip
     """One frame for each robot in ``indices`` (its pose, goal, base observation and rays given),
     pushed onto its stack and written to ``out``. ``fresh[n]`` starts a new episode first (own
     map cleared, geodesic field made, stack filled); otherwise ``actions[n]`` led to
     this frame and the geodesic shaping term is added to ``reward[n]``. ``params``: max_range,
     subgoal kind, subgoal distance, frame offsets of subgoal / action / patch (-1: absent),
-    patch size, geodesic weight, number of actions, rays per sector."""
+    patch size, geodesic weight, number of actions, rays per sector, reuse of plans (1) or a
+    search at every replan (0: the straightforward program the reuse must equal)."""
     max_range, sub_kind, along = params[0], int(params[1]), params[2]
     sub_at, act_at, patch_at = int(params[3]), int(params[4]), int(params[5])
     patch, w_geo, n_actions, per = int(params[6]), params[7], int(params[8]), int(params[9])
+    reuse = params[10] > 0.0
     uses_map = occ.shape[1] > 0
     for n in range(indices.shape[0]):
         i = indices[n]
@@ -283,13 +285,23 @@ def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal
             # the plan depends on the map, the goal and the robot's cell only: search again when one changed
             rc, cc = int(y / cell), int(x / cell)
             if fresh[n] or dirty[i] or rc != last[i, 0] or cc != last[i, 1]:
+                if fresh[n] or dirty[i]:
+                    version[i] += 1  # a new plan map: the plans kept for the previous one are void
                 if dirty[i]:
                     for r in range(height):
                         for c in range(width):
                             blocked[i, r, c] = occ[i, r, c] == SEEN_BLOCKED
                     dirty[i] = False
-                grid = blocked[i, :height, :width]
-                waypoint[i, 0], waypoint[i, 1] = _waypoint(grid, cell, x, y, gx, gy, gr, gc, along)
+                on_map = 0 <= rc < height and 0 <= cc < width
+                if reuse and on_map and stamp[i, rc, cc] == version[i]:
+                    # a cell already planned from on this plan map (same map, goal, cell: same plan)
+                    waypoint[i, 0], waypoint[i, 1] = plan_x[i, rc, cc], plan_y[i, rc, cc]
+                else:
+                    grid = blocked[i, :height, :width]
+                    waypoint[i, 0], waypoint[i, 1] = _waypoint(grid, cell, x, y, gx, gy, gr, gc, along)
+                    if on_map:
+                        plan_x[i, rc, cc], plan_y[i, rc, cc] = waypoint[i, 0], waypoint[i, 1]
+                        stamp[i, rc, cc] = version[i]
                 last[i, 0], last[i, 1] = rc, cc
             wx, wy = waypoint[i, 0], waypoint[i, 1]
         k = stack.shape[1]
@@ -312,7 +324,7 @@ class Perception:
     """Per-robot memory (own map, plans, frame stack, geodesic field) of ``n`` robots, and the
     step that turns the kernel's base observations into observations (see the module docstring)."""
 
-    def __init__(self, n: int, config: NavConfig) -> None:
+    def __init__(self, n: int, config: NavConfig, reuse: bool = True) -> None:
         o = config.observation
         self.n, self.config = n, config
         layout = frame_layout(config)
@@ -332,6 +344,7 @@ class Perception:
                 config.rewards.geodesic_progress,
                 config.robot.n_actions,
                 config.sensors.rays_per_beam,
+                reuse,
             ],
             dtype=np.float64,
         )
@@ -341,6 +354,7 @@ class Perception:
         self.dirty = np.zeros(n, np.bool_)
         self.waypoint = np.zeros((n, 2), np.float64)
         self.last = np.zeros((n, 2), np.int64)
+        self.version = np.zeros(n, np.int64)
         self.pgeo = np.zeros(n, np.float64)
         self.shape = (0, 0)
         self._allocate((1, 1))
@@ -360,6 +374,9 @@ class Perception:
         self.occ = grow(getattr(self, "occ", None), np.int8, self.uses_map)
         self.visits = grow(getattr(self, "visits", None), np.int32, self.uses_map)
         self.blocked = grow(getattr(self, "blocked", None), np.bool_, self.plans)
+        self.plan_x = grow(getattr(self, "plan_x", None), np.float64, self.plans)
+        self.plan_y = grow(getattr(self, "plan_y", None), np.float64, self.plans)
+        self.stamp = grow(getattr(self, "stamp", None), np.int64, self.plans, -1)
         self.geo = grow(getattr(self, "geo", None), np.float64, self.geodesic, np.inf)
         self.shape = (h, w)
 
@@ -373,5 +390,6 @@ class Perception:
             np.asarray(indices, np.int64), np.asarray(fresh, np.bool_), np.asarray(actions, np.int64), *maps,
             np.asarray(mp, np.int64), pose, goal, np.asarray(goal_cell, np.int64), base, rays, self.ray_c,
             self.ray_s, self.params, self.occ, self.visits, self.blocked, self.dirty, self.waypoint,
-            self.last, self.geo, self.pgeo, self.stack, out, reward,
+            self.last, self.plan_x, self.plan_y, self.stamp, self.version, self.geo, self.pgeo, self.stack,
+            out, reward,
         )  # fmt: skip
