@@ -28,7 +28,7 @@ def rollout(config: NavConfig, maps: str, reuse: bool, policy: str, steps: int =
     frames, rewards, finals = [obs.copy()], [], []
     for _ in range(steps):
         actions = seek(obs[:, :width]) if policy == "goal" else rng.integers(config.robot.n_actions, size=n)
-        obs, reward, terminated, truncated, info = env.step(actions)
+        obs, reward, terminated, truncated, _ = env.step(actions)
         frames.append(obs.copy())
         rewards.append(reward.copy())
         ended = terminated | truncated

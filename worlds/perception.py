@@ -238,8 +238,8 @@ def _potential(dist, cell, x, y):
 
 @njit(cache=True)
 def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal, goal_cell, base, rays,
-             ray_c, ray_s, params, occ, visits, blocked, dirty, waypoint, last, plan_x, plan_y, stamp, version,
-             geo, pgeo, stack, out, reward):  # fmt: skip
+             ray_c, ray_s, params, occ, visits, blocked, dirty, waypoint, last, plan_x, plan_y, stamp,
+             version, geo, pgeo, stack, out, reward):  # fmt: skip
     """One frame for each robot in ``indices`` (its pose, goal, base observation and rays given),
     pushed onto its stack and written to ``out``. ``fresh[n]`` starts a new episode first (own
     map cleared, geodesic field made, stack filled); otherwise ``actions[n]`` led to
