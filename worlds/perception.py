@@ -21,11 +21,14 @@ step, the last ``frame_stack`` frames observed newest first::
   ``subgoal_distance`` metres along the path from the robot's cell (the goal itself when
   nearer); the frame gets its squashed distance and bearing. It is replanned whenever the map
   changed in a way that matters (a cell became blocked or stopped being blocked), which gives
-  the same plan as replanning every step. ``known_map`` plans on the true map instead, for a
-  user who has one.
+  the same plan as replanning every step; the plan found from a cell is kept until the map
+  changes, so coming back to that cell costs no search. ``known_map`` plans on the true map
+  instead, for a user who has one.
 * **The geodesic reward** (``rewards.geodesic_progress``): potential-based shaping by the true
   shortest-path distance from the robot's cell to the goal. It is a training signal; the policy
-  never observes it.
+  never observes it. The Dijkstra from the goal is paused once the robot's cell is settled and
+  resumed when the robot reaches a cell it has not settled yet (the same search, so the same
+  distances, at the cost of the cells the episode needs).
 
 Both envs go through :class:`worlds.batch.NavBatch`, which calls :class:`Perception` after every
 kernel call, so the single env and the vector env stay the same program.
@@ -40,7 +43,7 @@ from numba import njit
 
 from worlds.config import NavConfig
 from worlds.fields import BLOCKED
-from worlds.gridsearch import grid_search
+from worlds.gridsearch import grid_search, search_run, search_start
 
 UNKNOWN, FREE, SEEN_BLOCKED = 0, 1, 2
 """cell states of the robot's own map"""
@@ -106,13 +109,33 @@ def _true_blocked(field, off, height, width):
 
 
 @njit(cache=True)
-def _distance_field(blocked, goal_r, goal_c, out):
-    """Grid distance (cells) from every cell of ``blocked`` to the goal into ``out`` (inf where
-    unreachable): one Dijkstra from the goal, for the geodesic reward."""
-    height, width = blocked.shape
-    g, _, _ = grid_search(blocked, goal_r * width + goal_c, -1, True)
-    out[:, :] = np.inf
-    out[:height, :width] = g.reshape(height, width)
+def _start_field(truth, goal_r, goal_c, geo, size, i, reuse):
+    """Start robot ``i``'s distance field on its true map: a Dijkstra from the goal, for the geodesic
+    reward. With ``reuse`` it is only started (:func:`_distance` runs it on as far as each robot
+    cell needs: the same search, paused), else run over the whole component at once."""
+    height, width = truth.shape
+    g, f, parent, pos, closed, heap = geo
+    hw = height * width
+    work = (g[i, :hw], f[i, :hw], parent[i, :hw], pos[i, :hw], closed[i, :hw], heap[i, :hw])
+    size[i] = search_start(truth, goal_r * width + goal_c, -1, True, *work)
+    if not reuse:
+        size[i], _ = search_run(truth, -1, -1, True, *work, size[i])
+
+
+@njit(cache=True)
+def _distance(truth, geo, size, i, cell, x, y):
+    """Robot ``i``'s true shortest-path distance (m) from the cell under (x, y) to its goal (inf off
+    the map or unreachable), searching on until that cell is settled."""
+    height, width = truth.shape
+    c, r = int(x / cell), int(y / cell)
+    if c < 0 or r < 0 or r >= height or c >= width:
+        return math.inf
+    g, f, parent, pos, closed, heap = geo
+    hw, node = height * width, r * width + c
+    if not closed[i, node] and size[i] > 0:
+        work = (g[i, :hw], f[i, :hw], parent[i, :hw], pos[i, :hw], closed[i, :hw], heap[i, :hw])
+        size[i], _ = search_run(truth, -1, node, True, *work, size[i])
+    return g[i, node] * cell
 
 
 @njit(cache=True)
@@ -229,17 +252,9 @@ def _frame(out, base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions,
 
 
 @njit(cache=True)
-def _potential(dist, cell, x, y):
-    c, r = int(x / cell), int(y / cell)
-    if c < 0 or r < 0 or r >= dist.shape[0] or c >= dist.shape[1]:
-        return math.inf
-    return dist[r, c] * cell
-
-
-@njit(cache=True)
 def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal, goal_cell, base, rays,
              ray_c, ray_s, params, occ, visits, blocked, dirty, waypoint, last, plan_x, plan_y, stamp,
-             version, geo, pgeo, stack, out, reward):  # fmt: skip
+             version, truth_map, geo, geo_size, pgeo, stack, out, reward):  # fmt: skip
     """One frame for each robot in ``indices`` (its pose, goal, base observation and rays given),
     pushed onto its stack and written to ``out``. ``fresh[n]`` starts a new episode first (own
     map cleared, geodesic field made, stack filled); otherwise ``actions[n]`` led to
@@ -266,13 +281,14 @@ def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal
             if w_geo > 0.0 or sub_kind == SUB_KNOWN:
                 truth = _true_blocked(field, moff[m], height, width)
                 if w_geo > 0.0:
-                    _distance_field(truth, gr, gc, geo[i])
-                    pgeo[i] = _potential(geo[i], cell, x, y)
+                    truth_map[i, :height, :width] = truth
+                    _start_field(truth, gr, gc, geo, geo_size, i, reuse)
+                    pgeo[i] = _distance(truth_map[i, :height, :width], geo, geo_size, i, cell, x, y)
                 if sub_kind == SUB_KNOWN:
                     blocked[i, :height, :width] = truth
             dirty[i] = sub_kind == SUB_OWN
         elif w_geo > 0.0:
-            now = _potential(geo[i], cell, x, y)
+            now = _distance(truth_map[i, :height, :width], geo, geo_size, i, cell, x, y)
             if math.isfinite(now) and math.isfinite(pgeo[i]):
                 reward[n] += w_geo * (pgeo[i] - now)
             pgeo[i] = now
@@ -356,6 +372,7 @@ class Perception:
         self.last = np.zeros((n, 2), np.int64)
         self.version = np.zeros(n, np.int64)
         self.pgeo = np.zeros(n, np.float64)
+        self.geo_size = np.zeros(n, np.int64)
         self.shape = (0, 0)
         self._allocate((1, 1))
 
@@ -377,7 +394,15 @@ class Perception:
         self.plan_x = grow(getattr(self, "plan_x", None), np.float64, self.plans)
         self.plan_y = grow(getattr(self, "plan_y", None), np.float64, self.plans)
         self.stamp = grow(getattr(self, "stamp", None), np.int64, self.plans, -1)
-        self.geo = grow(getattr(self, "geo", None), np.float64, self.geodesic, np.inf)
+        self.truth_map = grow(getattr(self, "truth_map", None), np.bool_, self.geodesic)
+        # the geodesic field's Dijkstra, one per robot (flat work arrays of search_run, g first)
+        flat = h * w if self.geodesic else 0
+        old = getattr(self, "geo", None)
+        dtypes = (np.float64, np.float64, np.int64, np.int64, np.bool_, np.int64)
+        self.geo = tuple(np.zeros((self.n, flat), dtype) for dtype in dtypes)
+        if old is not None:  # a search runs on the same flat indices (row * its map's width + col)
+            for new, prev in zip(self.geo, old, strict=True):
+                new[:, : prev.shape[1]] = prev[:, : new.shape[1]]
         self.shape = (h, w)
 
     def observe(
@@ -390,6 +415,6 @@ class Perception:
             np.asarray(indices, np.int64), np.asarray(fresh, np.bool_), np.asarray(actions, np.int64), *maps,
             np.asarray(mp, np.int64), pose, goal, np.asarray(goal_cell, np.int64), base, rays, self.ray_c,
             self.ray_s, self.params, self.occ, self.visits, self.blocked, self.dirty, self.waypoint,
-            self.last, self.plan_x, self.plan_y, self.stamp, self.version, self.geo, self.pgeo, self.stack,
-            out, reward,
+            self.last, self.plan_x, self.plan_y, self.stamp, self.version, self.truth_map, self.geo,
+            self.geo_size, self.pgeo, self.stack, out, reward,
         )  # fmt: skip
