@@ -35,7 +35,7 @@ def _before(f: np.ndarray, g: np.ndarray, a: int, b: int) -> bool:
     return g[a] > g[b]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sift_up(heap, pos, f, g, i):
     node = heap[i]
     while i > 0:
@@ -50,7 +50,7 @@ def _sift_up(heap, pos, f, g, i):
     pos[node] = i
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sift_down(heap, pos, f, g, i, size):
     node = heap[i]
     while True:
@@ -69,7 +69,7 @@ def _sift_down(heap, pos, f, g, i, size):
     pos[node] = i
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _octile(r0, c0, r1, c1, diagonal):
     dr = abs(r0 - r1)
     dc = abs(c0 - c1)
