@@ -12,6 +12,7 @@ import pytest
 
 from worlds.config import LEARNING_NAV, NavConfig
 from worlds.heuristics import goal_seeking_policy
+from worlds.perception import REUSE_PARAM
 from worlds.vector_env import NavigationVectorEnv
 
 KNOWN_MAP = dataclasses.replace(
@@ -21,7 +22,7 @@ KNOWN_MAP = dataclasses.replace(
 
 def rollout(config: NavConfig, maps: str, reuse: bool, policy: str, steps: int = 300, n: int = 12):
     env = NavigationVectorEnv(n, config, maps=maps, threads=1)
-    env.batch.perception.params[10] = float(reuse)
+    env.batch.perception.params[REUSE_PARAM] = float(reuse)
     obs, _ = env.reset(seed=3)
     seek = goal_seeking_policy(config)
     width = config.sensors.n_beams + 3  # readings + goal, what the heuristic reads

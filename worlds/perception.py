@@ -43,7 +43,8 @@ from numba import njit
 
 from worlds.config import NavConfig
 from worlds.fields import BLOCKED
-from worlds.gridsearch import grid_search, search_run, search_start
+from worlds.geodesic import field_distance, start_field
+from worlds.gridsearch import grid_search
 
 UNKNOWN, FREE, SEEN_BLOCKED = 0, 1, 2
 """cell states of the robot's own map"""
@@ -52,6 +53,9 @@ PATCH_VALUE = np.array([0.5, 0.0, 1.0], dtype=np.float32)
 _DR = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
 _DC = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
 SUB_NONE, SUB_OWN, SUB_KNOWN = 0, 1, 2
+REUSE_PARAM = 10
+"""index in :attr:`Perception.params` of the reuse switch: 1 keeps plans per cell and pauses the geodesic
+field's Dijkstra, 0 is the straightforward program (a search at every replan, the whole field per reset)"""
 
 
 def frame_layout(config: NavConfig) -> dict[str, tuple[int, int]]:
@@ -106,36 +110,6 @@ def _true_blocked(field, off, height, width):
         for c in range(width):
             out[r, c] = field[off + (r + 1) * (width + 2) + c + 1] == BLOCKED
     return out
-
-
-@njit(cache=True)
-def _start_field(truth, goal_r, goal_c, geo, size, i, reuse):
-    """Start robot ``i``'s distance field on its true map: a Dijkstra from the goal, for the geodesic
-    reward. With ``reuse`` it is only started (:func:`_distance` runs it on as far as each robot
-    cell needs: the same search, paused), else run over the whole component at once."""
-    height, width = truth.shape
-    g, f, parent, pos, closed, heap = geo
-    hw = height * width
-    work = (g[i, :hw], f[i, :hw], parent[i, :hw], pos[i, :hw], closed[i, :hw], heap[i, :hw])
-    size[i] = search_start(truth, goal_r * width + goal_c, -1, True, *work)
-    if not reuse:
-        size[i], _ = search_run(truth, -1, -1, True, *work, size[i])
-
-
-@njit(cache=True)
-def _distance(truth, geo, size, i, cell, x, y):
-    """Robot ``i``'s true shortest-path distance (m) from the cell under (x, y) to its goal (inf off
-    the map or unreachable), searching on until that cell is settled."""
-    height, width = truth.shape
-    c, r = int(x / cell), int(y / cell)
-    if c < 0 or r < 0 or r >= height or c >= width:
-        return math.inf
-    g, f, parent, pos, closed, heap = geo
-    hw, node = height * width, r * width + c
-    if not closed[i, node] and size[i] > 0:
-        work = (g[i, :hw], f[i, :hw], parent[i, :hw], pos[i, :hw], closed[i, :hw], heap[i, :hw])
-        size[i], _ = search_run(truth, -1, node, True, *work, size[i])
-    return g[i, node] * cell
 
 
 @njit(cache=True)
@@ -265,7 +239,7 @@ def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal
     max_range, sub_kind, along = params[0], int(params[1]), params[2]
     sub_at, act_at, patch_at = int(params[3]), int(params[4]), int(params[5])
     patch, w_geo, n_actions, per = int(params[6]), params[7], int(params[8]), int(params[9])
-    reuse = params[10] > 0.0
+    reuse = params[REUSE_PARAM] > 0.0
     uses_map = occ.shape[1] > 0
     for n in range(indices.shape[0]):
         i = indices[n]
@@ -282,13 +256,13 @@ def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal
                 truth = _true_blocked(field, moff[m], height, width)
                 if w_geo > 0.0:
                     truth_map[i, :height, :width] = truth
-                    _start_field(truth, gr, gc, geo, geo_size, i, reuse)
-                    pgeo[i] = _distance(truth_map[i, :height, :width], geo, geo_size, i, cell, x, y)
+                    start_field(truth, gr, gc, geo, geo_size, i, reuse)
+                    pgeo[i] = field_distance(truth_map[i, :height, :width], geo, geo_size, i, cell, x, y)
                 if sub_kind == SUB_KNOWN:
                     blocked[i, :height, :width] = truth
             dirty[i] = sub_kind == SUB_OWN
         elif w_geo > 0.0:
-            now = _distance(truth_map[i, :height, :width], geo, geo_size, i, cell, x, y)
+            now = field_distance(truth_map[i, :height, :width], geo, geo_size, i, cell, x, y)
             if math.isfinite(now) and math.isfinite(pgeo[i]):
                 reward[n] += w_geo * (pgeo[i] - now)
             pgeo[i] = now
