@@ -15,6 +15,10 @@ wall-clock ratio (what threads buy is wall-clock time).
     python -m bench.env_throughput     # human lines, then one JSON object on the last line
     python -m bench.env_throughput --nav learning --robots 256   # the observation policies learn with
 
+``--policy goal`` steps with :func:`worlds.heuristics.goal_seeking_policy` instead (episodes of about
+40 steps rather than 11); ``--reuse-ablation ROUNDS`` measures only our env, with the perception's
+reuse (kept plans, paused geodesic Dijkstra) off and on, interleaved.
+
 ``--nav learning`` measures :data:`worlds.config.LEARNING_NAV` (sector minima, own-map subgoal
 ..., issue 14) instead of ``NavConfig()``; its target is 200k robot-steps per CPU-second, far
 above what a learner consumes (a few thousand per second).
