@@ -15,6 +15,10 @@ wall-clock ratio (what threads buy is wall-clock time).
     python -m bench.env_throughput     # human lines, then one JSON object on the last line
     python -m bench.env_throughput --nav learning --robots 256   # the observation policies learn with
 
+``--policy goal`` steps with :func:`worlds.heuristics.goal_seeking_policy` instead (episodes of about
+40 steps rather than 11); ``--reuse-ablation ROUNDS`` measures only our env, with the perception's
+reuse (kept plans, paused geodesic Dijkstra) off and on, interleaved.
+
 ``--nav learning`` measures :data:`worlds.config.LEARNING_NAV` (sector minima, own-map subgoal
 ..., issue 14) instead of ``NavConfig()``; its target is 200k robot-steps per CPU-second, far
 above what a learner consumes (a few thousand per second).
@@ -34,6 +38,8 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import worlds  # noqa: F401  (registers navlearn/Navigation-v0)
 from worlds.config import LEARNING_NAV, NavConfig
+from worlds.heuristics import goal_seeking_policy
+from worlds.perception import REUSE_PARAM
 from worlds.vector_env import NavigationVectorEnv
 
 TARGET_STEPS_PER_S = 1_000_000
@@ -42,17 +48,18 @@ TARGET_LEARNING_STEPS_PER_CPU_S = 200_000
 NAVS = {"default": NavConfig(), "learning": LEARNING_NAV}
 
 
-def measure(env, n: int, seconds: float, max_steps: int, seed: int) -> dict:
-    """Step ``env`` (``n`` robots) with random actions for about ``seconds`` (at most
-    ``max_steps`` env steps) after a warm-up; robot-steps per wall and per CPU second."""
-    env.reset(seed=seed)
+def measure(env, n: int, seconds: float, max_steps: int, seed: int, policy=None) -> dict:
+    """Step ``env`` (``n`` robots) with random actions (or ``policy(obs)``'s) for about ``seconds``
+    (at most ``max_steps`` env steps) after a warm-up; robot-steps per wall and per CPU second."""
+    obs, _ = env.reset(seed=seed)
     actions = np.random.default_rng(seed).integers(NavConfig().robot.n_actions, size=(256, n))
+    act = (lambda t, obs: actions[t % 256]) if policy is None else (lambda t, obs: policy(obs))
     for t in range(3):  # warm-up (compiled code loaded, caches filled)
-        env.step(actions[t])
+        obs, *_ = env.step(act(t, obs))
     steps, ended = 0, 0
     wall0, cpu0 = time.perf_counter(), time.process_time()
     while steps < max_steps and time.perf_counter() - wall0 < seconds:
-        _, _, terminated, truncated, _ = env.step(actions[steps % 256])
+        obs, _, terminated, truncated, _ = env.step(act(steps, obs))
         ended += int(np.count_nonzero(terminated | truncated))
         steps += 1
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
@@ -63,6 +70,43 @@ def measure(env, n: int, seconds: float, max_steps: int, seed: int) -> dict:
         "robot_steps_per_cpu_s": n * steps / cpu,
         "mean_episode_length": n * steps / max(ended, 1),
     }
+
+
+def make_policy(config: NavConfig, kind: str):
+    """None (random actions) or the goal-seeking heuristic on the readings and goal of ``config``."""
+    if kind == "random":
+        return None
+    heuristic, width = goal_seeking_policy(config), config.sensors.n_beams + 3
+    return lambda obs: heuristic(np.asarray(obs)[:, :width])
+
+
+def reuse_ablation(config: NavConfig, args) -> int:
+    """Robot-steps per CPU second of our env (1 thread) with the perception's reuse (kept plans,
+    paused geodesic Dijkstra) off and on, interleaved (off, on, off, on, ...) at each robot count;
+    the two give the same observations (tests/test_worlds_reuse.py)."""
+    load_before = os.getloadavg()[0]
+    policy = make_policy(config, args.policy)
+    results = []
+    for n in args.robots:
+        runs: dict[str, list[float]] = {"off": [], "on": []}
+        for _ in range(args.reuse_ablation):
+            for name in runs:
+                env = NavigationVectorEnv(n, config, threads=1)
+                env.batch.perception.params[REUSE_PARAM] = float(name == "on")
+                row = measure(env, n, args.seconds, 10**9, args.seed, policy)
+                runs[name].append(row["robot_steps_per_cpu_s"])
+        off, on = float(np.median(runs["off"])), float(np.median(runs["on"]))
+        results.append({"robots": n, "reuse_off_cpu": runs["off"], "reuse_on_cpu": runs["on"],
+                        "median_off": off, "median_on": on, "speedup": on / off})  # fmt: skip
+        print(f"{n:5d} robots, {args.policy} actions: reuse off {off:>10,.0f}, on {on:>10,.0f} robot-steps "
+              f"per CPU s (median of {args.reuse_ablation}), x{on / off:.2f}")  # fmt: skip
+    print(json.dumps({
+        "bench": "env_throughput_reuse", "nav": args.nav, "policy": args.policy, "seconds": args.seconds,
+        "load_average_before": load_before, "load_average_after": os.getloadavg()[0], "results": results,
+        "learning_target_steps_per_cpu_s": TARGET_LEARNING_STEPS_PER_CPU_S,
+        "learning_target_met_cpu": results[-1]["median_on"] >= TARGET_LEARNING_STEPS_PER_CPU_S,
+    }))  # fmt: skip
+    return 0
 
 
 def main() -> int:
@@ -82,22 +126,34 @@ def main() -> int:
         help="threads of the threaded measurement (default: the core count)",
     )
     parser.add_argument("--nav", choices=list(NAVS), default="default", help="NavConfig() or LEARNING_NAV")
+    parser.add_argument(
+        "--policy", choices=["random", "goal"], default="random",
+        help="random actions, or worlds.heuristics.goal_seeking_policy (longer episodes)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--reuse-ablation", type=int, default=0, metavar="ROUNDS",
+        help="instead: our env (1 thread) with the perception's reuse off and on, interleaved ROUNDS times",
+    )  # fmt: skip
     args = parser.parse_args()
     config = NAVS[args.nav]
+    if args.reuse_ablation:
+        return reuse_ablation(config, args)
     load_before = os.getloadavg()[0]
     results = []
     for n in args.robots:
-        ours = measure(NavigationVectorEnv(n, config, threads=1), n, args.seconds, 10**9, args.seed)
+        policy = make_policy(config, args.policy)
+        ours = measure(NavigationVectorEnv(n, config, threads=1), n, args.seconds, 10**9, args.seed, policy)
         threaded = None
         if n >= 64 and args.threads > 1:
             env = NavigationVectorEnv(n, config, threads=args.threads)
-            threaded = measure(env, n, args.seconds, 10**9, args.seed) | {"threads": env.batch.threads}
+            threaded = measure(env, n, args.seconds, 10**9, args.seed, policy)
+            threaded["threads"] = env.batch.threads
             env.close()
         sync = SyncVectorEnv(
             [lambda: gym.make("navlearn/Navigation-v0", config=config) for _ in range(n)],
             autoreset_mode=AutoresetMode.SAME_STEP,
         )
-        base = measure(sync, n, args.baseline_seconds, 10**9, args.seed)
+        base = measure(sync, n, args.baseline_seconds, 10**9, args.seed, policy)
         sync.close()
         row = {
             "robots": n,
@@ -128,7 +184,7 @@ def main() -> int:
     summary = {
         "bench": "env_throughput",
         "config": f"{'NavConfig() defaults' if args.nav == 'default' else 'LEARNING_NAV'}, maps mixed:16, "
-        f"random actions; ours with threads=1 and threads={args.threads} ({os.cpu_count()} cores)",
+        f"{args.policy} actions; ours with threads=1 and threads={args.threads} ({os.cpu_count()} cores)",
         "nav": args.nav,
         "observation_dim": NavigationVectorEnv(1, config).batch.obs_dim,
         "load_average_before": load_before,

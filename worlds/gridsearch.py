@@ -35,7 +35,7 @@ def _before(f: np.ndarray, g: np.ndarray, a: int, b: int) -> bool:
     return g[a] > g[b]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sift_up(heap, pos, f, g, i):
     node = heap[i]
     while i > 0:
@@ -50,7 +50,7 @@ def _sift_up(heap, pos, f, g, i):
     pos[node] = i
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sift_down(heap, pos, f, g, i, size):
     node = heap[i]
     while True:
@@ -69,7 +69,7 @@ def _sift_down(heap, pos, f, g, i, size):
     pos[node] = i
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _octile(r0, c0, r1, c1, diagonal):
     dr = abs(r0 - r1)
     dc = abs(c0 - c1)
@@ -79,29 +79,34 @@ def _octile(r0, c0, r1, c1, diagonal):
 
 
 @njit(cache=True)
-def grid_search(blocked, start, goal, diagonal):
-    """Best-first search from ``start`` over the free cells of ``blocked``.
+def search_start(blocked, start, goal, diagonal, g, f, parent, pos, closed, heap):
+    """Put a search from ``start`` into the flat work arrays (``height * width`` each); returns the
+    heap's size. ``goal >= 0``: A* towards it, else Dijkstra."""
+    width = blocked.shape[1]
+    g[:] = np.inf
+    f[:] = np.inf
+    parent[:] = -1
+    pos[:] = -1  # index in heap, -1 = not in heap
+    closed[:] = False
+    g[start] = 0.0
+    if goal >= 0:
+        f[start] = _octile(start // width, start % width, goal // width, goal % width, diagonal)
+    else:
+        f[start] = 0.0
+    heap[0] = start
+    pos[start] = 0
+    return 1
 
-    With ``goal >= 0`` it is A* with the octile (or Manhattan) heuristic and
-    stops when the goal is expanded; with ``goal < 0`` it is Dijkstra over the
-    whole component. Returns (g, parent, expanded); unreached cells have g=inf.
-    """
+
+@njit(cache=True)
+def search_run(blocked, goal, stop, diagonal, g, f, parent, pos, closed, heap, size):
+    """Run the search held in the work arrays (heap of ``size``) until it expands ``goal`` (A*; not
+    expanded further) or has expanded ``stop`` and its neighbours (so that a later call goes on
+    exactly where this one stopped), or the heap is empty. Returns (heap size, nodes expanded)."""
     height, width = blocked.shape
-    n = height * width
-    g = np.full(n, np.inf)
-    f = np.full(n, np.inf)
-    parent = np.full(n, -1, dtype=np.int64)
-    pos = np.full(n, -1, dtype=np.int64)  # index in heap, -1 = not in heap
-    closed = np.zeros(n, dtype=np.bool_)
-    heap = np.empty(n, dtype=np.int64)
     n_moves = 8 if diagonal else 4
     gr = goal // width
     gc = goal % width
-    g[start] = 0.0
-    f[start] = _octile(start // width, start % width, gr, gc, diagonal) if goal >= 0 else 0.0
-    heap[0] = start
-    pos[start] = 0
-    size = 1
     expanded = 0
     while size > 0:
         node = heap[0]
@@ -142,4 +147,24 @@ def grid_search(blocked, start, goal, diagonal):
                     pos[nb] = size
                     size += 1
                 _sift_up(heap, pos, f, g, pos[nb])
+        if node == stop:
+            break
+    return size, expanded
+
+
+@njit(cache=True)
+def grid_search(blocked, start, goal, diagonal):
+    """Best-first search from ``start`` over the free cells of ``blocked``.
+
+    With ``goal >= 0`` it is A* with the octile (or Manhattan) heuristic and
+    stops when the goal is expanded; with ``goal < 0`` it is Dijkstra over the
+    whole component. Returns (g, parent, expanded); unreached cells have g=inf.
+    """
+    n = blocked.shape[0] * blocked.shape[1]
+    g, f = np.empty(n), np.empty(n)
+    parent, pos = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    closed = np.empty(n, dtype=np.bool_)
+    heap = np.empty(n, dtype=np.int64)
+    size = search_start(blocked, start, goal, diagonal, g, f, parent, pos, closed, heap)
+    _, expanded = search_run(blocked, goal, -1, diagonal, g, f, parent, pos, closed, heap, size)
     return g, parent, expanded

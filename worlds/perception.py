@@ -21,11 +21,14 @@ step, the last ``frame_stack`` frames observed newest first::
   ``subgoal_distance`` metres along the path from the robot's cell (the goal itself when
   nearer); the frame gets its squashed distance and bearing. It is replanned whenever the map
   changed in a way that matters (a cell became blocked or stopped being blocked), which gives
-  the same plan as replanning every step. ``known_map`` plans on the true map instead, for a
-  user who has one.
+  the same plan as replanning every step; the plan found from a cell is kept until the map
+  changes, so coming back to that cell costs no search. ``known_map`` plans on the true map
+  instead, for a user who has one.
 * **The geodesic reward** (``rewards.geodesic_progress``): potential-based shaping by the true
   shortest-path distance from the robot's cell to the goal. It is a training signal; the policy
-  never observes it.
+  never observes it. The Dijkstra from the goal is paused once the robot's cell is settled and
+  resumed when the robot reaches a cell it has not settled yet (the same search, so the same
+  distances, at the cost of the cells the episode needs).
 
 Both envs go through :class:`worlds.batch.NavBatch`, which calls :class:`Perception` after every
 kernel call, so the single env and the vector env stay the same program.
@@ -40,6 +43,7 @@ from numba import njit
 
 from worlds.config import NavConfig
 from worlds.fields import BLOCKED
+from worlds.geodesic import field_distance, start_field
 from worlds.gridsearch import grid_search
 
 UNKNOWN, FREE, SEEN_BLOCKED = 0, 1, 2
@@ -49,6 +53,9 @@ PATCH_VALUE = np.array([0.5, 0.0, 1.0], dtype=np.float32)
 _DR = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
 _DC = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
 SUB_NONE, SUB_OWN, SUB_KNOWN = 0, 1, 2
+REUSE_PARAM = 10
+"""index in :attr:`Perception.params` of the reuse switch: 1 keeps plans per cell and pauses the geodesic
+field's Dijkstra, 0 is the straightforward program (a search at every replan, the whole field per reset)"""
 
 
 def frame_layout(config: NavConfig) -> dict[str, tuple[int, int]]:
@@ -103,16 +110,6 @@ def _true_blocked(field, off, height, width):
         for c in range(width):
             out[r, c] = field[off + (r + 1) * (width + 2) + c + 1] == BLOCKED
     return out
-
-
-@njit(cache=True)
-def _distance_field(blocked, goal_r, goal_c, out):
-    """Grid distance (cells) from every cell of ``blocked`` to the goal into ``out`` (inf where
-    unreachable): one Dijkstra from the goal, for the geodesic reward."""
-    height, width = blocked.shape
-    g, _, _ = grid_search(blocked, goal_r * width + goal_c, -1, True)
-    out[:, :] = np.inf
-    out[:height, :width] = g.reshape(height, width)
 
 
 @njit(cache=True)
@@ -229,26 +226,20 @@ def _frame(out, base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions,
 
 
 @njit(cache=True)
-def _potential(dist, cell, x, y):
-    c, r = int(x / cell), int(y / cell)
-    if c < 0 or r < 0 or r >= dist.shape[0] or c >= dist.shape[1]:
-        return math.inf
-    return dist[r, c] * cell
-
-
-@njit(cache=True)
 def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal, goal_cell, base, rays,
-             ray_c, ray_s, params, occ, visits, blocked, dirty, waypoint, last, geo, pgeo, stack, out,
-             reward):  # fmt: skip
+             ray_c, ray_s, params, occ, visits, blocked, dirty, waypoint, last, plan_x, plan_y, stamp,
+             version, truth_map, geo, geo_size, pgeo, stack, out, reward):  # fmt: skip
     """One frame for each robot in ``indices`` (its pose, goal, base observation and rays given),
     pushed onto its stack and written to ``out``. ``fresh[n]`` starts a new episode first (own
     map cleared, geodesic field made, stack filled); otherwise ``actions[n]`` led to
     this frame and the geodesic shaping term is added to ``reward[n]``. ``params``: max_range,
     subgoal kind, subgoal distance, frame offsets of subgoal / action / patch (-1: absent),
-    patch size, geodesic weight, number of actions, rays per sector."""
+    patch size, geodesic weight, number of actions, rays per sector, reuse of plans (1) or a
+    search at every replan (0: the straightforward program the reuse must equal)."""
     max_range, sub_kind, along = params[0], int(params[1]), params[2]
     sub_at, act_at, patch_at = int(params[3]), int(params[4]), int(params[5])
     patch, w_geo, n_actions, per = int(params[6]), params[7], int(params[8]), int(params[9])
+    reuse = params[REUSE_PARAM] > 0.0
     uses_map = occ.shape[1] > 0
     for n in range(indices.shape[0]):
         i = indices[n]
@@ -264,13 +255,14 @@ def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal
             if w_geo > 0.0 or sub_kind == SUB_KNOWN:
                 truth = _true_blocked(field, moff[m], height, width)
                 if w_geo > 0.0:
-                    _distance_field(truth, gr, gc, geo[i])
-                    pgeo[i] = _potential(geo[i], cell, x, y)
+                    truth_map[i, :height, :width] = truth
+                    start_field(truth, gr, gc, geo, geo_size, i, reuse)
+                    pgeo[i] = field_distance(truth_map[i, :height, :width], geo, geo_size, i, cell, x, y)
                 if sub_kind == SUB_KNOWN:
                     blocked[i, :height, :width] = truth
             dirty[i] = sub_kind == SUB_OWN
         elif w_geo > 0.0:
-            now = _potential(geo[i], cell, x, y)
+            now = field_distance(truth_map[i, :height, :width], geo, geo_size, i, cell, x, y)
             if math.isfinite(now) and math.isfinite(pgeo[i]):
                 reward[n] += w_geo * (pgeo[i] - now)
             pgeo[i] = now
@@ -283,13 +275,23 @@ def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal
             # the plan depends on the map, the goal and the robot's cell only: search again when one changed
             rc, cc = int(y / cell), int(x / cell)
             if fresh[n] or dirty[i] or rc != last[i, 0] or cc != last[i, 1]:
+                if fresh[n] or dirty[i]:
+                    version[i] += 1  # a new plan map: the plans kept for the previous one are void
                 if dirty[i]:
                     for r in range(height):
                         for c in range(width):
                             blocked[i, r, c] = occ[i, r, c] == SEEN_BLOCKED
                     dirty[i] = False
-                grid = blocked[i, :height, :width]
-                waypoint[i, 0], waypoint[i, 1] = _waypoint(grid, cell, x, y, gx, gy, gr, gc, along)
+                on_map = 0 <= rc < height and 0 <= cc < width
+                if reuse and on_map and stamp[i, rc, cc] == version[i]:
+                    # a cell already planned from on this plan map (same map, goal, cell: same plan)
+                    waypoint[i, 0], waypoint[i, 1] = plan_x[i, rc, cc], plan_y[i, rc, cc]
+                else:
+                    grid = blocked[i, :height, :width]
+                    waypoint[i, 0], waypoint[i, 1] = _waypoint(grid, cell, x, y, gx, gy, gr, gc, along)
+                    if on_map:
+                        plan_x[i, rc, cc], plan_y[i, rc, cc] = waypoint[i, 0], waypoint[i, 1]
+                        stamp[i, rc, cc] = version[i]
                 last[i, 0], last[i, 1] = rc, cc
             wx, wy = waypoint[i, 0], waypoint[i, 1]
         k = stack.shape[1]
@@ -312,7 +314,7 @@ class Perception:
     """Per-robot memory (own map, plans, frame stack, geodesic field) of ``n`` robots, and the
     step that turns the kernel's base observations into observations (see the module docstring)."""
 
-    def __init__(self, n: int, config: NavConfig) -> None:
+    def __init__(self, n: int, config: NavConfig, reuse: bool = True) -> None:
         o = config.observation
         self.n, self.config = n, config
         layout = frame_layout(config)
@@ -332,6 +334,7 @@ class Perception:
                 config.rewards.geodesic_progress,
                 config.robot.n_actions,
                 config.sensors.rays_per_beam,
+                reuse,
             ],
             dtype=np.float64,
         )
@@ -341,7 +344,9 @@ class Perception:
         self.dirty = np.zeros(n, np.bool_)
         self.waypoint = np.zeros((n, 2), np.float64)
         self.last = np.zeros((n, 2), np.int64)
+        self.version = np.zeros(n, np.int64)
         self.pgeo = np.zeros(n, np.float64)
+        self.geo_size = np.zeros(n, np.int64)
         self.shape = (0, 0)
         self._allocate((1, 1))
 
@@ -360,7 +365,18 @@ class Perception:
         self.occ = grow(getattr(self, "occ", None), np.int8, self.uses_map)
         self.visits = grow(getattr(self, "visits", None), np.int32, self.uses_map)
         self.blocked = grow(getattr(self, "blocked", None), np.bool_, self.plans)
-        self.geo = grow(getattr(self, "geo", None), np.float64, self.geodesic, np.inf)
+        self.plan_x = grow(getattr(self, "plan_x", None), np.float64, self.plans)
+        self.plan_y = grow(getattr(self, "plan_y", None), np.float64, self.plans)
+        self.stamp = grow(getattr(self, "stamp", None), np.int64, self.plans, -1)
+        self.truth_map = grow(getattr(self, "truth_map", None), np.bool_, self.geodesic)
+        # the geodesic field's Dijkstra, one per robot (flat work arrays of search_run, g first)
+        flat = h * w if self.geodesic else 0
+        old = getattr(self, "geo", None)
+        dtypes = (np.float64, np.float64, np.int64, np.int64, np.bool_, np.int64)
+        self.geo = tuple(np.zeros((self.n, flat), dtype) for dtype in dtypes)
+        if old is not None:  # a search runs on the same flat indices (row * its map's width + col)
+            for new, prev in zip(self.geo, old, strict=True):
+                new[:, : prev.shape[1]] = prev[:, : new.shape[1]]
         self.shape = (h, w)
 
     def observe(
@@ -373,5 +389,6 @@ class Perception:
             np.asarray(indices, np.int64), np.asarray(fresh, np.bool_), np.asarray(actions, np.int64), *maps,
             np.asarray(mp, np.int64), pose, goal, np.asarray(goal_cell, np.int64), base, rays, self.ray_c,
             self.ray_s, self.params, self.occ, self.visits, self.blocked, self.dirty, self.waypoint,
-            self.last, self.geo, self.pgeo, self.stack, out, reward,
+            self.last, self.plan_x, self.plan_y, self.stamp, self.version, self.truth_map, self.geo,
+            self.geo_size, self.pgeo, self.stack, out, reward,
         )  # fmt: skip
