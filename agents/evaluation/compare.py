@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import binomtest
 
-from agents.evaluation.metrics import Rate, path_ratio, rate, spl
+from agents.evaluation.metrics import Rate, json_fields, path_ratio, rate, spl
 from agents.evaluation.runner import EpisodeRecord, EvalResult
 from worlds.outcomes import Outcome
 
@@ -70,15 +70,7 @@ class PairedRow:
     path_ratio_b: float
 
     def to_dict(self) -> dict[str, object]:
-        out: dict[str, object] = {}
-        for key, value in self.__dict__.items():
-            if isinstance(value, Rate):
-                out[key] = value.to_dict()
-            elif isinstance(value, float) and not math.isfinite(value):
-                out[key] = None  # JSON has no nan
-            else:
-                out[key] = value
-        return out
+        return json_fields(self)
 
 
 def paired_row(

@@ -143,6 +143,19 @@ def point_clearance(grid: GridMap, xy: np.ndarray, cell_clearance: np.ndarray | 
     return _clearance_kernel(grid.blocked, float(grid.cell_size), xy[:, 0].copy(), xy[:, 1].copy(), bound)
 
 
+def json_fields(record: object) -> dict[str, object]:
+    """A metrics dataclass's fields as JSON: each Rate as its dict, nan and infinity as None."""
+    out: dict[str, object] = {}
+    for key, value in record.__dict__.items():
+        if isinstance(value, Rate):
+            out[key] = value.to_dict()
+        elif isinstance(value, float) and not math.isfinite(value):
+            out[key] = None  # JSON has no nan
+        else:
+            out[key] = value
+    return out
+
+
 @dataclass(frozen=True)
 class FamilyMetrics:
     """The evaluation figures for one map family (see the module docstring)."""
@@ -159,15 +172,7 @@ class FamilyMetrics:
     min_clearance_min: float
 
     def to_dict(self) -> dict[str, object]:
-        out: dict[str, object] = {}
-        for key, value in self.__dict__.items():
-            if isinstance(value, Rate):
-                out[key] = value.to_dict()
-            elif isinstance(value, float) and not math.isfinite(value):
-                out[key] = None  # JSON has no nan
-            else:
-                out[key] = value
-        return out
+        return json_fields(self)
 
 
 def summarize(
