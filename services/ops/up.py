@@ -179,6 +179,8 @@ class Up:
                     str(cfg.envs),
                     "--maps",
                     cfg.maps,
+                    "--moving-discs",
+                    str(cfg.moving_discs),
                     "--seed",
                     str(cfg.seed + i),
                 ],
