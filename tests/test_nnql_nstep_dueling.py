@@ -140,3 +140,22 @@ def test_plain_network_layout_is_unchanged_so_old_policies_load():
     net = QNetwork(4, 3, [8], "relu")
     assert "dueling" not in net.architecture
     assert export_weights(net).keys() == net.state_dict().keys()
+
+
+def test_n_step_dueling_learner_checkpoint_keeps_discounts_and_weights(tmp_path):
+    config = NNQLConfig(
+        n_step=3, gamma=GAMMA, dueling=True, hidden_sizes=(8,), batch_size=2, learning_starts=2
+    )
+    learner = NNQLLearner(config, 2, 3)
+    for s in [step(0, 1), step(1, 2), step(2, 4), step(3, 8, truncated=True)]:
+        learner.add(s)
+    learner.update(1)
+    learner.save_checkpoint(tmp_path / "ckpt")
+    again = NNQLLearner.from_checkpoint(tmp_path / "ckpt")
+    assert isinstance(again.network, DuelingQNetwork) and len(again.replay) == 4
+    stored = again._columns()
+    np.testing.assert_allclose(
+        np.sort(stored.discount[:4].numpy()), np.sort([GAMMA**3, GAMMA**3, GAMMA**2, GAMMA])
+    )
+    for name, value in learner.get_weights().items():
+        np.testing.assert_array_equal(again.get_weights()[name], value)
