@@ -8,7 +8,7 @@ robot-steps, several seeds, one learner setting per variant:
     dueling   dueling head (NNQLConfig.dueling)
     discs     training episodes with 0..4 moving discs, uniform (ObstacleConfig.mix)
     utd8      one update per 8 transitions instead of 16
-    n3+discs, n3+dueling, n3+dueling+discs   combinations
+    n3+discs, n3+dueling, n3+dueling+discs, dueling+discs   combinations
 
 Each run keeps its best weights on periodic validations (seed 1, ``--val-episodes``), then is
 evaluated on four sets of ``--episodes``: validation (seed 1, unseen static maps, and the same
@@ -50,6 +50,7 @@ VARIANTS: dict[str, tuple[dict, int]] = {
     "n3+discs": ({"n_step": 3}, 4),
     "n3+dueling": ({"n_step": 3, "dueling": True}, 0),
     "n3+dueling+discs": ({"n_step": 3, "dueling": True}, 4),
+    "dueling+discs": ({"dueling": True}, 4),
 }
 """variant -> (NNQLConfig fields, moving discs per training episode at most)"""
 SETS = (
