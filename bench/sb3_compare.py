@@ -109,7 +109,9 @@ def paired(a: dict, b: dict, name: str) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--algos", nargs="+", default=list(ALGOS), choices=ALGOS)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--steps", type=int, default=200_000, help="robot-steps of training per run")
@@ -154,7 +156,8 @@ def main() -> None:
         )
     report["wall_s"] = round(time.perf_counter() - start, 1)
 
-    print(f"LEARNING_NAV, {args.steps} robot-steps per run, seeds {args.seeds}, {args.episodes} episodes per set")
+    print(f"LEARNING_NAV, {args.steps} robot-steps per run, seeds {args.seeds}, "
+          f"{args.episodes} episodes per set")  # fmt: skip
     for algo, e in report["algos"].items():
         cells = [f"{name} {e[name]['success']:.1%} [{e[name]['ci'][0]:.1%},{e[name]['ci'][1]:.1%}]"
                  for name, _, _ in SETS]  # fmt: skip
