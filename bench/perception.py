@@ -10,6 +10,9 @@ robot-steps, several seeds, one observation per variant:
     E  D + C
     E+geo  E trained with the geodesic progress reward in place of the straight-line one
     B+geo, D+geo  B and D with that reward (which part of E+geo helps: the reward, the subgoal?)
+    F  B + a 16x16 egocentric patch of the robot's own map (occupancy, visits) read by a small CNN
+       beside the MLP (agents.nnql.patch_network; no subgoal: learning alone)
+    F+geo  F with the geodesic progress reward
 
 Each run keeps its best weights on the validation set (seed 1, periodic evaluations of
 ``--val-episodes``), then is evaluated on the validation set (seed 1) and on the test sets
@@ -76,6 +79,10 @@ VARIANTS: dict[str, NavConfig] = {
 GEODESIC = RewardConfig(progress=0.0, geodesic_progress=0.1)
 VARIANTS["B+geo"] = NavConfig(sensors=SECTORS, rewards=GEODESIC)
 VARIANTS["D+geo"] = replace(VARIANTS["D"], rewards=GEODESIC)
+PATCH = 16
+"""side of variant F's own-map patch (cells of 1 m: 8 m each way, half a 16x16 training map)"""
+VARIANTS["F"] = NavConfig(sensors=SECTORS, observation=ObservationConfig(patch_size=PATCH))
+VARIANTS["F+geo"] = replace(VARIANTS["F"], rewards=GEODESIC)
 SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dynamic", 0))
 
 

@@ -4,7 +4,9 @@ A policy directory holds two files (written atomically, temp + rename):
 
 * ``model.safetensors`` - the weights of an MLP in ``nn.Sequential`` layout (TorchRL's
   ``MLP``): ``"0.weight"``, ``"0.bias"``, ``"2.weight"``, ... one linear layer at every
-  even index, the activation between them; float32.
+  even index, the activation between them; float32. An NNQL Q-network with a CNN over the
+  own-map patch (architecture entry ``patch``, :mod:`agents.nnql.patch_network`) names its
+  tensors ``"cnn.*"`` and ``"head.*"`` and is run by that torch module (:mod:`agents.forward`).
 * ``config.json`` - ``{"model": name, "kind": kind, "version": int, "architecture":
   {"obs_dim", "n_actions", "hidden_sizes", "activation"}, "observation": {...}, ...}`` plus any
   metadata. ``observation`` holds the settings that fix what the policy observes
@@ -13,7 +15,7 @@ A policy directory holds two files (written atomically, temp + rename):
 
 ``kind`` says what the network outputs: ``"q_network"`` (Q-values, NNQL) or
 ``"policy_logits"`` (action logits, imitation and NIRL neural policies). Both are
-evaluated greedily (argmax over actions), with numpy only, so loading a policy
+evaluated greedily (argmax over actions), with numpy only for MLPs, so loading one
 needs no torch.
 
 ``load_policy_or_baseline`` also accepts the name ``heuristic``: the goal-seeking
@@ -30,17 +32,8 @@ import numpy as np
 from safetensors import SafetensorError
 from safetensors.numpy import load_file
 
-from agents.mlp import (
-    ACTIVATIONS,
-    ARCHITECTURE_KEYS,
-    CONFIG_FILE,
-    KINDS,
-    WEIGHTS_FILE,
-    check_layers,
-    mlp_forward,
-    mlp_layers,
-    save_policy,
-)
+from agents.forward import network_forward
+from agents.mlp import ACTIVATIONS, ARCHITECTURE_KEYS, CONFIG_FILE, KINDS, WEIGHTS_FILE, save_policy
 from worlds.config import LEGACY_OBSERVATION, NavConfig, with_observation
 from worlds.heuristics import goal_seeking_policy
 from worlds.perception import observation_dim
@@ -74,7 +67,7 @@ class GreedyMLPPolicy:
                 f"takes obs_dim={self.architecture['obs_dim']}"
             )
         try:
-            self.layers = check_layers(mlp_layers(weights), self.architecture)
+            self.forward = network_forward(weights, self.architecture)
         except ValueError as exc:
             raise PolicyFormatError(str(exc)) from None
 
@@ -91,7 +84,7 @@ class GreedyMLPPolicy:
         obs = np.asarray(obs, dtype=np.float32)
         if obs.ndim != 2 or obs.shape[1] != self.obs_dim:
             raise ValueError(f"expected observations (N, {self.obs_dim}), got {obs.shape}")
-        return mlp_forward(self.layers, self.architecture["activation"], obs)
+        return self.forward(obs)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         return self.outputs(obs).argmax(axis=1).astype(np.int64)
