@@ -18,8 +18,8 @@ Each run keeps its best weights on the validation set (seed 1, periodic evaluati
 ``--val-episodes``), then is evaluated on the validation set (seed 1) and on the test sets
 (seed 0: unseen static maps and the same with 4 moving discs), ``--episodes`` each. The
 hand-written goal-seeking heuristic runs on the same episodes. Reported per variant: success
-[Wilson 95%] per seed and pooled, McNemar's exact test (paired, same episodes) against A and
-against the heuristic for each seed, per map family (rects, discs, rooms), collisions
+[Wilson 95%] per seed and pooled, McNemar's exact test (paired, same episodes) against A, D+geo
+(the default) and the heuristic for each seed, per map family (rects, discs, rooms), collisions
 (static/dynamic), timeouts, SPL, path ratio to A*, robot-steps and wall time to reach 90%
 validation success during training. The best variant by mean validation success is named.
 
@@ -83,6 +83,9 @@ PATCH = 16
 """side of variant F's own-map patch (cells of 1 m: 8 m each way, half a 16x16 training map)"""
 VARIANTS["F"] = NavConfig(sensors=SECTORS, observation=ObservationConfig(patch_size=PATCH))
 VARIANTS["F+geo"] = replace(VARIANTS["F"], rewards=GEODESIC)
+REFERENCES = ("A", "D+geo")
+"""variants every other one is compared with (McNemar, same seed, same episodes): today's observation
+and the default (worlds.config.LEARNING_NAV)"""
 SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dynamic", 0))
 
 
@@ -257,10 +260,10 @@ def main() -> None:
                 r["sets"][name]["mcnemar_vs_heuristic"] = mcnemar(
                     np.array(r["episodes"][name]), np.array(base["episodes"][name])
                 )
-                if "A" in runs and v != "A":
-                    a = next((x for x in runs["A"] if x["seed"] == r["seed"]), None)
-                    if a is not None:
-                        r["sets"][name]["mcnemar_vs_A"] = mcnemar(
+                for ref in REFERENCES:
+                    a = next((x for x in runs.get(ref, []) if x["seed"] == r["seed"]), None)
+                    if a is not None and v != ref:
+                        r["sets"][name][f"mcnemar_vs_{ref}"] = mcnemar(
                             np.array(r["episodes"][name]), np.array(a["episodes"][name])
                         )
         entry["runs"] = [
@@ -289,10 +292,11 @@ def main() -> None:
     for v, e in report["variants"].items():
         for r in e["runs"]:
             t = r["sets"]["test"]
-            vs = t.get("mcnemar_vs_A", {}).get("p")
+            vs = "".join(f", vs {ref} {t[f'mcnemar_vs_{ref}']['p']:.3g}" for ref in REFERENCES
+                         if f"mcnemar_vs_{ref}" in t)  # fmt: skip
             print(f"  {v} seed {r['seed']}: test {t['success']:.1%}, SPL {t['spl']:.2f}, collisions "
                   f"{t['collision_static']:.1%}, timeouts {t['timeout']:.1%}, McNemar p vs heuristic "
-                  f"{t['mcnemar_vs_heuristic']['p']:.3g}" + (f", vs A {vs:.3g}" if vs is not None else "")
+                  f"{t['mcnemar_vs_heuristic']['p']:.3g}" + vs
                   + f"; train {r['train_wall_s']:.0f} s, to 90% val {r['to_90_validation']}")  # fmt: skip
     print(f"best by validation success: {best}; worlds.config.LEARNING_NAV is {report['learning_nav_is']}")
     Path(args.png).parent.mkdir(parents=True, exist_ok=True)
