@@ -24,7 +24,8 @@ hand-written goal-seeking heuristic runs on the same episodes. Reported per vari
 validation success during training. The best variant by mean validation success is named.
 
 Each (variant, seed) run writes ``OUT/<variant>-s<seed>/result.json`` and is skipped when that
-file exists, so the runs can be split across processes and the report re-made from them:
+file exists, so the runs can be split across processes and the report re-made from them; a run
+directory whose training finished (summary.json) with the same settings is evaluated, not retrained:
 
     python bench/perception.py --steps 200000 --seeds 0 1 2            # human lines, JSON last
     python bench/perception.py --variants A B --seeds 0 --steps 20000   # a smoke run
@@ -56,6 +57,7 @@ from worlds.config import (
     ObservationConfig,
     RewardConfig,
     SensorConfig,
+    observation_settings,
     with_observation,
 )
 from worlds.heuristics import goal_seeking_policy
@@ -146,22 +148,43 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
         steps=args.steps, envs=16, seed=seed, out=str(out), eval_every=args.steps // 4,
         eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False,
     )  # fmt: skip
-    start = time.perf_counter()
-    trained = train_local(run, nav=nav)
-    wall = time.perf_counter() - start
+    trained = finished(out, run, nav)
+    if trained is None:
+        start = time.perf_counter()
+        result = train_local(run, nav=nav)
+        trained = {"env_steps": result.env_steps, "wall": time.perf_counter() - start,
+                   "selected_version": result.selected_version, "curve": result.curve}  # fmt: skip
     policy = NNQLPolicy.load(out).greedy()
     results = evaluate_sets(policy, nav, sets)
     record = {
         "variant": variant,
         "seed": seed,
-        "train_robot_steps": trained.env_steps,
-        "train_wall_s": round(wall, 1),
-        "selected_version": trained.selected_version,
-        "to_90_validation": to_90(trained.curve),
+        "train_robot_steps": trained["env_steps"],
+        "train_wall_s": round(trained["wall"], 1),
+        "selected_version": trained["selected_version"],
+        "to_90_validation": to_90(trained["curve"]),
         **scored(results, sets),
     }
     cached.write_text(json.dumps(record) + "\n")
     return record
+
+
+def finished(out: Path, run: LocalTrainConfig, nav: NavConfig) -> dict | None:
+    """The training record of a run directory whose training finished with these settings (its
+    evaluation was cut, or it was trained by ``train_local`` elsewhere, e.g. bench/sb3_compare.py's
+    NNQL run): summary.json, curve.jsonl and the policy's observation; None if there is none.
+    Its wall time is ``train_local``'s own (without building the env)."""
+    if not (out / "summary.json").is_file():
+        return None
+    summary = json.loads((out / "summary.json").read_text())
+    same = {k: summary["run"][k] for k in ("steps", "envs", "seed", "eval_every", "eval_episodes", "maps")}
+    want = {"steps": run.steps, "envs": run.envs, "seed": run.seed, "eval_every": run.eval_every,
+            "eval_episodes": run.eval_episodes, "maps": run.maps}  # fmt: skip
+    if same != want or NNQLPolicy.load(out).observation != observation_settings(nav):
+        raise ValueError(f"{out} holds a run with other settings ({same}), not {want} in this variant")
+    curve = [json.loads(line) for line in (out / "curve.jsonl").read_text().splitlines() if line.strip()]
+    return {"env_steps": summary["env_steps"], "wall": summary["wall_time"],
+            "selected_version": summary["selected_version"], "curve": curve}  # fmt: skip
 
 
 def heuristic(sets: dict, out: Path) -> dict:
