@@ -166,3 +166,30 @@ def test_train_local_cli_patch_option(tmp_path, capsys):
     assert config["architecture"]["patch"]["size"] == 8
     assert config["observation"]["observation.subgoal"] == "none"
     assert config["nnql_config"]["q_network"] == "auto"
+
+
+def test_an_actor_process_runs_a_cnn_policy_on_one_torch_thread(tmp_path):
+    """Loading a CNN policy brings torch in (MLP actors never do); it then runs on one thread."""
+    import subprocess
+    import sys
+
+    learner_for(patch_nav(6)).save_policy(tmp_path / "p")
+    script = (
+        "import sys\n"
+        "from agents.nnql.policy import NNQLPolicy\n"
+        "assert 'torch' not in sys.modules\n"
+        f"policy = NNQLPolicy.load({str(tmp_path / 'p')!r})\n"
+        "import torch\n"
+        "print(torch.get_num_threads())\n"
+    )
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split()[-1] == "1"
+
+
+def test_world_show_draws_the_patch(tmp_path, capsys):
+    assert main(["world", "show", "--patch", "-1"]) == 2
+    assert "--patch" in capsys.readouterr().err
+    out = tmp_path / "w.png"
+    assert main(["world", "show", "--learning", "--patch", "8", "--steps", "5", "--out", str(out)]) == 0
+    assert out.stat().st_size > 0
