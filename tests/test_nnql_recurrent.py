@@ -73,9 +73,10 @@ def test_rollout_resets_the_memory_of_a_robot_whose_episode_ended():
             state = np.abs(batch["state_h"][robot]).sum() + np.abs(batch["state_c"][robot]).sum()
             assert (batch["step"][robot] == 0) == (t in starts)
             assert (state == 0.0) == (t in starts), (robot, t)  # zero state exactly at episode starts
-    episodes = np.array([b["episode"] for b in batches])  # (T, robots)
-    assert len(set(episodes[:, 0]) & set(episodes[:, 1])) == 0  # robots never share an episode id
-    assert list(episodes[:, 0]) == [0, 0, 0, 3, 3, 3, 3, 3, 6]
+    episodes = np.array([b["episode"] for b in batches])  # (T, robots): each robot's episode number
+    assert list(episodes[:, 0]) == [0, 0, 0, 1, 1, 1, 1, 1, 2]
+    assert list(episodes[:, 1]) == [0] * 7 + [1, 1]
+    assert all(list(b["env_ids"]) == [0, 1, 2] for b in batches)
     # the first action of a new episode is what a fresh memory picks for that observation
     fresh = policy.greedy()
     fresh.reset_state(np.ones(1, bool))
@@ -119,7 +120,7 @@ def test_sampled_sequences_never_cross_an_episode_boundary_nor_mix_robots():
     assert len(replay) == n
     seen_short = False
     for _ in range(30):
-        seq = replay.sample(16)
+        seq = replay.sample_sequences(16)
         for k in range(16):
             real = seq.mask[k].numpy()
             assert real[0] and (np.diff(real.astype(int)) <= 0).all()  # padding only after the real steps

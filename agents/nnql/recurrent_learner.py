@@ -39,7 +39,13 @@ from agents.nnql.losses import td_target
 from agents.nnql.policy import save_policy_dir
 from agents.nnql.recurrent_net import RecurrentQNetwork, State
 from agents.nnql.recurrent_policy import RecurrentNNQLPolicy
-from agents.nnql.sequence_replay import SEQUENCE_FIELDS, SequenceReplay, Sequences, sequence_tensordict
+from agents.nnql.sequence_replay import (
+    SEQUENCE_FIELDS,
+    SequenceReplay,
+    Sequences,
+    StreamEpisodes,
+    sequence_tensordict,
+)
 from agents.replay_files import load_replay, save_replay
 
 LOSSES = {"l2": F.mse_loss, "smooth_l1": F.smooth_l1_loss, "l1": F.l1_loss}
@@ -69,6 +75,8 @@ class RecurrentNNQLLearner:
         self.optimizer = torch.optim.Adam(self.network.parameters(), lr=config.lr)
         self.replay_rng = torch.Generator().manual_seed(config.seed)
         self.replay = SequenceReplay(config.replay_capacity, config.burn_in + config.seq_len, self.replay_rng)
+        self.streams = StreamEpisodes()
+        """(actor, robot) streams and their episode numbers -> the replay's trajectory ids"""
         self.updates = 0
         self.transitions_added = 0
 
@@ -83,16 +91,19 @@ class RecurrentNNQLLearner:
     # ------------------------------------------------------------ data in
 
     def add(self, batch: Any) -> int:
-        """Insert N transitions with their sequence fields (a mapping or an object with those attributes)."""
+        """Insert N transitions with their sequence fields (a mapping or an object with those attributes,
+        such as a protocols SequenceBatch); ``actor`` (attribute or key, "" if absent) names the stream."""
         flat = _flat_fields(batch)
-        for name in SEQUENCE_FIELDS:
+        for name in (*SEQUENCE_FIELDS, "actor"):
             if name not in flat:
-                flat[name] = getattr(batch, name, None)
+                flat[name] = getattr(batch, name, "" if name == "actor" else None)
             if flat[name] is None:
                 raise KeyError(f"a recurrent learner needs {name!r} in every transition batch")
         n = len(flat["action"])
         if n == 0:
             return 0
+        robots = np.asarray(flat["env_ids"]).tolist()
+        flat["episode"] = self.streams.ids([(flat["actor"], r) for r in robots], flat["episode"])
         arch = self.architecture
         self.replay.extend(sequence_tensordict(flat, arch["obs_dim"], arch["lstm_size"]))
         self.transitions_added += n
@@ -110,7 +121,7 @@ class RecurrentNNQLLearner:
         if n < 1:
             raise ValueError(f"update(n={n}): n must be >= 1")
         for _ in range(n):
-            metrics = self.train_on(self.replay.sample(self.config.sequences))
+            metrics = self.train_on(self.replay.sample_sequences(self.config.sequences))
         return metrics
 
     def train_on(self, seq: Sequences) -> dict[str, float]:
@@ -219,7 +230,7 @@ class RecurrentNNQLLearner:
         tmp.mkdir(parents=True)
         torch.save(self.state_dict(), tmp / CHECKPOINT_STATE)
         if len(self.replay):
-            save_replay(self.replay.buffer, tmp / CHECKPOINT_REPLAY)
+            save_replay(self.replay, tmp / CHECKPOINT_REPLAY)
         self.save_policy(tmp / CHECKPOINT_POLICY)
         old = path.with_name(f".{path.name}.old{os.getpid()}")
         if path.exists():
@@ -232,4 +243,6 @@ class RecurrentNNQLLearner:
         path = Path(path)
         self.load_state_dict(torch.load(path / CHECKPOINT_STATE, map_location=self.device, weights_only=True))
         if (path / CHECKPOINT_REPLAY).exists():
-            load_replay(self.replay.buffer, path / CHECKPOINT_REPLAY)
+            load_replay(self.replay, path / CHECKPOINT_REPLAY)
+            stored = self.replay.storage.get(torch.arange(len(self.replay)))
+            self.streams.start_after(int(stored.get("episode").max()))

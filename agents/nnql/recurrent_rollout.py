@@ -3,11 +3,11 @@
 :class:`RecurrentRollout` is :class:`agents.nnql.rollout.VectorRollout` with a
 :class:`agents.nnql.recurrent_policy.RecurrentNNQLPolicy`: the policy keeps one LSTM state
 per robot and the rollout zeroes it where an episode ends (before the first action of the
-next one). Each transition batch also carries, per robot, its episode id (``episode``:
-``episode_base + robot + num_envs * k`` for the robot's k-th episode, so robots never share
-one), its ``step`` within the episode and the state the policy held before acting
-(``state_h``, ``state_c``) - the fields of agents.nnql.sequence_replay.SEQUENCE_FIELDS.
-Numpy only: ``train --local`` and the actor service share it.
+next one). Each transition batch also carries, per robot, its index (``env_ids``), the number
+of its episode (``episode``: 0, 1, ... per robot), its ``step`` within the episode and the
+state the policy held before acting (``state_h``, ``state_c``) - the fields of
+agents.nnql.sequence_replay.SEQUENCE_FIELDS; the learner turns (actor, robot, episode) into
+replay-wide trajectory ids. Numpy only: ``train --local`` and the actor service share it.
 """
 
 from __future__ import annotations
@@ -16,38 +16,34 @@ from typing import Any
 
 import numpy as np
 
-from agents.nnql.recurrent_policy import RecurrentNNQLPolicy
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
 
 
 class RecurrentRollout(VectorRollout):
     """A VectorRollout whose batches carry episode ids, steps and the policy's LSTM state."""
 
-    def __init__(self, env: Any, policy: RecurrentNNQLPolicy, *, episode_base: int = 0):
+    def __init__(self, env: Any, policy: Any):
+        """``policy``: a RecurrentNNQLPolicy, or anything with its ``__call__``, ``reset_state`` and
+        ``input_state`` (the actor's, services/actor/recurrent.py)."""
         super().__init__(env, policy)
-        self.episode_base = int(episode_base)
-        self.episode_count = np.zeros(self.num_envs, np.int64)
-        """episodes each robot has started (its current episode is the count - 1)"""
+        self.robots = np.arange(self.num_envs, dtype=np.int32)
+        self.episode = np.full(self.num_envs, -1, np.int64)
+        """each robot's current episode number"""
         self.episode_step = np.zeros(self.num_envs, np.int64)
-
-    @property
-    def episode_ids(self) -> np.ndarray:
-        robots = np.arange(self.num_envs, dtype=np.int64)
-        return self.episode_base + robots + self.num_envs * (self.episode_count - 1)
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> np.ndarray:
         self.policy.reset_state(np.ones(self.num_envs, bool))
-        self.episode_count += 1
+        self.episode += 1
         self.episode_step[:] = 0
         return super().reset(seed=seed, options=options)
 
     def step(self) -> tuple[dict[str, np.ndarray], list[EpisodeEnd]]:
         h, c = self.policy.input_state  # the state the current actions were chosen from
-        episode, step = self.episode_ids, self.episode_step.copy()
+        episode, step = self.episode.copy(), self.episode_step.copy()
         batch, ended = super().step()
         done = batch["terminated"] | batch["truncated"]
         self.episode_step += 1
         self.episode_step[done] = 0
-        self.episode_count[done] += 1
-        batch.update(episode=episode, step=step, state_h=h, state_c=c)
+        self.episode[done] += 1
+        batch.update(env_ids=self.robots, episode=episode, step=step, state_h=h, state_c=c)
         return batch, ended

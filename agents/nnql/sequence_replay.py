@@ -24,8 +24,9 @@ import torch
 from tensordict import TensorDict
 from torchrl.data import LazyTensorStorage, SliceSampler, TensorDictReplayBuffer
 
-SEQUENCE_FIELDS = ("episode", "step", "state_h", "state_c")
-"""what a recurrent transition batch carries beside the feed-forward fields (agents.nnql.learner)"""
+SEQUENCE_FIELDS = ("env_ids", "episode", "step", "state_h", "state_c")
+"""what a recurrent transition batch carries beside the feed-forward fields (agents.nnql.learner): the
+robot, its episode number, the step in that episode, the LSTM state before the step"""
 MASK_KEY = ("collector", "mask")
 """where SliceSampler's pad_output marks real (True) and padded (False) steps"""
 
@@ -80,12 +81,13 @@ def sequence_tensordict(flat: dict[str, Any], obs_dim: int, lstm_size: int) -> T
     )
 
 
-class SequenceReplay:
-    """A TorchRL replay buffer of transitions sampled as within-episode slices of ``length`` steps."""
+class SequenceReplay(TensorDictReplayBuffer):
+    """A TorchRL replay buffer of transitions sampled as within-episode slices of ``length`` steps
+    (everything else - storage, extend, len, the replay files of agents.replay_files - as any)."""
 
     def __init__(self, capacity: int, length: int, generator: torch.Generator | None = None):
         self.length = int(length)
-        self.sampler = SliceSampler(
+        sampler = SliceSampler(
             slice_len=self.length,
             traj_key="episode",
             step_key="step",
@@ -94,20 +96,12 @@ class SequenceReplay:
             pad_output=True,
             truncated_key=None,
         )
-        self.buffer = TensorDictReplayBuffer(
-            storage=LazyTensorStorage(int(capacity)), sampler=self.sampler, generator=generator
-        )
+        super().__init__(storage=LazyTensorStorage(int(capacity)), sampler=sampler, generator=generator)
 
-    def __len__(self) -> int:
-        return len(self.buffer)
-
-    def extend(self, td: TensorDict) -> None:
-        self.buffer.extend(td)
-
-    def sample(self, sequences: int) -> Sequences:
+    def sample_sequences(self, sequences: int) -> Sequences:
         """``sequences`` slices, each within one episode (sampler indices and mask, rows from storage)."""
-        index, info = self.sampler.sample(self.buffer.storage, sequences * self.length)
-        rows = self.buffer.storage.get(index)
+        index, info = self.sampler.sample(self.storage, sequences * self.length)
+        rows = self.storage.get(index)
         mask = info[MASK_KEY] if MASK_KEY in info else torch.ones(len(rows), dtype=torch.bool)
 
         def seq(value: torch.Tensor) -> torch.Tensor:
@@ -151,3 +145,7 @@ class StreamEpisodes:
                 self.next_id += 1
             out[k] = known[1]
         return out
+
+    def start_after(self, used: int) -> None:
+        """Give new ids from ``used`` + 1 on (ids up to ``used`` are in a restored replay)."""
+        self.next_id = max(self.next_id, int(used) + 1)
