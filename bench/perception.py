@@ -45,6 +45,7 @@ from scipy.stats import binomtest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.evaluation.metrics import wilson_interval
+from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
 from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
@@ -179,6 +180,23 @@ def heuristic(sets: dict, out: Path) -> dict:
     return record
 
 
+def reference(spec: str, sets: dict, out: Path) -> tuple[str, dict]:
+    """``VARIANT=DIR``: a saved policy (e.g. pretrained/nnql for D+geo) evaluated on the same episodes,
+    a run of VARIANT with seed None (compared with every seed's run); cached in OUT/ref-VARIANT.json."""
+    variant, _, path = spec.partition("=")
+    cached = out / f"ref-{variant}.json"
+    if cached.is_file():
+        return variant, json.loads(cached.read_text())
+    policy = load_policy(path)
+    config = json.loads((Path(path) / "config.json").read_text())
+    results = evaluate_sets(policy, policy.nav_config(), sets)
+    record = {"variant": variant, "seed": None, "reference": str(path), "train_wall_s": None,
+              "train_robot_steps": config.get("env_steps"), "to_90_validation": None}  # fmt: skip
+    record.update(scored(results, sets))
+    cached.write_text(json.dumps(record) + "\n")
+    return variant, record
+
+
 def pooled(records: list[dict], name: str) -> dict:
     """Success over every seed's episodes of set ``name`` with its Wilson interval, and the mean."""
     wins = sum(int(np.sum(r["episodes"][name])) for r in records)
@@ -238,6 +256,10 @@ def main() -> None:
     parser.add_argument("--out", default="runs/perception", help="run directories and result files")
     parser.add_argument("--png", default="bench/plots/perception.png")
     parser.add_argument(
+        "--reference", nargs="*", default=[], metavar="VARIANT=DIR",
+        help="saved policies evaluated on the same episodes as runs of VARIANT (e.g. D+geo=pretrained/nnql)",
+    )  # fmt: skip
+    parser.add_argument(
         "--cached-only", action="store_true", help="report the runs already in --out, train nothing"
     )
     args = parser.parse_args()
@@ -251,6 +273,9 @@ def main() -> None:
         runs = {v: [run_one(v, s, args, sets) for s in seeds] for v, seeds in done.items() if seeds}
     else:
         runs = {v: [run_one(v, s, args, sets) for s in args.seeds] for v in args.variants}
+    for spec in args.reference:
+        variant, record = reference(spec, sets, Path(args.out))
+        runs.setdefault(variant, []).append(record)
     report: dict = {"steps": args.steps, "seeds": args.seeds, "episodes": args.episodes, "variants": {}}
     report["heuristic"] = base["sets"]
     for v, records in runs.items():
@@ -264,7 +289,7 @@ def main() -> None:
                     np.array(r["episodes"][name]), np.array(base["episodes"][name])
                 )
                 for other in PAIRED_WITH:
-                    a = next((x for x in runs.get(other, []) if x["seed"] == r["seed"]), None)
+                    a = next((x for x in runs.get(other, []) if x["seed"] in (r["seed"], None)), None)
                     if a is not None and other != v:
                         r["sets"][name][f"mcnemar_vs_{other}"] = mcnemar(
                             np.array(r["episodes"][name]), np.array(a["episodes"][name])
@@ -300,7 +325,8 @@ def main() -> None:
             print(f"  {v} seed {r['seed']}: test {t['success']:.1%}, SPL {t['spl']:.2f}, collisions "
                   f"{t['collision_static']:.1%}, timeouts {t['timeout']:.1%}, McNemar p vs heuristic "
                   f"{t['mcnemar_vs_heuristic']['p']:.3g}" + vs
-                  + f"; train {r['train_wall_s']:.0f} s, to 90% val {r['to_90_validation']}")  # fmt: skip
+                  + (f"; train {r['train_wall_s']:.0f} s, to 90% val {r['to_90_validation']}"
+                     if r["seed"] is not None else " (saved policy, --reference)"))  # fmt: skip
     print(f"best by validation success: {best}; worlds.config.LEARNING_NAV is {report['learning_nav_is']}")
     Path(args.png).parent.mkdir(parents=True, exist_ok=True)
     plot(report, Path(args.png))
