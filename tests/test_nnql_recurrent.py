@@ -190,3 +190,25 @@ def test_saved_recurrent_policy_evaluates_identically_after_reload(tmp_path):
 def test_bad_recurrent_options_raise_naming_the_field(field, value):
     with pytest.raises(ValueError, match=field):
         NNQLConfig(recurrent=True, **{field: value})
+
+
+def test_checkpoint_restores_weights_replay_and_keeps_trajectory_ids_unique(tmp_path):
+    learner = RecurrentNNQLLearner(small_config(), OBS_DIM, N_ACTIONS)
+    rollout = RecurrentRollout(ScriptedVectorEnv([[5, 9, 3], [7, 2, 30]]), learner.policy(seed=0))
+    rollout.reset()
+    while not learner.ready():
+        learner.add(rollout.step()[0])
+    learner.update(2)
+    learner.save_checkpoint(tmp_path / "ckpt")
+    resumed = RecurrentNNQLLearner(small_config(), OBS_DIM, N_ACTIONS)
+    resumed.load_checkpoint(tmp_path / "ckpt")
+    assert resumed.version == 2 and len(resumed.replay) == len(learner.replay)
+    assert all(np.array_equal(v, resumed.get_weights()[k]) for k, v in learner.get_weights().items())
+    stored = resumed.replay.storage.get(torch.arange(len(resumed.replay))).get("episode")
+    # a restarted actor numbers its episodes from 0 again: they must not reuse a stored id
+    fresh = RecurrentRollout(ScriptedVectorEnv([[4, 4]]), resumed.policy())
+    fresh.reset()
+    resumed.add(fresh.step()[0])
+    newest = resumed.replay.storage.get(torch.arange(len(resumed.replay))).get("episode")[-1]
+    assert int(newest) > int(stored.max())
+    resumed.update(1)  # the fragmented sampler finds every (episode, step) pair unique
