@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 import re
-import signal
 import subprocess
 import sys
 import time
@@ -18,6 +17,7 @@ import time
 import numpy as np
 import pytest
 from conftest import free_port
+from test_nirl_services import stop_all
 
 from protocols import keys
 from protocols.codec import encode
@@ -28,20 +28,6 @@ from worlds.config import LEARNING_NAV
 from worlds.perception import observation_dim
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(400)]
-
-
-def stop_all(processes: dict[str, subprocess.Popen]) -> dict[str, int]:
-    for process in processes.values():
-        if process.poll() is None:
-            process.send_signal(signal.SIGTERM)
-    codes = {}
-    for name, process in processes.items():
-        try:
-            codes[name] = process.wait(60)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            codes[name] = process.wait()
-    return codes
 
 
 def test_recurrent_learner_trains_on_actor_sequences_and_the_actor_follows_its_weights(tmp_path):

@@ -22,8 +22,6 @@ episode end) is there too, so every step's s' has its Q-values from the same unr
 from __future__ import annotations
 
 import copy
-import os
-import shutil
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -34,7 +32,7 @@ import torch.nn.functional as F
 
 from agents.device import resolve_device
 from agents.nnql.config import NNQLConfig
-from agents.nnql.learner import CHECKPOINT_POLICY, CHECKPOINT_REPLAY, CHECKPOINT_STATE, _flat_fields
+from agents.nnql.learner import CHECKPOINT_REPLAY, CHECKPOINT_STATE, _flat_fields, write_checkpoint
 from agents.nnql.losses import td_target
 from agents.nnql.policy import save_policy_dir
 from agents.nnql.recurrent_net import RecurrentQNetwork, State
@@ -222,27 +220,23 @@ class RecurrentNNQLLearner:
         self.transitions_added = int(state["counters"]["transitions_added"])
         torch.set_rng_state(state["torch_rng"])
 
+    def save_replay(self, path: str | Path) -> None:
+        """Every stored row, writer, sampler and rng (agents.replay_files); nothing if empty."""
+        if len(self.replay):
+            save_replay(self.replay, path)
+
+    def load_replay(self, path: str | Path) -> None:
+        """Inverse of save_replay; new trajectory ids start after the stored ones."""
+        if Path(path).exists():
+            load_replay(self.replay, path)
+            stored = self.replay.storage.get(torch.arange(len(self.replay)))
+            self.streams.start_after(int(stored.get("episode").max()))
+
     def save_checkpoint(self, path: str | Path) -> Path:
         """learner.pt, replay/ and policy/ in a directory replaced atomically (as NNQLLearner's)."""
-        path = Path(path)
-        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-        shutil.rmtree(tmp, ignore_errors=True)
-        tmp.mkdir(parents=True)
-        torch.save(self.state_dict(), tmp / CHECKPOINT_STATE)
-        if len(self.replay):
-            save_replay(self.replay, tmp / CHECKPOINT_REPLAY)
-        self.save_policy(tmp / CHECKPOINT_POLICY)
-        old = path.with_name(f".{path.name}.old{os.getpid()}")
-        if path.exists():
-            os.replace(path, old)
-        os.replace(tmp, path)
-        shutil.rmtree(old, ignore_errors=True)
-        return path
+        return write_checkpoint(self, path)
 
     def load_checkpoint(self, path: str | Path) -> None:
         path = Path(path)
         self.load_state_dict(torch.load(path / CHECKPOINT_STATE, map_location=self.device, weights_only=True))
-        if (path / CHECKPOINT_REPLAY).exists():
-            load_replay(self.replay, path / CHECKPOINT_REPLAY)
-            stored = self.replay.storage.get(torch.arange(len(self.replay)))
-            self.streams.start_after(int(stored.get("episode").max()))
+        self.load_replay(path / CHECKPOINT_REPLAY)
