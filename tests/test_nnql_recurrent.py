@@ -212,3 +212,23 @@ def test_checkpoint_restores_weights_replay_and_keeps_trajectory_ids_unique(tmp_
     newest = resumed.replay.storage.get(torch.arange(len(resumed.replay))).get("episode")[-1]
     assert int(newest) > int(stored.max())
     resumed.update(1)  # the fragmented sampler finds every (episode, step) pair unique
+
+
+@pytest.mark.parametrize("update, period", [("soft", 1), ("hard", 2)])
+def test_target_network_follows_the_online_one(update, period):
+    config = small_config(target_update=update, target_period=period)
+    learner = RecurrentNNQLLearner(config, OBS_DIM, N_ACTIONS)
+    rollout = RecurrentRollout(ScriptedVectorEnv([[5, 9, 3], [7, 2, 30]]), learner.policy(seed=0))
+    rollout.reset()
+    while not learner.ready():
+        learner.add(rollout.step()[0])
+    before = [p.detach().clone() for p in learner.target.parameters()]
+    learner.update(1)
+    online = list(learner.network.parameters())
+    for old, new, now in zip(before, learner.target.parameters(), online, strict=True):
+        expected = old if update == "hard" else old + learner.config.target_tau * (now.detach() - old)
+        torch.testing.assert_close(new, expected)
+    learner.update(1)
+    if update == "hard":  # copied at every period-th update
+        for new, now in zip(learner.target.parameters(), learner.network.parameters(), strict=True):
+            torch.testing.assert_close(new, now.detach())

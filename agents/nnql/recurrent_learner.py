@@ -169,12 +169,15 @@ class RecurrentNNQLLearner:
         }
 
     def _update_target(self) -> None:
-        online, target = list(self.network.parameters()), list(self.target.parameters())
+        soft = self.config.target_update == "soft"
+        if not soft and self.updates % self.config.target_period:
+            return
         with torch.no_grad():
-            if self.config.target_update == "soft":
-                torch._foreach_lerp_(target, online, self.config.target_tau)
-            elif self.updates % self.config.target_period == 0:
-                torch._foreach_copy_(target, online)
+            for target, online in zip(self.target.parameters(), self.network.parameters(), strict=True):
+                if soft:
+                    target.lerp_(online, self.config.target_tau)
+                else:
+                    target.copy_(online)
 
     # ------------------------------------------------------------ weights
 
