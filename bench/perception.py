@@ -10,6 +10,9 @@ robot-steps, several seeds, one observation per variant:
     E  D + C
     E+geo  E trained with the geodesic progress reward in place of the straight-line one
     B+geo, D+geo  B and D with that reward (which part of E+geo helps: the reward, the subgoal?)
+    F  B + a 16x16 egocentric patch of the robot's own map (occupancy, visits) read by a small CNN
+       beside the MLP (agents.nnql.patch_network; no subgoal: learning alone)
+    F+geo  F with the geodesic progress reward
     G, G+geo  B (and B+geo) with the recurrent Q (R2D2-style: LSTM, sequence replay with burn-in and
           stored state; agents/nnql/recurrent_learner.py, options RECURRENT below): memory, no planner
 
@@ -17,13 +20,14 @@ Each run keeps its best weights on the validation set (seed 1, periodic evaluati
 ``--val-episodes``), then is evaluated on the validation set (seed 1) and on the test sets
 (seed 0: unseen static maps and the same with 4 moving discs), ``--episodes`` each. The
 hand-written goal-seeking heuristic runs on the same episodes. Reported per variant: success
-[Wilson 95%] per seed and pooled, McNemar's exact test (paired, same episodes) against A and
-against the heuristic for each seed, per map family (rects, discs, rooms), collisions
+[Wilson 95%] per seed and pooled, McNemar's exact test (paired, same episodes) against A, D+geo
+(the default) and the heuristic for each seed, per map family (rects, discs, rooms), collisions
 (static/dynamic), timeouts, SPL, path ratio to A*, robot-steps and wall time to reach 90%
 validation success during training. The best variant by mean validation success is named.
 
 Each (variant, seed) run writes ``OUT/<variant>-s<seed>/result.json`` and is skipped when that
-file exists, so the runs can be split across processes and the report re-made from them:
+file exists, so the runs can be split across processes and the report re-made from them; a run
+directory whose training finished (summary.json) with the same settings is evaluated, not retrained:
 
     python bench/perception.py --steps 200000 --seeds 0 1 2            # human lines, JSON last
     python bench/perception.py --variants A B --seeds 0 --steps 20000   # a smoke run
@@ -58,6 +62,7 @@ from worlds.config import (
     ObservationConfig,
     RewardConfig,
     SensorConfig,
+    observation_settings,
     with_observation,
 )
 from worlds.heuristics import goal_seeking_policy
@@ -81,6 +86,10 @@ VARIANTS: dict[str, NavConfig] = {
 GEODESIC = RewardConfig(progress=0.0, geodesic_progress=0.1)
 VARIANTS["B+geo"] = NavConfig(sensors=SECTORS, rewards=GEODESIC)
 VARIANTS["D+geo"] = replace(VARIANTS["D"], rewards=GEODESIC)
+PATCH = 16
+"""side of variant F's own-map patch (cells of 1 m: 8 m each way, half a 16x16 training map)"""
+VARIANTS["F"] = NavConfig(sensors=SECTORS, observation=ObservationConfig(patch_size=PATCH))
+VARIANTS["F+geo"] = replace(VARIANTS["F"], rewards=GEODESIC)
 VARIANTS["G"] = VARIANTS["B"]
 VARIANTS["G+geo"] = VARIANTS["B+geo"]
 RECURRENT = {"recurrent": True, "utd_ratio": 0.04}
@@ -150,22 +159,43 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
         eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False,
     )  # fmt: skip
     nnql = NNQLConfig(seed=seed, **NNQL_OPTIONS.get(variant, {}))
-    start = time.perf_counter()
-    trained = train_local(run, nnql, nav=nav)
-    wall = time.perf_counter() - start
+    trained = finished(out, run, nav)
+    if trained is None:
+        start = time.perf_counter()
+        result = train_local(run, nnql, nav=nav)
+        trained = {"env_steps": result.env_steps, "wall": time.perf_counter() - start,
+                   "selected_version": result.selected_version, "curve": result.curve}  # fmt: skip
     policy = (RecurrentNNQLPolicy if nnql.recurrent else NNQLPolicy).load(out).greedy()
     results = evaluate_sets(policy, nav, sets)
     record = {
         "variant": variant,
         "seed": seed,
-        "train_robot_steps": trained.env_steps,
-        "train_wall_s": round(wall, 1),
-        "selected_version": trained.selected_version,
-        "to_90_validation": to_90(trained.curve),
+        "train_robot_steps": trained["env_steps"],
+        "train_wall_s": round(trained["wall"], 1),
+        "selected_version": trained["selected_version"],
+        "to_90_validation": to_90(trained["curve"]),
         **scored(results, sets),
     }
     cached.write_text(json.dumps(record) + "\n")
     return record
+
+
+def finished(out: Path, run: LocalTrainConfig, nav: NavConfig) -> dict | None:
+    """The training record of a run directory whose training finished with these settings (its
+    evaluation was cut, or it was trained by ``train_local`` elsewhere, e.g. bench/sb3_compare.py's
+    NNQL run): summary.json, curve.jsonl and the policy's observation; None if there is none.
+    Its wall time is ``train_local``'s own (without building the env)."""
+    if not (out / "summary.json").is_file():
+        return None
+    summary = json.loads((out / "summary.json").read_text())
+    same = {k: summary["run"][k] for k in ("steps", "envs", "seed", "eval_every", "eval_episodes", "maps")}
+    want = {"steps": run.steps, "envs": run.envs, "seed": run.seed, "eval_every": run.eval_every,
+            "eval_episodes": run.eval_episodes, "maps": run.maps}  # fmt: skip
+    if same != want or NNQLPolicy.load(out).observation != observation_settings(nav):
+        raise ValueError(f"{out} holds a run with other settings ({same}), not {want} in this variant")
+    curve = [json.loads(line) for line in (out / "curve.jsonl").read_text().splitlines() if line.strip()]
+    return {"env_steps": summary["env_steps"], "wall": summary["wall_time"],
+            "selected_version": summary["selected_version"], "curve": curve}  # fmt: skip
 
 
 def heuristic(sets: dict, out: Path) -> dict:

@@ -4,7 +4,9 @@ A policy directory holds two files (written atomically, temp + rename):
 
 * ``model.safetensors`` - the weights of an MLP in ``nn.Sequential`` layout (TorchRL's
   ``MLP``): ``"0.weight"``, ``"0.bias"``, ``"2.weight"``, ... one linear layer at every
-  even index, the activation between them; float32.
+  even index, the activation between them; float32. An NNQL Q-network with a CNN over the
+  own-map patch (architecture entry ``patch``, :mod:`agents.nnql.patch_network`) names its
+  tensors ``"cnn.*"`` and ``"head.*"`` and is run by that torch module (:mod:`agents.forward`).
 * ``config.json`` - ``{"model": name, "kind": kind, "version": int, "architecture":
   {"obs_dim", "n_actions", "hidden_sizes", "activation"}, "observation": {...}, ...}`` plus any
   metadata. ``observation`` holds the settings that fix what the policy observes
@@ -17,7 +19,7 @@ carries one LSTM state per robot and resets it per episode.
 
 ``kind`` says what the network outputs: ``"q_network"`` (Q-values, NNQL) or
 ``"policy_logits"`` (action logits, imitation and NIRL neural policies). Both are
-evaluated greedily (argmax over actions), with numpy only, so loading a policy
+evaluated greedily (argmax over actions), with numpy only for MLPs, so loading one
 needs no torch.
 
 ``load_policy_or_baseline`` also accepts the name ``heuristic``: the goal-seeking
@@ -34,17 +36,8 @@ import numpy as np
 from safetensors import SafetensorError
 from safetensors.numpy import load_file
 
-from agents.mlp import (
-    ACTIVATIONS,
-    ARCHITECTURE_KEYS,
-    CONFIG_FILE,
-    KINDS,
-    WEIGHTS_FILE,
-    check_layers,
-    mlp_forward,
-    mlp_layers,
-    save_policy,
-)
+from agents.forward import network_forward
+from agents.mlp import ACTIVATIONS, ARCHITECTURE_KEYS, CONFIG_FILE, KINDS, WEIGHTS_FILE, save_policy
 from agents.nnql.recurrent_policy import Memory, RecurrentQ, is_recurrent
 from worlds.config import LEGACY_OBSERVATION, NavConfig, with_observation
 from worlds.heuristics import goal_seeking_policy
@@ -91,7 +84,7 @@ class GreedyMLPPolicy:
             raise PolicyFormatError(str(exc)) from None
 
     def _set_weights(self, weights: dict[str, np.ndarray]) -> None:
-        self.layers = check_layers(mlp_layers(weights), self.architecture)
+        self.forward = network_forward(weights, self.architecture)
 
     @property
     def obs_dim(self) -> int:
@@ -106,7 +99,7 @@ class GreedyMLPPolicy:
         obs = np.asarray(obs, dtype=np.float32)
         if obs.ndim != 2 or obs.shape[1] != self.obs_dim:
             raise ValueError(f"expected observations (N, {self.obs_dim}), got {obs.shape}")
-        return mlp_forward(self.layers, self.architecture["activation"], obs)
+        return self.forward(obs)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         return self.outputs(obs).argmax(axis=1).astype(np.int64)

@@ -36,7 +36,8 @@ from agents.device import resolve_device
 from agents.nnql.config import NNQLConfig
 from agents.nnql.lean import Batch, LeanUpdate, Step
 from agents.nnql.losses import PRIORITY_KEY, make_loss
-from agents.nnql.networks import QNetwork, make_q_actor
+from agents.nnql.networks import make_q_actor
+from agents.nnql.patch_network import build_q_network
 from agents.nnql.policy import NNQLPolicy, save_policy_dir
 from agents.nnql.replay_storage import (
     columns,
@@ -142,7 +143,7 @@ class NNQLLearner:
         self.device = resolve_device(device)
         torch.set_num_threads(config.torch_threads)
         torch.manual_seed(config.seed)
-        self.network = QNetwork.from_config(config, obs_dim, n_actions).to(self.device)
+        self.network = build_q_network(config, obs_dim, n_actions, self.observation).to(self.device)
         self.loss = make_loss(config, make_q_actor(self.network))
         if config.target_update == "soft":
             self.target_updater = SoftUpdate(self.loss, tau=config.target_tau)
@@ -325,6 +326,7 @@ class NNQLLearner:
         return {
             "config": self.config.to_dict(),
             "architecture": self.architecture,
+            "observation": self.observation,
             "loss": self.loss.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "target_updater": self.target_updater.state_dict(),
@@ -388,7 +390,8 @@ class NNQLLearner:
         state = torch.load(Path(path) / CHECKPOINT_STATE, map_location="cpu", weights_only=True)
         arch = state["architecture"]
         config = NNQLConfig.from_dict(state["config"])
-        learner = cls(config, arch["obs_dim"], arch["n_actions"], device=device, replay_dir=replay_dir)
+        learner = cls(config, arch["obs_dim"], arch["n_actions"], device=device, replay_dir=replay_dir,
+                      observation=state.get("observation"))  # fmt: skip
         learner.load_checkpoint(path)
         return learner
 
