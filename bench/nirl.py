@@ -64,6 +64,7 @@ from agents.nirl.max_margin import Q_KEYS
 from agents.nirl.train_local import train_nirl
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
+from agents.nnql.ratelimit import RateLimiter
 from agents.nnql.rollout import VectorRollout
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.planning.demonstrate import generate_demos
@@ -170,12 +171,14 @@ def train_dqfd(demos, seed: int, env_steps: int, nav: NavConfig, margin: float =
     policy.explore_as(cfg, q.version)
     rollout = VectorRollout(env, policy)
     rollout.reset(seed=seed)
+    limiter = RateLimiter(cfg.utd_ratio, max(cfg.learning_starts, cfg.batch_size), tolerance=1.0)
     while rollout.steps < env_steps:
         batch, _ = rollout.step()
-        q.add(batch)
-        for _ in range(q.updates_due()):
+        limiter.inserted(q.add(batch))
+        due = limiter.updates_allowed(len(q.replay))
+        for _ in range(due):
             update(pretrain=False)
-            q.update_credit = max(q.update_credit - 1.0, 0.0)
+        limiter.updated(due)
         policy.set_weights(q.get_weights(), q.version)
         policy.explore_as(cfg, q.version)
     env.close()
