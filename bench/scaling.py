@@ -333,6 +333,7 @@ def report_line(run: dict[str, Any]) -> str:
 
 def main() -> None:
     args = parse_args()
+    args.thresholds = sorted({*args.thresholds, args.target})  # the target is always timed
     if args.recorded:
         recorded = json.loads(Path(args.recorded).read_text().strip().splitlines()[-1])
         print(json.dumps(rejudge(recorded, args.thresholds, args.window)))
