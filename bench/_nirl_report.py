@@ -57,7 +57,8 @@ def report(path: Path) -> int:
           " collisions (unseen) |")  # fmt: skip
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for method in METHODS:
-        for set_name in (*SETS, "-"):
+        larger = sorted({r["set"] for r in rows if r["set"].isdigit() and r["set"] not in SETS}, key=int)
+        for set_name in (*SETS, *larger, "-"):
             cell = [r for r in rows if r["method"] == method and r["set"] == set_name]
             if not cell:
                 continue

@@ -86,13 +86,21 @@ NAVS = {"learning": LEARNING_NAV, "default": NavConfig()}
 RUNS = {"learning": "bench/nirl_runs_learning.jsonl", "default": "bench/nirl_runs.jsonl"}
 
 
-def demo_sets(seed: int, noise: float, nav: NavConfig) -> tuple[dict[str, list], list[np.ndarray]]:
+def demo_sets(
+    seed: int, noise: float, nav: NavConfig, larger: int = 0
+) -> tuple[dict[str, list], list[np.ndarray]]:
+    """The clean (first 5, 10, 20 episodes) and noisy sets of ``seed``; with ``larger`` > 20 also the
+    clean set continued to that many episodes (set ``str(larger)``; failures dropped as always)."""
     clean, _ = generate_demos("mixed:16", 20, seed=10_000 + seed, config=nav)
     noisy, _ = generate_demos("mixed:16", 20, seed=20_000 + seed, noise=noise, config=nav)
     expert_labels = [d.labels.copy() for d in noisy]
     for demo in noisy:  # the learners see the recorded actions only
         demo.expert_actions = None
-    return {"5": clean[:5], "10": clean[:10], "20": clean, "20noisy": noisy}, expert_labels
+    sets = {"5": clean[:5], "10": clean[:10], "20": clean, "20noisy": noisy}
+    if larger > 20:  # episodes 20 .. larger - 1 of the same sequence (episode i resets with seed + i)
+        more, _ = generate_demos("mixed:16", larger - 20, seed=10_000 + seed + 20, config=nav)
+        sets[str(larger)] = clean + more
+    return sets, expert_labels
 
 
 def outcomes_of(result, family: str) -> list[int]:
@@ -273,7 +281,11 @@ def main() -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--methods", default=",".join(METHODS), help="comma list of " + ", ".join(METHODS))
-    parser.add_argument("--sets", default=",".join(SETS), help="comma list of demo sets: " + ", ".join(SETS))
+    parser.add_argument(
+        "--sets",
+        default=",".join(SETS),
+        help="comma list of demo sets: " + ", ".join(SETS) + " or one larger clean set N > 20 (e.g. 500)",
+    )
     parser.add_argument("--seeds", default="0,1,2", help="comma list of seeds")
     parser.add_argument("--episodes", type=int, default=500, help="test episodes per family")
     parser.add_argument("--iterations", type=int, default=10, help="NIRL/SQIL rounds (and DQfD's env budget)")
@@ -326,7 +338,8 @@ def main() -> int:
             print(f"expert: {short}", flush=True)
         learners = [m for m in methods if m != "expert"]
         needs_demos = any(m != "nnql" for m in learners)
-        demos, expert_labels = demo_sets(seed, args.noise, nav) if needs_demos else ({}, [])
+        larger = max([int(s) for s in args.sets.split(",") if s.isdigit()] + [0])
+        demos, expert_labels = demo_sets(seed, args.noise, nav, larger) if needs_demos else ({}, [])
         for method in learners:
             for set_name in ["-"] if method == "nnql" else [s for s in args.sets.split(",") if s]:
                 row = run_one(method, set_name, seed, None if method == "nnql" else demos[set_name],
