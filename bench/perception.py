@@ -10,6 +10,8 @@ robot-steps, several seeds, one observation per variant:
     E  D + C
     E+geo  E trained with the geodesic progress reward in place of the straight-line one
     B+geo, D+geo  B and D with that reward (which part of E+geo helps: the reward, the subgoal?)
+    G, G+geo  B (and B+geo) with the recurrent Q (R2D2-style: LSTM, sequence replay with burn-in and
+          stored state; agents/nnql/recurrent_learner.py, options RECURRENT below): memory, no planner
 
 Each run keeps its best weights on the validation set (seed 1, periodic evaluations of
 ``--val-episodes``), then is evaluated on the validation set (seed 1) and on the test sets
@@ -43,8 +45,11 @@ from scipy.stats import binomtest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.evaluation.metrics import wilson_interval
+from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
+from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
+from agents.nnql.recurrent_policy import RecurrentNNQLPolicy
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from worlds.config import (
     LEARNING_NAV,
@@ -76,6 +81,14 @@ VARIANTS: dict[str, NavConfig] = {
 GEODESIC = RewardConfig(progress=0.0, geodesic_progress=0.1)
 VARIANTS["B+geo"] = NavConfig(sensors=SECTORS, rewards=GEODESIC)
 VARIANTS["D+geo"] = replace(VARIANTS["D"], rewards=GEODESIC)
+VARIANTS["G"] = VARIANTS["B"]
+VARIANTS["G+geo"] = VARIANTS["B+geo"]
+RECURRENT = {"recurrent": True, "utd_ratio": 0.04}
+"""NNQLConfig of the recurrent variants (the rest default: LSTM 128, 10 burn-in + 20 trained steps,
+32 sequences per update); utd 0.04 replays each transition about as often as the default MLP's 1/16"""
+NNQL_OPTIONS: dict[str, dict] = {"G": RECURRENT, "G+geo": RECURRENT}
+PAIRED_WITH = ("A", "D+geo")
+"""each run is compared (McNemar, same seed, same episodes) with the runs of these variants when present"""
 SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dynamic", 0))
 
 
@@ -136,10 +149,11 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
         steps=args.steps, envs=16, seed=seed, out=str(out), eval_every=args.steps // 4,
         eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False,
     )  # fmt: skip
+    nnql = NNQLConfig(seed=seed, **NNQL_OPTIONS.get(variant, {}))
     start = time.perf_counter()
-    trained = train_local(run, nav=nav)
+    trained = train_local(run, nnql, nav=nav)
     wall = time.perf_counter() - start
-    policy = NNQLPolicy.load(out).greedy()
+    policy = (RecurrentNNQLPolicy if nnql.recurrent else NNQLPolicy).load(out).greedy()
     results = evaluate_sets(policy, nav, sets)
     record = {
         "variant": variant,
@@ -164,6 +178,23 @@ def heuristic(sets: dict, out: Path) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     cached.write_text(json.dumps(record) + "\n")
     return record
+
+
+def reference(spec: str, sets: dict, out: Path) -> tuple[str, dict]:
+    """``VARIANT=DIR``: a saved policy (e.g. pretrained/nnql for D+geo) evaluated on the same episodes,
+    a run of VARIANT with seed None (compared with every seed's run); cached in OUT/ref-VARIANT.json."""
+    variant, _, path = spec.partition("=")
+    cached = out / f"ref-{variant}.json"
+    if cached.is_file():
+        return variant, json.loads(cached.read_text())
+    policy = load_policy(path)
+    config = json.loads((Path(path) / "config.json").read_text())
+    results = evaluate_sets(policy, policy.nav_config(), sets)
+    record = {"variant": variant, "seed": None, "reference": str(path), "train_wall_s": None,
+              "train_robot_steps": config.get("env_steps"), "to_90_validation": None}  # fmt: skip
+    record.update(scored(results, sets))
+    cached.write_text(json.dumps(record) + "\n")
+    return variant, record
 
 
 def pooled(records: list[dict], name: str) -> dict:
@@ -225,6 +256,10 @@ def main() -> None:
     parser.add_argument("--out", default="runs/perception", help="run directories and result files")
     parser.add_argument("--png", default="bench/plots/perception.png")
     parser.add_argument(
+        "--reference", nargs="*", default=[], metavar="VARIANT=DIR",
+        help="saved policies evaluated on the same episodes as runs of VARIANT (e.g. D+geo=pretrained/nnql)",
+    )  # fmt: skip
+    parser.add_argument(
         "--cached-only", action="store_true", help="report the runs already in --out, train nothing"
     )
     args = parser.parse_args()
@@ -238,6 +273,9 @@ def main() -> None:
         runs = {v: [run_one(v, s, args, sets) for s in seeds] for v, seeds in done.items() if seeds}
     else:
         runs = {v: [run_one(v, s, args, sets) for s in args.seeds] for v in args.variants}
+    for spec in args.reference:
+        variant, record = reference(spec, sets, Path(args.out))
+        runs.setdefault(variant, []).append(record)
     report: dict = {"steps": args.steps, "seeds": args.seeds, "episodes": args.episodes, "variants": {}}
     report["heuristic"] = base["sets"]
     for v, records in runs.items():
@@ -250,10 +288,10 @@ def main() -> None:
                 r["sets"][name]["mcnemar_vs_heuristic"] = mcnemar(
                     np.array(r["episodes"][name]), np.array(base["episodes"][name])
                 )
-                if "A" in runs and v != "A":
-                    a = next((x for x in runs["A"] if x["seed"] == r["seed"]), None)
-                    if a is not None:
-                        r["sets"][name]["mcnemar_vs_A"] = mcnemar(
+                for other in PAIRED_WITH:
+                    a = next((x for x in runs.get(other, []) if x["seed"] in (r["seed"], None)), None)
+                    if a is not None and other != v:
+                        r["sets"][name][f"mcnemar_vs_{other}"] = mcnemar(
                             np.array(r["episodes"][name]), np.array(a["episodes"][name])
                         )
         entry["runs"] = [
@@ -282,11 +320,13 @@ def main() -> None:
     for v, e in report["variants"].items():
         for r in e["runs"]:
             t = r["sets"]["test"]
-            vs = t.get("mcnemar_vs_A", {}).get("p")
+            vs = "".join(f", vs {o} {t[f'mcnemar_vs_{o}']['p']:.3g}" for o in PAIRED_WITH
+                         if f"mcnemar_vs_{o}" in t)  # fmt: skip
             print(f"  {v} seed {r['seed']}: test {t['success']:.1%}, SPL {t['spl']:.2f}, collisions "
                   f"{t['collision_static']:.1%}, timeouts {t['timeout']:.1%}, McNemar p vs heuristic "
-                  f"{t['mcnemar_vs_heuristic']['p']:.3g}" + (f", vs A {vs:.3g}" if vs is not None else "")
-                  + f"; train {r['train_wall_s']:.0f} s, to 90% val {r['to_90_validation']}")  # fmt: skip
+                  f"{t['mcnemar_vs_heuristic']['p']:.3g}" + vs
+                  + (f"; train {r['train_wall_s']:.0f} s, to 90% val {r['to_90_validation']}"
+                     if r["seed"] is not None else " (saved policy, --reference)"))  # fmt: skip
     print(f"best by validation success: {best}; worlds.config.LEARNING_NAV is {report['learning_nav_is']}")
     Path(args.png).parent.mkdir(parents=True, exist_ok=True)
     plot(report, Path(args.png))

@@ -80,6 +80,16 @@ class NNQLConfig:
     """seeds network initialisation and replay sampling"""
     torch_threads: int = 1
     """torch intra-op threads, set process-wide by the learner (small MLPs are fastest on one)"""
+    recurrent: bool = False
+    """R2D2-style recurrent Q (agents/nnql/recurrent_learner.py): encoder, LSTM, Q head; sequence replay"""
+    lstm_size: int = 128
+    """LSTM hidden units (recurrent)"""
+    seq_len: int = 20
+    """steps of a replayed sequence that are trained on, after the burn-in (recurrent)"""
+    burn_in: int = 10
+    """steps at a sequence's start that only unroll the LSTM from the stored state, no loss (recurrent)"""
+    sequences: int = 32
+    """sequences per update (recurrent; batch_size counts transitions of the feed-forward Q only)"""
 
     def __post_init__(self) -> None:
         self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)
@@ -104,6 +114,13 @@ class NNQLConfig:
             raise ValueError("NNQLConfig: need 0 < target_tau <= 1 and target_period >= 1")
         if min(self.temperature_start, self.temperature_end) <= 0:
             raise ValueError("NNQLConfig: Boltzmann temperatures must be > 0")
+        for name in ("lstm_size", "seq_len", "sequences"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"NNQLConfig.{name}={getattr(self, name)}: expected >= 1")
+        if self.burn_in < 0:
+            raise ValueError(f"NNQLConfig.burn_in={self.burn_in}: expected >= 0")
+        if self.recurrent and (self.sarsa or self.prioritized):
+            raise ValueError("NNQLConfig.recurrent: uniform sequence replay; no sarsa/prioritized")
         if self.sarsa and self.double_q:
             raise ValueError("NNQLConfig: sarsa bootstraps on the taken action; set double_q=False")
 

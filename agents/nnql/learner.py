@@ -372,19 +372,7 @@ class NNQLLearner:
 
     def save_checkpoint(self, path: str | Path) -> Path:
         """A directory with learner.pt, replay/ and policy/, replaced atomically."""
-        path = Path(path)
-        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-        shutil.rmtree(tmp, ignore_errors=True)
-        tmp.mkdir(parents=True)
-        torch.save(self.state_dict(), tmp / CHECKPOINT_STATE)
-        self.save_replay(tmp / CHECKPOINT_REPLAY)
-        self.save_policy(tmp / CHECKPOINT_POLICY)
-        old = path.with_name(f".{path.name}.old{os.getpid()}")
-        if path.exists():
-            os.replace(path, old)
-        os.replace(tmp, path)
-        shutil.rmtree(old, ignore_errors=True)
-        return path
+        return write_checkpoint(self, path)
 
     def load_checkpoint(self, path: str | Path) -> None:
         path = Path(path)
@@ -403,3 +391,21 @@ class NNQLLearner:
         learner = cls(config, arch["obs_dim"], arch["n_actions"], device=device, replay_dir=replay_dir)
         learner.load_checkpoint(path)
         return learner
+
+
+def write_checkpoint(learner: Any, path: str | Path) -> Path:
+    """``learner``'s checkpoint directory (``state_dict`` as learner.pt, ``save_replay`` into replay/,
+    ``save_policy`` into policy/), written beside ``path`` and swapped in atomically."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    torch.save(learner.state_dict(), tmp / CHECKPOINT_STATE)
+    learner.save_replay(tmp / CHECKPOINT_REPLAY)
+    learner.save_policy(tmp / CHECKPOINT_POLICY)
+    old = path.with_name(f".{path.name}.old{os.getpid()}")
+    if path.exists():
+        os.replace(path, old)
+    os.replace(tmp, path)
+    shutil.rmtree(old, ignore_errors=True)
+    return path

@@ -63,6 +63,18 @@ def register(subparsers) -> None:
     parser.add_argument("--prioritized", action="store_true", help="prioritized replay (PrioritizedSampler)")
     parser.add_argument("--sarsa", action="store_true", help="SARSA: bootstrap on the next action taken")
     parser.add_argument(
+        "--recurrent",
+        action="store_true",
+        help="recurrent Q, R2D2-style: LSTM, sequence replay, burn-in, stored state (agents/nnql)",
+    )
+    for name in ("lstm_size", "seq_len", "burn_in", "sequences"):
+        parser.add_argument(
+            "--" + name.replace("_", "-"),
+            type=int,
+            default=getattr(defaults, name),
+            help=f"{name} (--recurrent)",
+        )
+    parser.add_argument(
         "--epsilon-greedy", action="store_true", help="epsilon-greedy exploration instead of Boltzmann"
     )
     parser.add_argument(
@@ -91,6 +103,11 @@ def run(args: argparse.Namespace) -> int:
             double_q=not args.sarsa,
             exploration="epsilon" if args.epsilon_greedy else "boltzmann",
             seed=args.seed,
+            recurrent=args.recurrent,
+            lstm_size=args.lstm_size,
+            seq_len=args.seq_len,
+            burn_in=args.burn_in,
+            sequences=args.sequences,
         )
         if args.steps < 1 or args.envs < 1:
             raise ValueError("--steps and --envs must be positive")
