@@ -26,9 +26,15 @@ grid        the occupancy grid, ``np.packbits`` of ``blocked`` (with
             ``grid_shape`` and ``cell_size``), so the task can be rebuilt
 =========== ==========================================================
 
-The dataset metadata carries ``navlearn_format`` (:data:`FORMAT_VERSION`);
-loading checks it, the spaces and every episode's arrays, and raises
-:class:`DemoFormatError` with one clear message for anything else.
+The dataset metadata carries ``navlearn_format`` (:data:`FORMAT_VERSION`) and, in its
+``navlearn`` JSON, ``observation``: the observation settings the robot recorded
+(``worlds.config.observation_settings``, like a saved policy's ``config.json``). With the
+own-map subgoal the observation depends on the trajectory, so a demonstration is recorded in the
+observation it is meant for, never converted. A dataset written before that record observes
+``worlds.config.LEGACY_OBSERVATION`` (8 beams + goal) when its width is that one's.
+Loading checks the format, the spaces and every episode's arrays (and
+``agents.demo_observation`` the observation against a learner's), and raises
+:class:`DemoFormatError` with one clear message naming the file for anything else.
 """
 
 from __future__ import annotations
@@ -45,7 +51,9 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from worlds.config import NavConfig, with_observation
 from worlds.maps import Cell, GridMap, Task
+from worlds.perception import observation_dim
 
 FORMAT_VERSION = 1
 SOURCES = ("astar", "human", "file")
@@ -160,7 +168,7 @@ def _check_demo(demo: Demo, where: str) -> None:
 
 
 @contextlib.contextmanager
-def _datasets_root(root: Path) -> Iterator[None]:
+def datasets_root(root: Path) -> Iterator[None]:
     """Point Minari's ``MINARI_DATASETS_PATH`` at ``root`` for the duration of a call."""
     old = os.environ.get("MINARI_DATASETS_PATH")
     os.environ["MINARI_DATASETS_PATH"] = str(root)
@@ -194,8 +202,10 @@ def write_demos(
     description: str = "",
     extra_metadata: dict | None = None,
     overwrite: bool = False,
+    observation: dict | None = None,
 ) -> Path:
-    """Write ``demos`` as the Minari dataset ``path`` (a directory); returns it."""
+    """Write ``demos`` as the Minari dataset ``path`` (a directory); returns it. ``observation``:
+    the settings the robot observed (``worlds.config.observation_settings(nav)``), recorded."""
     import minari
     from minari.data_collector import EpisodeBuffer
 
@@ -207,6 +217,12 @@ def write_demos(
         shutil.rmtree(target)
     if not demos:
         raise ValueError("no demonstrations to write")
+    extra = dict(extra_metadata or {})
+    if observation is not None:
+        width = observation_dim(with_observation(NavConfig(), observation))
+        if (width,) != observation_space.shape:
+            raise ValueError(f"observation settings {observation} give {width} values: {observation_space}")
+        extra["observation"] = dict(observation)
     buffers = []
     for i, demo in enumerate(demos):
         _check_demo(demo, f"demo {i}")
@@ -235,7 +251,7 @@ def write_demos(
             )
         )
     root.mkdir(parents=True, exist_ok=True)
-    with _datasets_root(root), warnings.catch_warnings():
+    with datasets_root(root), warnings.catch_warnings():
         # Minari warns about optional provenance fields (permalink, e-mail, env spec) we leave unset.
         warnings.simplefilter("ignore", UserWarning)
         dataset = minari.create_dataset_from_buffers(
@@ -248,7 +264,7 @@ def write_demos(
             description=description or "navlearn navigation demonstrations",
         )
         dataset.storage.update_metadata(
-            {"navlearn_format": FORMAT_VERSION, "navlearn": json.dumps(extra_metadata or {}, sort_keys=True)}
+            {"navlearn_format": FORMAT_VERSION, "navlearn": json.dumps(extra, sort_keys=True)}
         )
     return target
 
@@ -309,7 +325,8 @@ def _read_demo(episode, meta: dict, where: str, obs_dim: int) -> Demo:
 
 def load_demos(path: str | Path) -> list[Demo]:
     """Load and validate the demonstration dataset at ``path`` (a directory written by
-    :func:`write_demos` or ``navlearn demos generate``)."""
+    :func:`write_demos` or ``navlearn demos generate``); ``agents.demo_observation.load_demos_for``
+    also checks its observation against a learner's."""
     import minari
 
     root, dataset_id = dataset_location(path)
@@ -319,7 +336,7 @@ def load_demos(path: str | Path) -> list[Demo]:
     if not (target / "data").is_dir():
         raise DemoFormatError(f"{target}: not a Minari dataset (no data/ directory)")
     try:
-        with _datasets_root(root):
+        with datasets_root(root):
             dataset = minari.load_dataset(dataset_id)
         metadata = dataset.storage.metadata
         version = metadata.get("navlearn_format")
@@ -354,7 +371,7 @@ def dataset_info(path: str | Path) -> dict:
     import minari
 
     root, dataset_id = dataset_location(path)
-    with _datasets_root(root):
+    with datasets_root(root):
         metadata = dict(minari.load_dataset(dataset_id).storage.metadata)
     metadata["navlearn"] = json.loads(metadata.get("navlearn", "{}"))
     return metadata

@@ -53,15 +53,19 @@ def mlp_forward(layers: Layers, activation: str, obs: np.ndarray) -> np.ndarray:
     for i, (weight, bias) in enumerate(layers):
         x = x @ weight + bias
         if i < len(layers) - 1:
-            if activation == "relu":
-                np.maximum(x, 0.0, out=x)
-            elif activation == "tanh":
-                np.tanh(x, out=x)
-            elif activation == "elu":
-                x = np.where(x > 0, x, np.expm1(np.minimum(x, 0.0)))
-            else:
-                raise ValueError(f"unknown activation {activation!r}")
+            x = activate(x, activation)
     return x
+
+
+def activate(x: np.ndarray, activation: str) -> np.ndarray:
+    """The hidden activation applied to ``x`` (in place where numpy allows)."""
+    if activation == "relu":
+        return np.maximum(x, 0.0, out=x)
+    if activation == "tanh":
+        return np.tanh(x, out=x)
+    if activation == "elu":
+        return np.where(x > 0, x, np.expm1(np.minimum(x, 0.0)))
+    raise ValueError(f"unknown activation {activation!r}")
 
 
 def save_policy(

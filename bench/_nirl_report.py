@@ -7,6 +7,7 @@ defined here, where the table reads them, and imported by ``bench/nirl.py``."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from agents.evaluation.metrics import wilson_interval as wilson
 
 FAMILIES = ("unseen", "dynamic")
 SETS = ("5", "10", "20", "20noisy")
-METHODS = ("bc", "sqil", "dqfd", "nirl", "maxmargin", "nnql")
+METHODS = ("bc", "sqil", "dqfd", "nirl", "maxmargin", "nnql", "expert")
 
 
 def mcnemar(a: list[int], b: list[int]) -> tuple[int, int, float]:
@@ -30,17 +31,34 @@ def first_reaching(curve, target: float):
     return next((steps for steps, success in curve if success >= target - 1e-9), None)
 
 
+def median_steps(steps: list) -> float | None:
+    """Median over seeds of the robot-steps to a success level; a seed that never got there counts
+    as more than any other (None when the median itself is such a seed, or there are none)."""
+    if not steps:
+        return None
+    ordered = sorted(steps, key=lambda s: math.inf if s is None else s)
+    mid = len(ordered) // 2
+    pick = ordered[mid] if len(ordered) % 2 else (ordered[mid - 1], ordered[mid])
+    if isinstance(pick, tuple):
+        return None if None in pick else float(sum(pick) / 2)
+    return None if pick is None else float(pick)
+
+
 def report(path: Path) -> int:
     rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     latest = {(r["method"], r["set"], r["seed"]): r for r in rows}  # a re-run replaces its line
     rows = list(latest.values())
     table, summary = [], {"bench": "nirl", "cells": {}}
+    navs = sorted({r.get("nav", "default") for r in rows if r["method"] != "gridcheck"})
+    summary["nav"] = navs
+    print(f"observation: {', '.join(navs)} (rows without a record: the first table's, NavConfig())")
     print("| learner | demos | seeds | unseen success (pooled) [95% CI] | per seed "
           "| dynamic success [95% CI] |"
           " collisions (unseen) |")  # fmt: skip
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for method in METHODS:
-        for set_name in (*SETS, "-"):
+        larger = sorted({r["set"] for r in rows if r["set"].isdigit() and r["set"] not in SETS}, key=int)
+        for set_name in (*SETS, *larger, "-"):
             cell = [r for r in rows if r["method"] == method and r["set"] == set_name]
             if not cell:
                 continue
@@ -99,12 +117,16 @@ def report(path: Path) -> int:
     curves = {m: [r["curve"] for r in rows if r["method"] == m and "curve" in r] for m in ("nirl", "nnql")}
     summary["curves"] = curves
     learning = {}
-    for target in (0.9, 0.6, 0.5):
+    for target in (0.9, 0.8, 0.6, 0.5):
         nirl_steps = [first_reaching(c, target) for c in curves["nirl"]]
         nnql_steps = [first_reaching(c, target) for c in curves["nnql"]]
-        learning[str(target)] = {"nirl": nirl_steps, "nnql": nnql_steps}
+        medians = {"nirl": median_steps(nirl_steps), "nnql": median_steps(nnql_steps)}
+        ratio = medians["nirl"] / medians["nnql"] if None not in medians.values() else None
+        learning[str(target)] = {"nirl": nirl_steps, "nnql": nnql_steps, "median": medians, "ratio": ratio}
+        shown = "undefined" if ratio is None else f"{ratio:.2f}"
         print(
-            f"robot-steps to {target:.0%} validation success: NIRL (20 demos) {nirl_steps}, NNQL {nnql_steps}"
+            f"robot-steps to {target:.0%} validation success: NIRL (20 demos) {nirl_steps}, "
+            f"NNQL {nnql_steps}; medians {medians['nirl']} / {medians['nnql']}, ratio {shown}"
         )
     summary["steps_to_validation_success"] = learning
     grid = [r for r in rows if r["method"] == "gridcheck"]
@@ -126,6 +148,7 @@ def report(path: Path) -> int:
         "nirl_minus_bc_noisy_unseen_ge_0.10": None if not noisy else noisy["nirl"] - noisy["bc"],
         "mcnemar_p_noisy_unseen_lt_0.01": noisy.get("p"),
         "gridworld_agreement_ge_0.95": [g["agreement"] for g in grid],
+        "steps_to_0.9_ratio_le_0.33": learning["0.9"]["ratio"],
     }
     print(json.dumps(summary))
     return 0

@@ -24,9 +24,16 @@ cloning on the same episodes. Learning time: NIRL (20 clean demos) and NNQL from
 validated on 50 validation-seed episodes along the way; robot-steps to a fixed validation success.
 The grid-world check (``agents.nirl.gridcheck``) measures reward recovery where the true reward is known.
 
-Runs append one JSON line each to ``--runs`` (so the grid can be run in pieces, in the background);
-``--report`` reads them and prints the table (``bench/_nirl_report.py``), then one JSON object on the
-last line.
+Observation (``--nav``): ``learning`` (the default, ``worlds.config.LEARNING_NAV``: 24 sector minima,
+the goal, the subgoal from the robot's own map, geodesic progress reward for the learners that use the
+environment's reward) or ``default`` (``NavConfig()``: 8 beams + goal, the first table's). The expert
+acts on the true map either way; its demonstrations are recorded in the chosen observation, and its
+own success on the same test episodes is measured beside (``--methods expert``).
+
+Runs append one JSON line each to ``--runs`` (default ``bench/nirl_runs_learning.jsonl`` for
+``--nav learning``, ``bench/nirl_runs.jsonl``, the first table's, for ``--nav default``; so the grid
+can be run in pieces, in the background); each line records its observation. ``--report`` reads them
+and prints the table (``bench/_nirl_report.py``), then one JSON object on the last line.
 
     python -m bench.nirl --methods nirl,bc --sets 20,20noisy --seeds 0,1,2    # a piece
     python -m bench.nirl --report                                             # the table
@@ -46,6 +53,7 @@ import numpy as np
 import torch
 
 from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation.metrics import wilson_interval
 from agents.imitation.config import ImitationConfig
 from agents.imitation.train import train_policy
 from agents.nirl.buffers import demo_buffer, sample
@@ -56,12 +64,16 @@ from agents.nirl.max_margin import Q_KEYS
 from agents.nirl.train_local import train_nirl
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
+from agents.nnql.ratelimit import RateLimiter
 from agents.nnql.rollout import VectorRollout
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.planning.demonstrate import generate_demos
 from bench._common import machine_load
 from bench._nirl_report import FAMILIES, METHODS, SETS, report
-from worlds.config import NavConfig
+from bench.planning import expert_outcomes
+from worlds.config import LEARNING_NAV, NavConfig, observation_settings
+from worlds.outcomes import Outcome
+from worlds.perception import observation_dim
 
 ISSUE8 = {
     "core": "max_margin", "gamma": 0.95, "target_tau": 0.005, "prior_temperature": 0.1,
@@ -70,15 +82,25 @@ ISSUE8 = {
 }  # fmt: skip
 """NIRLConfig of the max-margin learner as issue 8 measured it (its defaults then)"""
 VALIDATION_SEED = 1
+NAVS = {"learning": LEARNING_NAV, "default": NavConfig()}
+RUNS = {"learning": "bench/nirl_runs_learning.jsonl", "default": "bench/nirl_runs.jsonl"}
 
 
-def demo_sets(seed: int, noise: float, nav: NavConfig) -> tuple[dict[str, list], list[np.ndarray]]:
+def demo_sets(
+    seed: int, noise: float, nav: NavConfig, larger: int = 0
+) -> tuple[dict[str, list], list[np.ndarray]]:
+    """The clean (first 5, 10, 20 episodes) and noisy sets of ``seed``; with ``larger`` > 20 also the
+    clean set continued to that many episodes (set ``str(larger)``; failures dropped as always)."""
     clean, _ = generate_demos("mixed:16", 20, seed=10_000 + seed, config=nav)
     noisy, _ = generate_demos("mixed:16", 20, seed=20_000 + seed, noise=noise, config=nav)
     expert_labels = [d.labels.copy() for d in noisy]
     for demo in noisy:  # the learners see the recorded actions only
         demo.expert_actions = None
-    return {"5": clean[:5], "10": clean[:10], "20": clean, "20noisy": noisy}, expert_labels
+    sets = {"5": clean[:5], "10": clean[:10], "20": clean, "20noisy": noisy}
+    if larger > 20:  # episodes 20 .. larger - 1 of the same sequence (episode i resets with seed + i)
+        more, _ = generate_demos("mixed:16", larger - 20, seed=10_000 + seed + 20, config=nav)
+        sets[str(larger)] = clean + more
+    return sets, expert_labels
 
 
 def outcomes_of(result, family: str) -> list[int]:
@@ -99,6 +121,19 @@ def figures(result) -> dict:
     return out
 
 
+def expert_figures(sets, nav: NavConfig) -> dict:
+    """The expert's own success on the same test episodes (it plans on the true map)."""
+    out = {}
+    for es in sets:
+        outcomes = expert_outcomes(es, nav)
+        solved = [int(o == Outcome.GOAL) for o in outcomes]
+        low, high = wilson_interval(sum(solved), len(solved))
+        static = float(np.mean([o == Outcome.COLLISION_STATIC for o in outcomes]))
+        out[es.family] = {"success": float(np.mean(solved)), "success_ci": [low, high], "solved": solved,
+                          "collision_static": static}  # fmt: skip
+    return out
+
+
 def validation_success(policy, episodes: int, nav) -> float:
     report = evaluate(policy, make_eval_set("unseen", episodes, seed=VALIDATION_SEED), nav)
     return report.metrics["unseen"].success.value
@@ -109,8 +144,8 @@ def train_dqfd(demos, seed: int, env_steps: int, nav: NavConfig, margin: float =
     from worlds.vector_env import NavigationVectorEnv
 
     cfg = NNQLConfig(seed=seed, learning_starts=256)
-    obs_dim, n_actions = nav.sensors.n_beams + 3, nav.robot.n_actions
-    q = NNQLLearner(cfg, obs_dim, n_actions)
+    obs_dim, n_actions = observation_dim(nav), nav.robot.n_actions
+    q = NNQLLearner(cfg, obs_dim, n_actions, observation=observation_settings(nav))
     store = demo_buffer(50_000, seed + 1)
     for d in demos:
         store.extend(
@@ -144,12 +179,14 @@ def train_dqfd(demos, seed: int, env_steps: int, nav: NavConfig, margin: float =
     policy.explore_as(cfg, q.version)
     rollout = VectorRollout(env, policy)
     rollout.reset(seed=seed)
+    limiter = RateLimiter(cfg.utd_ratio, max(cfg.learning_starts, cfg.batch_size), tolerance=1.0)
     while rollout.steps < env_steps:
         batch, _ = rollout.step()
-        q.add(batch)
-        for _ in range(q.updates_due()):
+        limiter.inserted(q.add(batch))
+        due = limiter.updates_allowed(len(q.replay))
+        for _ in range(due):
             update(pretrain=False)
-            q.update_credit = max(q.update_credit - 1.0, 0.0)
+        limiter.updated(due)
         policy.set_weights(q.get_weights(), q.version)
         policy.explore_as(cfg, q.version)
     env.close()
@@ -165,7 +202,9 @@ def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, s
     budget = args.iterations * args.steps_per_iteration
     if method == "bc":
         config = ImitationConfig(seed=seed, batch_size=32, patience=30, max_epochs=400, val_fraction=0.25)
-        trained = train_policy(demos, config, n_actions=nav.robot.n_actions)
+        trained = train_policy(
+            demos, config, n_actions=nav.robot.n_actions, observation=observation_settings(nav)
+        )
         policy, row["env_steps"] = trained.policy(), 0
         row["bc_epochs"], row["bc_best_epoch"] = len(trained.history), trained.best_epoch
         row["bc_steps_per_epoch"] = math.ceil(trained.train_steps / config.batch_size)
@@ -200,7 +239,8 @@ def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, s
         result = train_local(
             LocalTrainConfig(steps=args.nnql_steps, eval_every=args.nnql_eval_every,
                              eval_episodes=args.val_episodes,
-                             keep_best=False, final_eval_episodes=0, out="", seed=seed, progress=False)
+                             keep_best=False, final_eval_episodes=0, out="", seed=seed, progress=False),
+            nav=nav,
         )  # fmt: skip
         policy, row["env_steps"] = result.learner.policy(), result.env_steps
         row["curve"] = [(p["env_steps"], p["eval_success"]) for p in result.curve if "eval_success" in p]
@@ -230,7 +270,8 @@ def code_version() -> str:
     root = Path(__file__).resolve().parents[1]
     git = ["git", "-C", str(root)]
     commit = subprocess.run([*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout
-    tracked = [*git, "status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/nirl_runs.jsonl"]
+    runs = [f":!{path}" for path in RUNS.values()]
+    tracked = [*git, "status", "--porcelain", "--untracked-files=no", "--", ".", *runs]
     dirty = subprocess.run(tracked, capture_output=True)
     return commit.strip() + ("+dirty" if dirty.stdout.strip() else "")
 
@@ -240,7 +281,11 @@ def main() -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--methods", default=",".join(METHODS), help="comma list of " + ", ".join(METHODS))
-    parser.add_argument("--sets", default=",".join(SETS), help="comma list of demo sets: " + ", ".join(SETS))
+    parser.add_argument(
+        "--sets",
+        default=",".join(SETS),
+        help="comma list of demo sets: " + ", ".join(SETS) + " or one larger clean set N > 20 (e.g. 500)",
+    )
     parser.add_argument("--seeds", default="0,1,2", help="comma list of seeds")
     parser.add_argument("--episodes", type=int, default=500, help="test episodes per family")
     parser.add_argument("--iterations", type=int, default=10, help="NIRL/SQIL rounds (and DQfD's env budget)")
@@ -254,20 +299,26 @@ def main() -> int:
     parser.add_argument("--val-episodes", type=int, default=50, help="validation episodes of the curves")
     parser.add_argument("--noise", type=float, default=0.3, help="random-action probability of the noisy set")
     parser.add_argument("--gridcheck", action="store_true", help="also run the grid-world reward recovery")
-    parser.add_argument("--runs", default="bench/nirl_runs.jsonl", help="JSON lines file runs append to")
+    parser.add_argument(
+        "--nav", choices=list(NAVS), default="learning", help="observation: LEARNING_NAV or NavConfig()"
+    )
+    parser.add_argument("--runs", default=None, help="JSON lines file runs append to (default by --nav)")
     parser.add_argument("--report", action="store_true", help="print the table of --runs and stop")
     args = parser.parse_args()
-    runs = Path(args.runs)
+    runs = Path(args.runs or RUNS[args.nav])
     if args.report:
         return report(runs)
-    nav = NavConfig()
-    code = {"commit": code_version(), "argv": sys.argv[1:]}  # which code and settings made each line
+    nav = NAVS[args.nav]
+    # which code, settings and observation made each line
+    code = {"commit": code_version(), "argv": sys.argv[1:], "nav": args.nav,
+            "observation": observation_settings(nav)}  # fmt: skip
     sets = [make_eval_set(f, args.episodes, seed=0) for f in FAMILIES]
     methods = [m for m in args.methods.split(",") if m]
     unknown = sorted(set(methods) - set(METHODS))
     if unknown:
         parser.error(f"unknown methods {unknown}")
-    for seed in (int(s) for s in args.seeds.split(",")):
+    seeds = [int(s) for s in args.seeds.split(",")]
+    for seed in seeds:
         if args.gridcheck:
             from agents.nirl.gridcheck import check_reward_recovery
 
@@ -276,8 +327,20 @@ def main() -> int:
             with open(runs, "a") as fh:
                 fh.write(json.dumps(row) + "\n")
             print(json.dumps(row), flush=True)
-        demos, expert_labels = demo_sets(seed, args.noise, nav)
-        for method in methods:
+        if "expert" in methods and seed == seeds[0]:  # deterministic on the same episodes: once
+            t0 = time.perf_counter()
+            row = {"method": "expert", "set": "-", "seed": seed, "episodes": args.episodes,
+                   "test": expert_figures(sets, nav), "env_steps": 0} | code  # fmt: skip
+            row |= {"seconds": round(time.perf_counter() - t0, 1), "load": machine_load()}
+            with open(runs, "a") as fh:
+                fh.write(json.dumps(row) + "\n")
+            short = {f: round(row["test"][f]["success"], 3) for f in FAMILIES}
+            print(f"expert: {short}", flush=True)
+        learners = [m for m in methods if m != "expert"]
+        needs_demos = any(m != "nnql" for m in learners)
+        larger = max([int(s) for s in args.sets.split(",") if s.isdigit()] + [0])
+        demos, expert_labels = demo_sets(seed, args.noise, nav, larger) if needs_demos else ({}, [])
+        for method in learners:
             for set_name in ["-"] if method == "nnql" else [s for s in args.sets.split(",") if s]:
                 row = run_one(method, set_name, seed, None if method == "nnql" else demos[set_name],
                               expert_labels, args, sets, nav) | code | {"load": machine_load()}  # fmt: skip

@@ -10,18 +10,24 @@ robot-steps, several seeds, one observation per variant:
     E  D + C
     E+geo  E trained with the geodesic progress reward in place of the straight-line one
     B+geo, D+geo  B and D with that reward (which part of E+geo helps: the reward, the subgoal?)
+    F  B + a 16x16 egocentric patch of the robot's own map (occupancy, visits) read by a small CNN
+       beside the MLP (agents.nnql.patch_network; no subgoal: learning alone)
+    F+geo  F with the geodesic progress reward
+    G, G+geo  B (and B+geo) with the recurrent Q (R2D2-style: LSTM, sequence replay with burn-in and
+          stored state; agents/nnql/recurrent_learner.py, options RECURRENT below): memory, no planner
 
 Each run keeps its best weights on the validation set (seed 1, periodic evaluations of
 ``--val-episodes``), then is evaluated on the validation set (seed 1) and on the test sets
 (seed 0: unseen static maps and the same with 4 moving discs), ``--episodes`` each. The
 hand-written goal-seeking heuristic runs on the same episodes. Reported per variant: success
-[Wilson 95%] per seed and pooled, McNemar's exact test (paired, same episodes) against A and
-against the heuristic for each seed, per map family (rects, discs, rooms), collisions
+[Wilson 95%] per seed and pooled, McNemar's exact test (paired, same episodes) against A, D+geo
+(the default) and the heuristic for each seed, per map family (rects, discs, rooms), collisions
 (static/dynamic), timeouts, SPL, path ratio to A*, robot-steps and wall time to reach 90%
 validation success during training. The best variant by mean validation success is named.
 
 Each (variant, seed) run writes ``OUT/<variant>-s<seed>/result.json`` and is skipped when that
-file exists, so the runs can be split across processes and the report re-made from them:
+file exists, so the runs can be split across processes and the report re-made from them; a run
+directory whose training finished (summary.json) with the same settings is evaluated, not retrained:
 
     python bench/perception.py --steps 200000 --seeds 0 1 2            # human lines, JSON last
     python bench/perception.py --variants A B --seeds 0 --steps 20000   # a smoke run
@@ -43,8 +49,11 @@ from scipy.stats import binomtest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.evaluation.metrics import wilson_interval
+from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
+from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
+from agents.nnql.recurrent_policy import RecurrentNNQLPolicy
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from worlds.config import (
     LEARNING_NAV,
@@ -53,6 +62,7 @@ from worlds.config import (
     ObservationConfig,
     RewardConfig,
     SensorConfig,
+    observation_settings,
     with_observation,
 )
 from worlds.heuristics import goal_seeking_policy
@@ -76,6 +86,18 @@ VARIANTS: dict[str, NavConfig] = {
 GEODESIC = RewardConfig(progress=0.0, geodesic_progress=0.1)
 VARIANTS["B+geo"] = NavConfig(sensors=SECTORS, rewards=GEODESIC)
 VARIANTS["D+geo"] = replace(VARIANTS["D"], rewards=GEODESIC)
+PATCH = 16
+"""side of variant F's own-map patch (cells of 1 m: 8 m each way, half a 16x16 training map)"""
+VARIANTS["F"] = NavConfig(sensors=SECTORS, observation=ObservationConfig(patch_size=PATCH))
+VARIANTS["F+geo"] = replace(VARIANTS["F"], rewards=GEODESIC)
+VARIANTS["G"] = VARIANTS["B"]
+VARIANTS["G+geo"] = VARIANTS["B+geo"]
+RECURRENT = {"recurrent": True, "utd_ratio": 0.04}
+"""NNQLConfig of the recurrent variants (the rest default: LSTM 128, 10 burn-in + 20 trained steps,
+32 sequences per update); utd 0.04 replays each transition about as often as the default MLP's 1/16"""
+NNQL_OPTIONS: dict[str, dict] = {"G": RECURRENT, "G+geo": RECURRENT}
+PAIRED_WITH = ("A", "D+geo")
+"""each run is compared (McNemar, same seed, same episodes) with the runs of these variants when present"""
 SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dynamic", 0))
 
 
@@ -136,22 +158,44 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
         steps=args.steps, envs=16, seed=seed, out=str(out), eval_every=args.steps // 4,
         eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False,
     )  # fmt: skip
-    start = time.perf_counter()
-    trained = train_local(run, nav=nav)
-    wall = time.perf_counter() - start
-    policy = NNQLPolicy.load(out).greedy()
+    nnql = NNQLConfig(seed=seed, **NNQL_OPTIONS.get(variant, {}))
+    trained = finished(out, run, nav)
+    if trained is None:
+        start = time.perf_counter()
+        result = train_local(run, nnql, nav=nav)
+        trained = {"env_steps": result.env_steps, "wall": time.perf_counter() - start,
+                   "selected_version": result.selected_version, "curve": result.curve}  # fmt: skip
+    policy = (RecurrentNNQLPolicy if nnql.recurrent else NNQLPolicy).load(out).greedy()
     results = evaluate_sets(policy, nav, sets)
     record = {
         "variant": variant,
         "seed": seed,
-        "train_robot_steps": trained.env_steps,
-        "train_wall_s": round(wall, 1),
-        "selected_version": trained.selected_version,
-        "to_90_validation": to_90(trained.curve),
+        "train_robot_steps": trained["env_steps"],
+        "train_wall_s": round(trained["wall"], 1),
+        "selected_version": trained["selected_version"],
+        "to_90_validation": to_90(trained["curve"]),
         **scored(results, sets),
     }
     cached.write_text(json.dumps(record) + "\n")
     return record
+
+
+def finished(out: Path, run: LocalTrainConfig, nav: NavConfig) -> dict | None:
+    """The training record of a run directory whose training finished with these settings (its
+    evaluation was cut, or it was trained by ``train_local`` elsewhere, e.g. bench/sb3_compare.py's
+    NNQL run): summary.json, curve.jsonl and the policy's observation; None if there is none.
+    Its wall time is ``train_local``'s own (without building the env)."""
+    if not (out / "summary.json").is_file():
+        return None
+    summary = json.loads((out / "summary.json").read_text())
+    same = {k: summary["run"][k] for k in ("steps", "envs", "seed", "eval_every", "eval_episodes", "maps")}
+    want = {"steps": run.steps, "envs": run.envs, "seed": run.seed, "eval_every": run.eval_every,
+            "eval_episodes": run.eval_episodes, "maps": run.maps}  # fmt: skip
+    if same != want or NNQLPolicy.load(out).observation != observation_settings(nav):
+        raise ValueError(f"{out} holds a run with other settings ({same}), not {want} in this variant")
+    curve = [json.loads(line) for line in (out / "curve.jsonl").read_text().splitlines() if line.strip()]
+    return {"env_steps": summary["env_steps"], "wall": summary["wall_time"],
+            "selected_version": summary["selected_version"], "curve": curve}  # fmt: skip
 
 
 def heuristic(sets: dict, out: Path) -> dict:
@@ -164,6 +208,23 @@ def heuristic(sets: dict, out: Path) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     cached.write_text(json.dumps(record) + "\n")
     return record
+
+
+def reference(spec: str, sets: dict, out: Path) -> tuple[str, dict]:
+    """``VARIANT=DIR``: a saved policy (e.g. pretrained/nnql for D+geo) evaluated on the same episodes,
+    a run of VARIANT with seed None (compared with every seed's run); cached in OUT/ref-VARIANT.json."""
+    variant, _, path = spec.partition("=")
+    cached = out / f"ref-{variant}.json"
+    if cached.is_file():
+        return variant, json.loads(cached.read_text())
+    policy = load_policy(path)
+    config = json.loads((Path(path) / "config.json").read_text())
+    results = evaluate_sets(policy, policy.nav_config(), sets)
+    record = {"variant": variant, "seed": None, "reference": str(path), "train_wall_s": None,
+              "train_robot_steps": config.get("env_steps"), "to_90_validation": None}  # fmt: skip
+    record.update(scored(results, sets))
+    cached.write_text(json.dumps(record) + "\n")
+    return variant, record
 
 
 def pooled(records: list[dict], name: str) -> dict:
@@ -225,6 +286,10 @@ def main() -> None:
     parser.add_argument("--out", default="runs/perception", help="run directories and result files")
     parser.add_argument("--png", default="bench/plots/perception.png")
     parser.add_argument(
+        "--reference", nargs="*", default=[], metavar="VARIANT=DIR",
+        help="saved policies evaluated on the same episodes as runs of VARIANT (e.g. D+geo=pretrained/nnql)",
+    )  # fmt: skip
+    parser.add_argument(
         "--cached-only", action="store_true", help="report the runs already in --out, train nothing"
     )
     args = parser.parse_args()
@@ -238,6 +303,9 @@ def main() -> None:
         runs = {v: [run_one(v, s, args, sets) for s in seeds] for v, seeds in done.items() if seeds}
     else:
         runs = {v: [run_one(v, s, args, sets) for s in args.seeds] for v in args.variants}
+    for spec in args.reference:
+        variant, record = reference(spec, sets, Path(args.out))
+        runs.setdefault(variant, []).append(record)
     report: dict = {"steps": args.steps, "seeds": args.seeds, "episodes": args.episodes, "variants": {}}
     report["heuristic"] = base["sets"]
     for v, records in runs.items():
@@ -250,10 +318,10 @@ def main() -> None:
                 r["sets"][name]["mcnemar_vs_heuristic"] = mcnemar(
                     np.array(r["episodes"][name]), np.array(base["episodes"][name])
                 )
-                if "A" in runs and v != "A":
-                    a = next((x for x in runs["A"] if x["seed"] == r["seed"]), None)
-                    if a is not None:
-                        r["sets"][name]["mcnemar_vs_A"] = mcnemar(
+                for other in PAIRED_WITH:
+                    a = next((x for x in runs.get(other, []) if x["seed"] in (r["seed"], None)), None)
+                    if a is not None and other != v:
+                        r["sets"][name][f"mcnemar_vs_{other}"] = mcnemar(
                             np.array(r["episodes"][name]), np.array(a["episodes"][name])
                         )
         entry["runs"] = [
@@ -282,11 +350,13 @@ def main() -> None:
     for v, e in report["variants"].items():
         for r in e["runs"]:
             t = r["sets"]["test"]
-            vs = t.get("mcnemar_vs_A", {}).get("p")
+            vs = "".join(f", vs {o} {t[f'mcnemar_vs_{o}']['p']:.3g}" for o in PAIRED_WITH
+                         if f"mcnemar_vs_{o}" in t)  # fmt: skip
             print(f"  {v} seed {r['seed']}: test {t['success']:.1%}, SPL {t['spl']:.2f}, collisions "
                   f"{t['collision_static']:.1%}, timeouts {t['timeout']:.1%}, McNemar p vs heuristic "
-                  f"{t['mcnemar_vs_heuristic']['p']:.3g}" + (f", vs A {vs:.3g}" if vs is not None else "")
-                  + f"; train {r['train_wall_s']:.0f} s, to 90% val {r['to_90_validation']}")  # fmt: skip
+                  f"{t['mcnemar_vs_heuristic']['p']:.3g}" + vs
+                  + (f"; train {r['train_wall_s']:.0f} s, to 90% val {r['to_90_validation']}"
+                     if r["seed"] is not None else " (saved policy, --reference)"))  # fmt: skip
     print(f"best by validation success: {best}; worlds.config.LEARNING_NAV is {report['learning_nav_is']}")
     Path(args.png).parent.mkdir(parents=True, exist_ok=True)
     plot(report, Path(args.png))

@@ -84,12 +84,13 @@ def compare_astar(grid: GridMap, pairs: list[tuple], label: str) -> dict:
             "max_length_diff": worst}  # fmt: skip
 
 
-def expert_success(eval_set: EvalSet, config: NavConfig) -> float:
-    """The expert's success on exactly the episodes of ``eval_set`` (same tasks, seeds, discs)."""
+def expert_outcomes(eval_set: EvalSet, config: NavConfig) -> list[int]:
+    """The expert's outcome (worlds.outcomes.Outcome) on each episode of ``eval_set`` (same tasks,
+    seeds, discs), in the world ``config`` (its observation is what the expert reads its beams from)."""
     config = replace(config, obstacles=eval_set.obstacles)
     env = NavigationEnv(config, maps=fixed_sampler(eval_set.tasks, f"bench:{eval_set.family}"))
     expert = Expert(config)
-    wins = 0
+    outcomes = []
     for task, seed in zip(eval_set.tasks, eval_set.seeds, strict=True):
         obs, info = env.reset(seed=seed, options={"task": task})
         expert.reset(task, info["pose"])
@@ -97,8 +98,13 @@ def expert_success(eval_set: EvalSet, config: NavConfig) -> float:
         while not done:
             obs, _, terminated, truncated, info = env.step(expert.act(info["pose"], obs))
             done = terminated or truncated
-        wins += info["outcome"] == Outcome.GOAL
-    return wins / len(eval_set)
+        outcomes.append(int(info["outcome"]))
+    return outcomes
+
+
+def expert_success(eval_set: EvalSet, config: NavConfig) -> float:
+    """The expert's success on exactly the episodes of ``eval_set`` (same tasks, seeds, discs)."""
+    return float(np.mean([o == Outcome.GOAL for o in expert_outcomes(eval_set, config)]))
 
 
 def main() -> None:

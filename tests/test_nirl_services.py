@@ -59,14 +59,15 @@ def test_demonstrators_learner_actor_evaluator_train_and_compare_nirl(tmp_path):
     from agents.imitation.config import ImitationConfig
     from agents.imitation.train import save_trained, train_policy
     from agents.planning.demonstrate import generate_demos
-    from worlds.config import LEARNING_NAV, NavConfig
+    from worlds.config import LEARNING_NAV, NavConfig, observation_settings
     from worlds.env import observation_space
 
     # the file demonstrator sends what the learner takes (LEARNING_NAV); the imitation reference
     # is a policy of the plain observation, which its config.json leaves unrecorded (legacy)
     learning, _ = generate_demos("rooms:10", 4, seed=3, config=LEARNING_NAV)
     dataset = tmp_path / "demos" / "expert-v0"
-    write_demos(dataset, learning, observation_space(LEARNING_NAV), spaces.Discrete(5))
+    write_demos(dataset, learning, observation_space(LEARNING_NAV), spaces.Discrete(5),
+                observation=observation_settings(LEARNING_NAV))  # fmt: skip
     demos, _ = generate_demos("rooms:10", 4, seed=3, config=NavConfig())
     imitation = tmp_path / "imitation"
     result = train_policy(demos, ImitationConfig(hidden_sizes=(16,), max_epochs=3), n_actions=5)

@@ -276,17 +276,23 @@ def check_observation(saved: dict, config: NavConfig, what: str = "the policy") 
     unknown = sorted(set(saved) - set(OBSERVATION_FIELDS))
     if unknown:
         raise ValueError(f"{what} records unknown observation settings {unknown}; known {OBSERVATION_FIELDS}")
-    given = observation_settings(config)
-    wrong = [
-        f"{name}={saved[name]!r} (the env has {given[name]!r})"
-        for name in OBSERVATION_FIELDS
-        if name in saved and not _same(saved[name], given[name])
-    ]
+    wrong = observation_differences(saved, config)
     if wrong:
         raise ValueError(
             f"{what} was trained to observe " + ", ".join(wrong) + ": evaluate it in an env with its "
             "settings (worlds.config.with_observation) or retrain it"
         )
+
+
+def observation_differences(saved: dict, config: NavConfig, other: str = "the env") -> list[str]:
+    """``"field=saved (the env has value)"`` for every field where ``config``'s observation differs
+    from ``saved`` (fields ``saved`` lacks are not compared); ``other`` names ``config``'s side."""
+    given = observation_settings(config)
+    return [
+        f"{name}={saved[name]!r} ({other} has {given[name]!r})"
+        for name in OBSERVATION_FIELDS
+        if name in saved and not _same(saved[name], given[name])
+    ]
 
 
 def with_observation(config: NavConfig, saved: dict) -> NavConfig:

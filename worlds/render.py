@@ -144,3 +144,17 @@ def render_rgb(batch: NavBatch, i: int, trajectory=None) -> np.ndarray:
     image = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
     plt.close(fig)
     return image
+
+
+def draw_patch(fig: Figure, values: np.ndarray, size: int) -> None:
+    """Add the egocentric patch of the robot's own map (the observation's ``2 * size**2`` patch
+    values, :mod:`worlds.perception`) to the right of ``fig``: occupancy (black seen blocked, grey
+    unknown, white seen free) and visits, heading up, the robot at the centre."""
+    # (u back to front, v right to left, channel) -> rows front to back, columns left to right
+    patch = np.asarray(values, dtype=float).reshape(size, size, 2)[::-1, ::-1]
+    titles = ("own map: occupancy", "own map: visits")
+    for k, (title, cmap) in enumerate(zip(titles, ("Greys", "Blues"), strict=True)):
+        ax = fig.add_axes((1.02 + 0.42 * k, 0.3, 0.38, 0.38))
+        ax.imshow(patch[:, :, k], cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
+        ax.plot([(size - 1) / 2], [(size - 1) / 2], marker="^", color="tab:purple", ms=7)
+        ax.set(title=title, xticks=[], yticks=[])

@@ -4,16 +4,22 @@ A policy directory holds two files (written atomically, temp + rename):
 
 * ``model.safetensors`` - the weights of an MLP in ``nn.Sequential`` layout (TorchRL's
   ``MLP``): ``"0.weight"``, ``"0.bias"``, ``"2.weight"``, ... one linear layer at every
-  even index, the activation between them; float32.
+  even index, the activation between them; float32. An NNQL Q-network with a CNN over the
+  own-map patch (architecture entry ``patch``, :mod:`agents.nnql.patch_network`) names its
+  tensors ``"cnn.*"`` and ``"head.*"`` and is run by that torch module (:mod:`agents.forward`).
 * ``config.json`` - ``{"model": name, "kind": kind, "version": int, "architecture":
   {"obs_dim", "n_actions", "hidden_sizes", "activation"}, "observation": {...}, ...}`` plus any
   metadata. ``observation`` holds the settings that fix what the policy observes
   (:data:`worlds.config.OBSERVATION_FIELDS`); a policy saved without it observes
   :data:`worlds.config.LEGACY_OBSERVATION` (8 beams and the goal, one frame).
 
+An NNQL policy whose ``architecture`` also has ``lstm_size`` is recurrent (encoder, LSTM, Q head;
+agents/nnql/recurrent_policy.py): ``load_policy`` gives a :class:`GreedyRecurrentPolicy`, which
+carries one LSTM state per robot and resets it per episode.
+
 ``kind`` says what the network outputs: ``"q_network"`` (Q-values, NNQL) or
 ``"policy_logits"`` (action logits, imitation and NIRL neural policies). Both are
-evaluated greedily (argmax over actions), with numpy only, so loading a policy
+evaluated greedily (argmax over actions), with numpy only for MLPs, so loading one
 needs no torch.
 
 ``load_policy_or_baseline`` also accepts the name ``heuristic``: the goal-seeking
@@ -30,22 +36,21 @@ import numpy as np
 from safetensors import SafetensorError
 from safetensors.numpy import load_file
 
-from agents.mlp import (
-    ACTIVATIONS,
-    ARCHITECTURE_KEYS,
-    CONFIG_FILE,
-    KINDS,
-    WEIGHTS_FILE,
-    check_layers,
-    mlp_forward,
-    mlp_layers,
-    save_policy,
-)
+from agents.forward import network_forward
+from agents.mlp import ACTIVATIONS, ARCHITECTURE_KEYS, CONFIG_FILE, KINDS, WEIGHTS_FILE, save_policy
+from agents.nnql.recurrent_policy import Memory, RecurrentQ, is_recurrent
 from worlds.config import LEGACY_OBSERVATION, NavConfig, with_observation
 from worlds.heuristics import goal_seeking_policy
 from worlds.perception import observation_dim
 
-__all__ = ["GreedyMLPPolicy", "PolicyFormatError", "load_policy", "load_policy_or_baseline", "save_policy"]
+__all__ = [
+    "GreedyMLPPolicy",
+    "GreedyRecurrentPolicy",
+    "PolicyFormatError",
+    "load_policy",
+    "load_policy_or_baseline",
+    "save_policy",
+]
 HEURISTIC = "heuristic"
 """the name that ``load_policy_or_baseline`` reads as the goal-seeking baseline"""
 
@@ -74,9 +79,12 @@ class GreedyMLPPolicy:
                 f"takes obs_dim={self.architecture['obs_dim']}"
             )
         try:
-            self.layers = check_layers(mlp_layers(weights), self.architecture)
-        except ValueError as exc:
+            self._set_weights(weights)
+        except (KeyError, ValueError) as exc:
             raise PolicyFormatError(str(exc)) from None
+
+    def _set_weights(self, weights: dict[str, np.ndarray]) -> None:
+        self.forward = network_forward(weights, self.architecture)
 
     @property
     def obs_dim(self) -> int:
@@ -91,13 +99,32 @@ class GreedyMLPPolicy:
         obs = np.asarray(obs, dtype=np.float32)
         if obs.ndim != 2 or obs.shape[1] != self.obs_dim:
             raise ValueError(f"expected observations (N, {self.obs_dim}), got {obs.shape}")
-        return mlp_forward(self.layers, self.architecture["activation"], obs)
+        return self.forward(obs)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         return self.outputs(obs).argmax(axis=1).astype(np.int64)
 
     def __repr__(self) -> str:
-        return f"GreedyMLPPolicy(model={self.model!r}, kind={self.kind!r}, version={self.version})"
+        return f"{type(self).__name__}(model={self.model!r}, kind={self.kind!r}, version={self.version})"
+
+
+class GreedyRecurrentPolicy(GreedyMLPPolicy):
+    """A recurrent Q-network's policy (architecture with ``lstm_size``): argmax Q, one LSTM state per
+    robot, zeroed by ``reset_state(mask)`` at episode starts (the evaluation runner calls it)."""
+
+    def _set_weights(self, weights: dict[str, np.ndarray]) -> None:
+        self.net = RecurrentQ(weights, self.architecture)
+        self.memory = Memory(self.net.size)
+
+    def reset_state(self, done: np.ndarray) -> None:
+        self.memory.reset(done)
+
+    def outputs(self, obs: np.ndarray) -> np.ndarray:
+        """Q-values ``(N, n_actions)`` of one step; every robot's state moves on."""
+        obs = np.asarray(obs, dtype=np.float32)
+        if obs.ndim != 2 or obs.shape[1] != self.obs_dim:
+            raise ValueError(f"expected observations (N, {self.obs_dim}), got {obs.shape}")
+        return self.memory.advance(self.net, obs)
 
 
 def load_policy(path: str | Path) -> GreedyMLPPolicy:
@@ -123,6 +150,8 @@ def load_policy(path: str | Path) -> GreedyMLPPolicy:
     except (SafetensorError, OSError) as exc:
         raise PolicyFormatError(f"{weights_path}: unreadable safetensors file ({exc})") from None
     try:
+        if is_recurrent(architecture):
+            return GreedyRecurrentPolicy(weights, config)
         return GreedyMLPPolicy(weights, config)
     except (KeyError, ValueError) as exc:
         raise PolicyFormatError(f"{path}: {exc}") from None

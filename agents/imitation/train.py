@@ -40,6 +40,8 @@ class TrainResult:
     best_epoch: int = 0
     train_steps: int = 0
     val_steps: int = 0
+    observation: dict | None = None
+    """the observation settings of the demonstrations (worlds.config.observation_settings); None: legacy"""
 
     @property
     def best(self) -> dict:
@@ -48,9 +50,10 @@ class TrainResult:
     def policy(self) -> GreedyMLPPolicy:
         """The greedy numpy policy of the best weights (what ``load_policy`` would return)."""
         weights = {k: v.detach().cpu().numpy() for k, v in self.network.state_dict().items()}
-        return GreedyMLPPolicy(
-            weights, {"model": MODEL_NAME, "kind": "policy_logits", "architecture": self.architecture}
-        )
+        config = {"model": MODEL_NAME, "kind": "policy_logits", "architecture": self.architecture}
+        if self.observation is not None:
+            config["observation"] = self.observation
+        return GreedyMLPPolicy(weights, config)
 
 
 def extract_dataset(demos: Sequence[Demo]) -> tuple[np.ndarray, np.ndarray]:
@@ -85,8 +88,10 @@ def train_policy(
     config: ImitationConfig | None = None,
     n_actions: int | None = None,
     on_epoch: Callable[[dict], None] | None = None,
+    observation: dict | None = None,
 ) -> TrainResult:
-    """Train the MLP policy on ``demos``; ``on_epoch(record)`` sees each epoch's figures."""
+    """Train the MLP policy on ``demos``; ``on_epoch(record)`` sees each epoch's figures.
+    ``observation``: the settings the demonstrations were recorded in, kept with the policy."""
     config = config or ImitationConfig()
     train_idx, val_idx = split_episodes(len(demos), config.val_fraction, config.seed)
     x_train, y_train = extract_dataset([demos[i] for i in train_idx])
@@ -111,7 +116,9 @@ def train_policy(
     xt, yt = torch.from_numpy(x_train), torch.from_numpy(y_train)
     xv, yv = torch.from_numpy(x_val), torch.from_numpy(y_val)
     generator = torch.Generator().manual_seed(config.seed)
-    result = TrainResult(network, architecture, train_steps=len(yt), val_steps=len(yv))
+    result = TrainResult(
+        network, architecture, train_steps=len(yt), val_steps=len(yv), observation=observation
+    )
     best_loss, best_state, since_best = float("inf"), copy.deepcopy(network.state_dict()), 0
     for epoch in range(config.max_epochs):
         network.train()
@@ -159,5 +166,6 @@ def save_trained(path: str | Path, result: TrainResult, config: ImitationConfig,
             "val_steps": result.val_steps,
             **{k: round(v, 6) for k, v in result.best.items() if k != "epoch"},
         },
+        **({} if result.observation is None else {"observation": result.observation}),
         **metadata,
     )

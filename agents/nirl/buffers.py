@@ -11,27 +11,21 @@ import torch
 from tensordict import TensorDict
 from torchrl.data import LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
 
-from agents.demos import Demo, DemoFormatError, load_demos
-from worlds.config import NavConfig, observation_settings
-from worlds.perception import observation_dim
+from agents.demo_observation import load_demos_for
+from agents.demos import Demo, DemoFormatError
+from worlds.config import LEARNING_NAV
 
 
 def load_demonstrations(path: str, nav: Any = None) -> list[Demo]:
     """The demonstrations of the Minari dataset ``path``, checked for a NIRL learner of ``nav``'s
-    observation and actions. Anything unusable - no such dataset, an empty one, steps without
-    actions, observations of another size - raises one DemoFormatError naming ``path``."""
-    nav = nav or NavConfig()
-    demos = load_demos(path)
+    observation (default :data:`worlds.config.LEARNING_NAV`) and actions. Anything unusable - no
+    such dataset, an empty one, steps without actions, observations of another size or recorded
+    in other observation settings - raises one DemoFormatError naming ``path``."""
+    nav = nav or LEARNING_NAV
+    demos = load_demos_for(path, nav)
     if not demos:
         raise DemoFormatError(f"{path}: the dataset holds no demonstrations")
-    obs_dim, n_actions = observation_dim(nav), nav.robot.n_actions
-    width = demos[0].observations.shape[1]
-    if width != obs_dim:
-        raise DemoFormatError(
-            f"{path}: observations have {width} values per step, this robot's observation has {obs_dim} "
-            f"({nav.sensors.n_beams} readings + goal, {observation_settings(nav)}): record the "
-            "demonstrations with the same observation settings as the learner"
-        )
+    n_actions = nav.robot.n_actions
     for index, demo in enumerate(demos):
         if (demo.actions >= n_actions).any():
             raise DemoFormatError(f"{path} episode {index}: actions outside 0..{n_actions - 1}")

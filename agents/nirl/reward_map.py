@@ -22,7 +22,7 @@ import torch
 from agents.nirl.networks import RewardNetwork
 from agents.nirl.persistence import REWARD_FILE
 from agents.planning import distance_field
-from worlds.config import NavConfig
+from worlds.config import LEGACY_OBSERVATION, NavConfig, observation_differences, with_observation
 from worlds.maps import Task
 from worlds.sensors import cast_rays
 
@@ -48,9 +48,18 @@ def load_reward_network(run: str | Path) -> RewardNetwork:
     config, weights = run / "config.json", run / REWARD_FILE
     if not weights.is_file() or not config.is_file():
         raise ValueError(f"{run}: no {REWARD_FILE} and config.json (is --run a NIRL run directory?)")
-    architecture = json.loads(config.read_text()).get("reward_architecture")
+    saved = json.loads(config.read_text())
+    architecture = saved.get("reward_architecture")
     if architecture is None:
         raise ValueError(f"{config}: no reward_architecture (not written by NIRL)")
+    plain = with_observation(NavConfig(), LEGACY_OBSERVATION)
+    wrong = observation_differences(saved.get("observation") or LEGACY_OBSERVATION, plain, "plain")
+    if wrong:
+        raise ValueError(
+            f"{config}: this run observes {', '.join(wrong)}; the map is drawn for runs in the plain "
+            "observation (8 beams + goal, `nirl train --observation plain`) only, since an own-map "
+            "subgoal depends on the path the robot drove to each cell"
+        )
     network = RewardNetwork.from_architecture(architecture)
     network.mlp.load_state_dict(load_file(str(weights)))
     return network.eval()

@@ -32,6 +32,7 @@ from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.learner import NIRLLearner
 from agents.nirl.weights import HISTORY_FILE, WeightHistory, plot_weight_changes
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
+from worlds.config import LEARNING_NAV
 from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
@@ -64,9 +65,10 @@ def train_nirl(
     nav: Any = None,
     on_iteration: Callable[[dict[str, float], NIRLLearner], None] | None = None,
 ) -> NIRLResult:
-    """Warm-start on ``demos`` (``agents.demos.Demo`` list), then ``config.iterations`` rounds of
-    neural policy iteration (the learner on ``run.device``). ``on_iteration(point, learner)`` sees
-    each curve point."""
+    """Warm-start on ``demos`` (``agents.demos.Demo`` list, recorded in ``nav``'s observation,
+    default :data:`worlds.config.LEARNING_NAV`), then ``config.iterations`` rounds of neural policy
+    iteration (the learner on ``run.device``). ``on_iteration(point, learner)`` sees each curve point."""
+    nav = nav or LEARNING_NAV
     config = config or NIRLConfig()
     run = run or NIRLRun()
     start = time.perf_counter()

@@ -13,6 +13,8 @@ TARGET_UPDATES = ("soft", "hard")
 EXPLORATIONS = ("boltzmann", "epsilon")
 LOSS_FUNCTIONS = ("l2", "smooth_l1", "l1")
 ACTIVATION_NAMES = ("relu", "tanh", "elu")
+Q_NETWORKS = ("auto", "mlp")
+CNN_FIELDS = ("cnn_channels", "cnn_kernel_sizes", "cnn_strides")
 
 
 @dataclass
@@ -86,14 +88,42 @@ class NNQLConfig:
     """seeds network initialisation and replay sampling"""
     torch_threads: int = 1
     """torch intra-op threads, set process-wide by the learner (small MLPs are fastest on one)"""
+    q_network: str = "auto"
+    """auto: a small CNN over the own-map patch beside the MLP when the observation has a patch
+    (agents.nnql.patch_network), else the MLP; mlp: the flat MLP over every input"""
+    cnn_channels: tuple[int, ...] = (16, 32)
+    """output channels of the patch CNN's convolutions"""
+    cnn_kernel_sizes: tuple[int, ...] = (3, 3)
+    """kernel side of each convolution"""
+    cnn_strides: tuple[int, ...] = (2, 1)
+    """stride of each convolution"""
+    recurrent: bool = False
+    """R2D2-style recurrent Q (agents/nnql/recurrent_learner.py): encoder, LSTM, Q head; sequence replay"""
+    lstm_size: int = 128
+    """LSTM hidden units (recurrent)"""
+    seq_len: int = 20
+    """steps of a replayed sequence that are trained on, after the burn-in (recurrent)"""
+    burn_in: int = 10
+    """steps at a sequence's start that only unroll the LSTM from the stored state, no loss (recurrent)"""
+    sequences: int = 32
+    """sequences per update (recurrent; batch_size counts transitions of the feed-forward Q only)"""
 
     def __post_init__(self) -> None:
         self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)
+        for name in CNN_FIELDS:
+            values = tuple(int(v) for v in getattr(self, name))
+            setattr(self, name, values)
+            if not values or min(values) < 1 or len(values) != len(self.cnn_channels):
+                raise ValueError(
+                    f"NNQLConfig.{name}={values}: need positive values, one per convolution "
+                    f"({len(self.cnn_channels)} in cnn_channels)"
+                )
         checks = {
             "activation": (self.activation, ACTIVATION_NAMES),
             "target_update": (self.target_update, TARGET_UPDATES),
             "exploration": (self.exploration, EXPLORATIONS),
             "loss_function": (self.loss_function, LOSS_FUNCTIONS),
+            "q_network": (self.q_network, Q_NETWORKS),
         }
         for name, (value, allowed) in checks.items():
             if value not in allowed:
@@ -114,6 +144,15 @@ class NNQLConfig:
             raise ValueError(f"NNQLConfig.n_step={self.n_step!r}: expected an integer >= 1")
         if self.sarsa and self.n_step > 1:
             raise ValueError("NNQLConfig.n_step: SARSA bootstraps one step ahead; use n_step=1 with sarsa")
+        for name in ("lstm_size", "seq_len", "sequences"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"NNQLConfig.{name}={getattr(self, name)}: expected >= 1")
+        if self.burn_in < 0:
+            raise ValueError(f"NNQLConfig.burn_in={self.burn_in}: expected >= 0")
+        if self.recurrent and (self.sarsa or self.prioritized):
+            raise ValueError("NNQLConfig.recurrent: uniform sequence replay; no sarsa/prioritized")
+        if self.recurrent and (self.n_step > 1 or self.dueling):
+            raise ValueError("NNQLConfig.recurrent: one-step targets and a plain head; no n_step/dueling")
         if self.sarsa and self.double_q:
             raise ValueError("NNQLConfig: sarsa bootstraps on the taken action; set double_q=False")
 
@@ -121,6 +160,7 @@ class NNQLConfig:
         """JSON-able copy (tuples become lists)."""
         data = dataclasses.asdict(self)
         data["hidden_sizes"] = list(self.hidden_sizes)
+        data.update({name: list(getattr(self, name)) for name in CNN_FIELDS})
         return data
 
     @classmethod

@@ -36,8 +36,9 @@ from agents.device import resolve_device
 from agents.nnql.config import NNQLConfig
 from agents.nnql.lean import Batch, LeanUpdate, Step
 from agents.nnql.losses import PRIORITY_KEY, make_loss
-from agents.nnql.networks import QNetwork, export_weights, import_weights, make_q_actor
+from agents.nnql.networks import export_weights, import_weights, make_q_actor
 from agents.nnql.nstep import NStepAccumulator
+from agents.nnql.patch_network import build_q_network
 from agents.nnql.policy import NNQLPolicy, save_policy_dir
 from agents.nnql.replay_storage import (
     columns,
@@ -150,7 +151,7 @@ class NNQLLearner:
         self.device = resolve_device(device)
         torch.set_num_threads(config.torch_threads)
         torch.manual_seed(config.seed)
-        self.network = QNetwork.from_config(config, obs_dim, n_actions).to(self.device)
+        self.network = build_q_network(config, obs_dim, n_actions, self.observation).to(self.device)
         self.loss = make_loss(config, make_q_actor(self.network))
         if config.target_update == "soft":
             self.target_updater = SoftUpdate(self.loss, tau=config.target_tau)
@@ -346,6 +347,7 @@ class NNQLLearner:
         return {
             "config": self.config.to_dict(),
             "architecture": self.architecture,
+            "observation": self.observation,
             "loss": self.loss.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "target_updater": self.target_updater.state_dict(),
@@ -393,19 +395,7 @@ class NNQLLearner:
 
     def save_checkpoint(self, path: str | Path) -> Path:
         """A directory with learner.pt, replay/ and policy/, replaced atomically."""
-        path = Path(path)
-        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-        shutil.rmtree(tmp, ignore_errors=True)
-        tmp.mkdir(parents=True)
-        torch.save(self.state_dict(), tmp / CHECKPOINT_STATE)
-        self.save_replay(tmp / CHECKPOINT_REPLAY)
-        self.save_policy(tmp / CHECKPOINT_POLICY)
-        old = path.with_name(f".{path.name}.old{os.getpid()}")
-        if path.exists():
-            os.replace(path, old)
-        os.replace(tmp, path)
-        shutil.rmtree(old, ignore_errors=True)
-        return path
+        return write_checkpoint(self, path)
 
     def load_checkpoint(self, path: str | Path) -> None:
         path = Path(path)
@@ -421,6 +411,25 @@ class NNQLLearner:
         state = torch.load(Path(path) / CHECKPOINT_STATE, map_location="cpu", weights_only=True)
         arch = state["architecture"]
         config = NNQLConfig.from_dict(state["config"])
-        learner = cls(config, arch["obs_dim"], arch["n_actions"], device=device, replay_dir=replay_dir)
+        learner = cls(config, arch["obs_dim"], arch["n_actions"], device=device, replay_dir=replay_dir,
+                      observation=state.get("observation"))  # fmt: skip
         learner.load_checkpoint(path)
         return learner
+
+
+def write_checkpoint(learner: Any, path: str | Path) -> Path:
+    """``learner``'s checkpoint directory (``state_dict`` as learner.pt, ``save_replay`` into replay/,
+    ``save_policy`` into policy/), written beside ``path`` and swapped in atomically."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    torch.save(learner.state_dict(), tmp / CHECKPOINT_STATE)
+    learner.save_replay(tmp / CHECKPOINT_REPLAY)
+    learner.save_policy(tmp / CHECKPOINT_POLICY)
+    old = path.with_name(f".{path.name}.old{os.getpid()}")
+    if path.exists():
+        os.replace(path, old)
+    os.replace(tmp, path)
+    shutil.rmtree(old, ignore_errors=True)
+    return path

@@ -1,10 +1,11 @@
-"""The NNQL control policy for actors and evaluation: numpy only, built from weights.
+"""The NNQL control policy for actors and evaluation: built from weights, numpy for MLPs.
 
 Actors never hold a learner: they get a ``dict[str, np.ndarray]`` of weights (from a
 WeightsUpdate or a policy directory) plus the architecture dict, and act on a batch
 of observations at once. Exploration is the thesis' stochastic policy - Boltzmann
 (softmax of Q / temperature) with a decaying temperature - or epsilon-greedy; greedy
-for evaluation. No torch import here, so an actor process starts fast.
+for evaluation. No torch import here, so an actor process starts fast; a Q-network with a CNN
+over the own-map patch runs the learner's torch module (:mod:`agents.forward`).
 
 On disk a policy is a directory with ``model.safetensors`` (the weights) and
 ``config.json`` (model name, kind, architecture, version).
@@ -19,7 +20,8 @@ from typing import Any
 import numpy as np
 from safetensors.numpy import load_file
 
-from agents.mlp import CONFIG_FILE, WEIGHTS_FILE, check_layers, mlp_forward, mlp_layers, save_policy
+from agents.forward import network_forward
+from agents.mlp import CONFIG_FILE, WEIGHTS_FILE, save_policy
 from agents.nnql.config import NNQLConfig
 from worlds.config import LEGACY_OBSERVATION
 
@@ -89,7 +91,10 @@ class NNQLPolicy:
 
     def set_weights(self, weights: dict[str, np.ndarray], version: int | None = None) -> None:
         """Swap in new weights (same architecture); shapes are checked."""
-        self.layers = check_layers(mlp_layers(weights), self.architecture)
+        if getattr(self, "forward", None) is None:
+            self.forward = network_forward(weights, self.architecture)
+        else:
+            self.forward.load(weights)
         if version is not None:
             self.version = int(version)
 
@@ -107,7 +112,7 @@ class NNQLPolicy:
         obs = np.asarray(obs, dtype=np.float32)
         if obs.ndim != 2 or obs.shape[1] != self.architecture["obs_dim"]:
             raise ValueError(f"expected observations (N, {self.architecture['obs_dim']}), got {obs.shape}")
-        return mlp_forward(self.layers, self.architecture["activation"], obs)
+        return self.forward(obs)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         q = self.q_values(obs)
@@ -124,9 +129,10 @@ class NNQLPolicy:
         return np.minimum((draws > cumulative).sum(axis=1), q.shape[1] - 1).astype(np.int64)
 
     def greedy(self) -> NNQLPolicy:
-        """A greedy copy sharing the weights (for evaluation)."""
+        """A greedy copy with a copy of the weights (for evaluation)."""
         policy = NNQLPolicy.__new__(NNQLPolicy)
         policy.__dict__.update(self.__dict__)
+        policy.forward = network_forward(self.get_weights(), self.architecture)
         policy.mode = "greedy"
         return policy
 
@@ -134,11 +140,7 @@ class NNQLPolicy:
 
     def get_weights(self) -> dict[str, np.ndarray]:
         """A copy of the weights, named as ``set_weights`` takes them."""
-        weights = {}
-        for index, (weight, bias) in zip(range(0, 2 * len(self.layers), 2), self.layers, strict=True):
-            weights[f"{index}.weight"] = np.ascontiguousarray(weight.T)
-            weights[f"{index}.bias"] = bias.copy()
-        return weights
+        return self.forward.weights()
 
     def save(self, path: str | Path, **metadata: Any) -> Path:
         """Write ``model.safetensors`` + ``config.json`` (with the observation settings, when known)."""

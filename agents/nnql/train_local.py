@@ -17,12 +17,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from agents.evaluation.runner import evaluate, make_eval_set
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.ratelimit import RateLimiter
+from agents.nnql.recurrent_learner import RecurrentNNQLLearner
+from agents.nnql.recurrent_rollout import RecurrentRollout
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
 from worlds.config import LEARNING_NAV, NavConfig, observation_settings, with_moving_discs
 from worlds.vector_env import NavigationVectorEnv
@@ -80,7 +83,7 @@ class TrainResult:
     """FamilyMetrics.to_dict() of the final greedy evaluation of the saved weights (test set, seed 0)"""
     final_table: str = ""
     out: str | None = None
-    learner: NNQLLearner | None = field(default=None, repr=False)
+    learner: NNQLLearner | RecurrentNNQLLearner | None = field(default=None, repr=False)
     """the trained learner (not serialised)"""
 
     def to_dict(self) -> dict[str, Any]:
@@ -110,10 +113,17 @@ def train_local(
     env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
     obs_dim = int(env.single_observation_space.shape[0])
     n_actions = int(env.single_action_space.n)
-    learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation_settings(nav))
+    observation = observation_settings(nav)
+    if nnql.recurrent:
+        learner = RecurrentNNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
+    else:
+        learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
     policy = learner.policy(seed=run.seed)
     policy.explore_as(nnql, learner.version)
-    rollout = VectorRollout(env, policy, with_next_action=nnql.sarsa)
+    if nnql.recurrent:
+        rollout = RecurrentRollout(env, policy)
+    else:
+        rollout = VectorRollout(env, policy, with_next_action=nnql.sarsa)
     rollout.reset(seed=run.seed)
     # The learner service's rate logic, with no slack: one update per 1 / utd_ratio transitions once
     # the replay holds learning_starts (and a batch).
@@ -127,6 +137,8 @@ def train_local(
     next_point, next_eval = 0, run.eval_every if run.eval_every > 0 else run.steps + 1
     best: Candidate | None = None
     bar = _progress_bar(run)
+    # the numpy policy's small matrix products on one BLAS thread (why: agents/evaluation/runner.py)
+    blas = threadpool_limits(limits=1, user_api="blas")
     start = last_postfix = time.perf_counter()
     while rollout.steps < run.steps:
         batch, ended = rollout.step()
@@ -155,6 +167,7 @@ def train_local(
                 bar.set_postfix_str(_postfix(curve[-1], learner.updates, update_time), refresh=False)
                 last_postfix = now
     wall = time.perf_counter() - start
+    blas.restore_original_limits()
     if bar is not None:
         bar.close()
     env.close()

@@ -44,11 +44,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     gen.add_argument(
         "--observation",
-        choices=("plain", "learning"),
-        default="plain",
-        help="what the recorded robot observes: plain (8 beams + goal; imitation learning) or learning "
-        "(worlds.config.LEARNING_NAV, what `navlearn learner` takes from `demonstrator --source file`); "
-        "default %(default)s",
+        choices=("learning", "plain"),
+        default="learning",
+        help="what the recorded robot observes (the expert acts on the true map; the robot's own "
+        "observation of each episode is recorded, and the dataset records its settings): learning "
+        "(worlds.config.LEARNING_NAV, what NNQL, `nirl train`, `imitate train` and `up --nirl` learn in) "
+        "or plain (8 beams + goal, the older sets); default %(default)s",
     )
     gen.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
     gen.set_defaults(func=generate)
@@ -69,9 +70,10 @@ def generate(args: argparse.Namespace) -> int:
 
     from rich.progress import Progress
 
+    from agents.demo_observation import NAVS
     from agents.demos import dataset_location, write_demos
     from agents.planning.demonstrate import generate_demos
-    from worlds.config import LEARNING_NAV, NavConfig, ObstacleConfig, observation_settings
+    from worlds.config import ObstacleConfig, observation_settings
     from worlds.env import observation_space
     from worlds.tasks import parse_map_spec
 
@@ -91,7 +93,7 @@ def generate(args: argparse.Namespace) -> int:
     except ValueError as exc:  # DemoFormatError is a ValueError
         print(f"navlearn demos generate: {exc}", file=sys.stderr)
         return 2
-    base = LEARNING_NAV if args.observation == "learning" else NavConfig()
+    base = NAVS[args.observation]
     config = replace(
         base, pool_size=min(base.pool_size, args.episodes), obstacles=ObstacleConfig(count=args.obstacles)
     )
@@ -122,8 +124,8 @@ def generate(args: argparse.Namespace) -> int:
             "seed": args.seed,
             "noise": args.noise,
             "obstacles": args.obstacles,
-            "observation": observation_settings(config),
         },
+        observation=observation_settings(config),
         overwrite=args.overwrite,
     )
     print(
@@ -137,12 +139,14 @@ def show_info(args: argparse.Namespace) -> int:
     import sys
     from collections import Counter
 
+    from agents.demo_observation import dataset_observation
     from agents.demos import DemoFormatError, dataset_info, load_demos
     from worlds.outcomes import OUTCOME_NAMES
 
     try:
         demos = load_demos(args.path)
         meta = dataset_info(args.path)
+        observation, width = dataset_observation(args.path)
     except DemoFormatError as exc:
         print(f"navlearn demos info: {exc}", file=sys.stderr)
         return 2
@@ -153,4 +157,5 @@ def show_info(args: argparse.Namespace) -> int:
     print(f"{args.path}: {len(demos)} episodes, {steps} steps, {maps} maps")
     print(f"  outcomes {dict(outcomes)}, sources {dict(sources)}")
     print(f"  generated with {meta['navlearn']}")
+    print(f"  observation ({width} values per step): {observation or 'not recorded'}")
     return 0

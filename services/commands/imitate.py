@@ -56,6 +56,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument(
         "--seed", type=int, default=d.seed, help="seed of the split, initial weights and batches"
     )
+    train.add_argument(
+        "--observation",
+        choices=("learning", "plain"),
+        default="learning",
+        help="what the robot observes: learning (worlds.config.LEARNING_NAV, NNQL's default) or plain "
+        "(8 beams + goal, older demonstration sets); the demonstrations must have been recorded in it, "
+        "and the saved policy records it (default %(default)s)",
+    )
     train.set_defaults(func=run_train)
 
 
@@ -66,9 +74,11 @@ def run_train(args: argparse.Namespace) -> int:
 
     from rich.progress import Progress
 
-    from agents.demos import DemoFormatError, load_demos
+    from agents.demo_observation import NAVS, load_demos_for
+    from agents.demos import DemoFormatError
     from agents.imitation.config import ImitationConfig
     from agents.imitation.train import save_trained, train_policy
+    from worlds.config import observation_settings
 
     try:
         config = ImitationConfig(
@@ -81,14 +91,15 @@ def run_train(args: argparse.Namespace) -> int:
             val_fraction=args.val_fraction,
             seed=args.seed,
         )
-        demos = load_demos(args.demos)
+        nav = NAVS[args.observation]
+        demos = load_demos_for(args.demos, nav)
     except (DemoFormatError, ValueError) as exc:
         print(f"navlearn imitate train: {exc}", file=sys.stderr)
         return 2
     if len(demos) < 2:
         print("navlearn imitate train: need at least 2 demonstrations", file=sys.stderr)
         return 2
-    n_actions = int(max(int(d.actions.max()) for d in demos) + 1)
+    n_actions = nav.robot.n_actions
     with Progress() as progress:
         bar = progress.add_task("epochs", total=config.max_epochs)
 
@@ -100,7 +111,9 @@ def run_train(args: argparse.Namespace) -> int:
                 f"acc {record['val_accuracy']:.3f}",
             )
 
-        result = train_policy(demos, config, n_actions=n_actions, on_epoch=on_epoch)
+        result = train_policy(
+            demos, config, n_actions=n_actions, on_epoch=on_epoch, observation=observation_settings(nav)
+        )
     out = save_trained(args.out, result, config, demos=str(Path(args.demos).resolve()))
     with open(out / "training.jsonl", "w") as fh:
         for record in result.history:

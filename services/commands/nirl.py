@@ -35,6 +35,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     train.add_argument("--demos", required=True, help="demonstration dataset directory (Minari)")
+    train.add_argument(
+        "--observation",
+        choices=("learning", "plain"),
+        default="learning",
+        help="what the robot observes: learning (worlds.config.LEARNING_NAV, NNQL's default: sector "
+        "minima, goal, subgoal on its own map) or plain (8 beams + goal, older demonstration sets); the "
+        "demonstrations must have been recorded in it (default %(default)s)",
+    )
     add_options(
         train, NIRLRun, "NAVLEARN_NIRL_RUN", "run: environment, evaluation, outputs", skip=("progress",)
     )
@@ -71,6 +79,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run_train(args: argparse.Namespace) -> int:
     import sys
 
+    from agents.demo_observation import NAVS
     from agents.demos import DemoFormatError
     from agents.device import resolve_device
     from agents.nirl.buffers import load_demonstrations
@@ -86,13 +95,14 @@ def run_train(args: argparse.Namespace) -> int:
         if run.envs < 1:
             raise OptionError("--envs must be positive")
         parse_map_spec(run.maps)
-        demos = load_demonstrations(args.demos)
+        nav = NAVS[args.observation]
+        demos = load_demonstrations(args.demos, nav)
     except (OptionError, DemoFormatError, ValueError) as exc:
         print(f"navlearn nirl train: {exc}", file=sys.stderr)
         return 2
     steps = sum(len(d) for d in demos)
     print(f"{len(demos)} demonstrations ({steps} steps) from {args.demos}")
-    result = train_nirl(demos, config, run)
+    result = train_nirl(demos, config, run, nav)
     print(
         f"{result.learner.iteration} iterations, {result.env_steps} robot-steps, "
         f"{result.learner.version} Q updates in {result.wall_time:.0f} s"

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 from agents.device import DEVICES, resolve_device
-from agents.nnql.config import NNQLConfig
+from agents.nnql.config import Q_NETWORKS, NNQLConfig
 
 
 def register(subparsers) -> None:
@@ -75,6 +76,18 @@ def register(subparsers) -> None:
     )
     parser.add_argument("--sarsa", action="store_true", help="SARSA: bootstrap on the next action taken")
     parser.add_argument(
+        "--recurrent",
+        action="store_true",
+        help="recurrent Q, R2D2-style: LSTM, sequence replay, burn-in, stored state (agents/nnql)",
+    )
+    for name in ("lstm_size", "seq_len", "burn_in", "sequences"):
+        parser.add_argument(
+            "--" + name.replace("_", "-"),
+            type=int,
+            default=getattr(defaults, name),
+            help=f"{name} (--recurrent)",
+        )
+    parser.add_argument(
         "--epsilon-greedy", action="store_true", help="epsilon-greedy exploration instead of Boltzmann"
     )
     parser.add_argument(
@@ -83,8 +96,35 @@ def register(subparsers) -> None:
         default="cpu",
         help="where the learner's networks, loss and sampled batches live (auto: a GPU if torch sees one)",
     )
+    parser.add_argument(
+        "--patch",
+        type=int,
+        default=0,
+        help="add an egocentric PATCH x PATCH patch of the robot's own map to the observation "
+        "(occupancy + visits; read by a small CNN beside the MLP); 0: none",
+    )
+    parser.add_argument(
+        "--no-subgoal",
+        action="store_true",
+        help="drop the subgoal planned on the robot's own map (learning alone; e.g. with --patch 16)",
+    )
+    parser.add_argument(
+        "--q-network",
+        choices=Q_NETWORKS,
+        default=defaults.q_network,
+        help="auto: CNN over the patch beside the MLP when there is one; mlp: one MLP over every input",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
+
+
+def observation_of(args: argparse.Namespace):
+    """worlds.config.LEARNING_NAV with --patch and --no-subgoal applied."""
+    from worlds.config import LEARNING_NAV
+
+    subgoal = "none" if args.no_subgoal else LEARNING_NAV.observation.subgoal
+    observation = replace(LEARNING_NAV.observation, patch_size=args.patch, subgoal=subgoal)
+    return replace(LEARNING_NAV, observation=observation)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -105,7 +145,14 @@ def run(args: argparse.Namespace) -> int:
             double_q=not args.sarsa,
             exploration="epsilon" if args.epsilon_greedy else "boltzmann",
             seed=args.seed,
+            q_network=args.q_network,
+            recurrent=args.recurrent,
+            lstm_size=args.lstm_size,
+            seq_len=args.seq_len,
+            burn_in=args.burn_in,
+            sequences=args.sequences,
         )
+        nav = observation_of(args)
         if args.steps < 1 or args.envs < 1:
             raise ValueError("--steps and --envs must be positive")
         if args.moving_discs < 0:
@@ -134,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         device=args.device,
     )
-    result = train_local(run_config, nnql)
+    result = train_local(run_config, nnql, nav)
     print(
         f"{result.env_steps} robot-steps, {result.updates} updates in {result.wall_time:.0f} s "
         f"({result.env_steps_per_s:.0f} steps/s, learner {result.updates_per_s:.0f} updates/s)"

@@ -10,7 +10,9 @@ to --steps steps by a simple goal-seeking policy (or uniformly random actions wi
 its trajectory, its range beams at the last step, moving discs, start and goal. It needs no
 file: `navlearn world show --out world.png` draws a generated map. With --learning the robot
 observes what learned policies observe: its 24 sector minima are drawn as arcs across their
-sectors and its subgoal (2.5 m along A* on the map its rays have built) as a star.
+sectors and its subgoal (2.5 m along A* on the map its rays have built) as a star. With
+--patch N the observation also holds the N x N egocentric patch of the map the robot built from
+its own beams, drawn beside the map at the last step (occupancy and visits, heading up).
 
 --map takes a map spec: FAMILY:N or FAMILY:HxW with FAMILY one of rects, discs, rooms, maze,
 mixed (e.g. rooms:16, rects:24x32), or the path of a MovingAI .map/.scen file or an ASCII
@@ -54,6 +56,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="the observation learned policies use (worlds.config.LEARNING_NAV): 24 sector minima of 96 "
         "rays, drawn as arcs, and the subgoal on the robot's own map, drawn as a star (--beams ignored)",
     )
+    show.add_argument(
+        "--patch",
+        type=int,
+        default=0,
+        help="observe an N x N patch of the robot's own map and draw it (occupancy, visits; default 0: none)",
+    )
     show.set_defaults(func=show_main)
     world.set_defaults(func=lambda args: (world.print_help(), 2)[1])
 
@@ -64,18 +72,23 @@ def show_main(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    if args.steps < 1 or args.beams < 1 or args.obstacles < 0:
-        print("navlearn world show: --steps and --beams must be >= 1, --obstacles >= 0", file=sys.stderr)
+    if args.steps < 1 or args.beams < 1 or args.obstacles < 0 or args.patch < 0:
+        print(
+            "navlearn world show: --steps and --beams must be >= 1, --obstacles and --patch >= 0",
+            file=sys.stderr,
+        )
         return 2
     from worlds.config import LEARNING_NAV, NavConfig, ObstacleConfig, SensorConfig
     from worlds.env import NavigationEnv
     from worlds.heuristics import goal_seeking_policy
     from worlds.outcomes import OUTCOME_NAMES
-    from worlds.render import draw_robot
+    from worlds.perception import frame_layout
+    from worlds.render import draw_patch, draw_robot
 
+    observation = LEARNING_NAV.observation if args.learning else NavConfig().observation
     config = NavConfig(
         sensors=LEARNING_NAV.sensors if args.learning else replace(SensorConfig(), n_beams=args.beams),
-        observation=LEARNING_NAV.observation if args.learning else NavConfig().observation,
+        observation=replace(observation, patch_size=args.patch),
         obstacles=ObstacleConfig(count=args.obstacles, mode=args.obstacle_mode),
         max_steps=args.steps,
         pool_size=8,
@@ -102,6 +115,9 @@ def show_main(args: argparse.Namespace) -> int:
         f"{info['path_length']:.1f} m ({'random' if args.random else 'goal-seeking'} robot)"
     )
     fig = draw_robot(None, env.batch, 0, trajectory, title=title)
+    if args.patch:
+        start, stop = frame_layout(config)["patch"]
+        draw_patch(fig, obs[start:stop], args.patch)
     try:
         fig.savefig(args.out, dpi=120, bbox_inches="tight")
     except OSError as exc:

@@ -221,5 +221,5 @@ def record(config: DemonstratorConfig, demos: list[Demo]) -> None:
     nav = nav_config(config)
     path = write_demos(config.record, demos, observation_space(nav), spaces.Discrete(nav.robot.n_actions),
                        description=f"navlearn demonstrator --source {config.source}",
-                       extra_metadata={"observation": observation_settings(nav)})  # fmt: skip
+                       observation=observation_settings(nav))  # fmt: skip
     log.info("%d episodes recorded in %s", len(demos), path)

@@ -9,14 +9,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from agents.demos import Demo, DemoFormatError, load_demos
+from agents.demo_observation import load_demos_for
+from agents.demos import Demo, load_demos
 from agents.planning.demonstrate import record_episode
 from agents.planning.expert import Expert
 from services.demonstrator.config import DemonstratorConfig
 from worlds.config import LEARNING_NAV, NavConfig, ObstacleConfig
 from worlds.env import NavigationEnv
 from worlds.outcomes import Outcome
-from worlds.perception import observation_dim
 
 
 def nav_config(config: DemonstratorConfig) -> NavConfig:
@@ -44,16 +44,9 @@ def expert_episodes(config: DemonstratorConfig, stop: threading.Event) -> Iterat
 
 
 def check_file(config: DemonstratorConfig) -> None:
-    """A DemoFormatError unless ``config.file`` loads and its observations are the learner's
+    """A DemoFormatError unless ``config.file`` loads and was recorded in the learner's observation
     (:data:`worlds.config.LEARNING_NAV`): the learner would drop every batch of another width."""
-    demos = load_demos(config.file)
-    want = observation_dim(LEARNING_NAV)
-    widths = sorted({int(demo.observations.shape[1]) for demo in demos})
-    if widths and widths != [want]:
-        raise DemoFormatError(
-            f"{config.file}: observations of width {widths}, the learner takes {want} "
-            "(worlds.config.LEARNING_NAV); record the demonstrations in that observation"
-        )
+    load_demos_for(config.file, nav_config(config))
 
 
 def file_episodes(config: DemonstratorConfig) -> Iterator[Demo]:

@@ -24,6 +24,7 @@ from agents.evaluation import evaluate, make_eval_set
 from agents.evaluation.plots import REFERENCE, plot_evaluations
 from agents.evaluation.policies import load_policy
 from agents.nnql.policy import NNQLPolicy
+from agents.nnql.recurrent_policy import RecurrentNNQLPolicy, is_recurrent
 from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
@@ -101,7 +102,8 @@ class Evaluator:
         return version > last[1] and version - last[1] >= self.config.every_versions
 
     def evaluate(self, weights: dict, architecture: dict, version: int) -> dict[str, Any]:
-        policy = NNQLPolicy(weights, architecture, mode="greedy", version=version)
+        kind = RecurrentNNQLPolicy if is_recurrent(architecture) else NNQLPolicy  # memory reset per episode
+        policy = kind(weights, architecture, mode="greedy", version=version)
         start = time.perf_counter()
         result = evaluate(policy, self.eval_sets, config=LEARNING_NAV)  # what the actors observe
         metrics = result.to_dict(with_episodes=False)["metrics"]

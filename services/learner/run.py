@@ -12,6 +12,7 @@ import time
 from agents.nirl.config import NIRLConfig
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
+from agents.nnql.recurrent_learner import RecurrentNNQLLearner
 from protocols.limits import Limits
 from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.learner.config import LearnerConfig
@@ -37,16 +38,24 @@ def run_learner(
     when ``config.nirl`` is on (its defaults otherwise)."""
     nav = LEARNING_NAV  # what the actors observe
     obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
-    learner = NNQLLearner(
-        nnql,
-        obs_dim,
-        n_actions,
-        device=config.device,
-        replay_dir=config.replay_dir,
-        observation=observation_settings(nav),
-    )
+    if nnql.recurrent:  # R2D2-style: sequence replay in RAM, SequenceBatches from --recurrent actors
+        if config.replay_dir:
+            raise ValueError("--recurrent keeps its sequence replay in RAM; drop --replay-dir")
+        learner = RecurrentNNQLLearner(
+            nnql, obs_dim, n_actions, device=config.device, observation=observation_settings(nav)
+        )
+    else:
+        learner = NNQLLearner(
+            nnql,
+            obs_dim,
+            n_actions,
+            device=config.device,
+            replay_dir=config.replay_dir,
+            observation=observation_settings(nav),
+        )
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
-    limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
+    widest = max(obs_dim, nnql.lstm_size) if nnql.recurrent else obs_dim  # LSTM states are columns too
+    limits = Limits(n_actions=n_actions, max_obs_dim=widest)
     inbox = learner_inbox(config, nnql, limits, settings.run, (config.acl_names, settings.acl_file))
     if settings.mode == "router" and (warning := exposure_warning(settings)):
         log.warning("%s", warning)  # the learner hosts the router

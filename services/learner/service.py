@@ -29,7 +29,14 @@ from agents.replay_files import stored_bytes
 from protocols import keys
 from protocols.codec import encode
 from protocols.flow import Ack
-from protocols.messages import DemoBatch, EvalReport, ExplorationSchedule, StatusReport
+from protocols.messages import (
+    DemoBatch,
+    EvalReport,
+    ExplorationSchedule,
+    SequenceBatch,
+    StatusReport,
+    TransitionBatch,
+)
 from services.common.process import Scalars
 from services.common.weights import WeightsBroadcaster
 from services.learner.checkpoint import CheckpointDir
@@ -229,6 +236,13 @@ class LearnerService:
         if obs.shape[1] != obs_dim:
             self.inbox.reject(
                 "shape", f"{item.channel} from {item.name} have obs_dim {obs.shape[1]}, not {obs_dim}"
+            )
+            return
+        wanted = SequenceBatch if self.learner.config.recurrent else TransitionBatch
+        if isinstance(item.message, TransitionBatch) and type(item.message) is not wanted:
+            self.inbox.reject(
+                "kind",
+                f"{item.message.KIND} from {item.name}: this learner takes {wanted.KIND} (--recurrent)",
             )
             return
         if self.durable is None or self._replaying:

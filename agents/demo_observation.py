@@ -1,0 +1,94 @@
+"""What a demonstration dataset observes, and the check that a learner observes the same.
+
+A dataset records the observation settings its robot had (``worlds.config.observation_settings``,
+in the ``navlearn`` JSON of its metadata, written by ``agents.demos.write_demos``). With the
+own-map subgoal (``worlds.config.LEARNING_NAV``) the observation depends on the trajectory the
+robot drove, so a demonstration cannot be converted to another observation: it is recorded in
+the one its learner uses (``navlearn demos generate --observation``), and a learner of another
+observation refuses it with one error naming the file and every differing field. Sets written
+before the record observe ``worlds.config.LEGACY_OBSERVATION`` (8 beams + goal) when their width
+is that one's; they still load, in that observation (``--observation plain``).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from agents.demos import Demo, DemoFormatError, dataset_location, datasets_root, load_demos
+from worlds.config import (
+    LEARNING_NAV,
+    LEGACY_OBSERVATION,
+    NavConfig,
+    observation_differences,
+    with_observation,
+)
+from worlds.perception import observation_dim
+
+NAVS = {"learning": LEARNING_NAV, "plain": with_observation(NavConfig(), LEGACY_OBSERVATION)}
+"""the worlds a demonstration learner can be trained in (``--observation``): ``learning``, the default
+(worlds.config.LEARNING_NAV, what NNQL learns in), or ``plain``, today's 8 beams + goal"""
+
+
+def recorded_observation(navlearn_metadata: str | dict | None, width: int) -> dict | None:
+    """The observation settings of a dataset from its ``navlearn`` metadata (JSON text or decoded)
+    and observation width; legacy for an unrecorded set of the legacy width; None if unknown."""
+    meta = navlearn_metadata or {}
+    if isinstance(meta, str):
+        try:
+            meta = json.loads(meta)
+        except ValueError:
+            meta = {}
+    recorded = meta.get("observation") if isinstance(meta, dict) else None
+    if recorded is None and width == observation_dim(NAVS["plain"]):
+        return dict(LEGACY_OBSERVATION)
+    return None if recorded is None else dict(recorded)
+
+
+def dataset_observation(path: str | Path) -> tuple[dict | None, int]:
+    """``(observation settings or None, values per step)`` of the dataset at ``path``."""
+    import minari
+
+    root, dataset_id = dataset_location(path)
+    if not (root / dataset_id / "data").is_dir():
+        raise DemoFormatError(f"{root / dataset_id}: no such demonstration dataset")
+    try:
+        with datasets_root(root):
+            dataset = minari.load_dataset(dataset_id)
+        width = int(dataset.observation_space.shape[0])
+        navlearn = dataset.storage.metadata.get("navlearn")
+    except Exception as exc:  # damaged files: load_demos gives the same one-line error
+        raise DemoFormatError(
+            f"{root / dataset_id}: unreadable demonstration dataset ({type(exc).__name__}: {exc})"
+        ) from None
+    return recorded_observation(navlearn, width), width
+
+
+def check_observation(where: str | Path, recorded: dict | None, width: int, nav: NavConfig) -> None:
+    """A DemoFormatError naming ``where`` and every differing field unless demonstrations of
+    ``width`` values per step, recorded in the ``recorded`` settings, are what ``nav`` observes."""
+    want = observation_dim(nav)
+    if recorded is None:  # nothing recorded: the width is all there is to check
+        if width != want:
+            raise DemoFormatError(
+                f"{where}: observations have {width} values per step, the learner's have {want}; "
+                "record the demonstrations in the learner's observation"
+            )
+        return
+    wrong = observation_differences(recorded, nav, other="the learner")
+    if wrong:
+        raise DemoFormatError(
+            f"{where}: the demonstrations were recorded observing " + ", ".join(wrong) + "; train in "
+            "their observation (--observation plain for 8-beam sets) or record them again in the "
+            "learner's (navlearn demos generate --observation learning)"
+        )
+
+
+def load_demos_for(path: str | Path, nav: NavConfig = LEARNING_NAV) -> list[Demo]:
+    """The demonstrations at ``path``, checked to observe what a learner in ``nav`` observes
+    (default :data:`worlds.config.LEARNING_NAV`)."""
+    demos = load_demos(path)  # its own one-line errors for missing or damaged sets come first
+    root, dataset_id = dataset_location(path)
+    recorded, width = dataset_observation(path)
+    check_observation(root / dataset_id, recorded, width, nav)
+    return demos

@@ -1,0 +1,195 @@
+"""The Q-network with a CNN over the own-map patch (variant F): split, forward, files, options."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from agents.evaluation.policies import load_policy
+from agents.evaluation.runner import evaluate, make_eval_set
+from agents.forward import TorchForward
+from agents.nnql.config import NNQLConfig
+from agents.nnql.learner import NNQLLearner
+from agents.nnql.patch_network import PatchQNetwork, build_q_network
+from agents.nnql.policy import NNQLPolicy
+from services.cli import main
+from worlds.config import NavConfig, ObservationConfig, SensorConfig, observation_settings
+from worlds.perception import frame_dim, frame_layout, observation_dim
+from worlds.vector_env import NavigationVectorEnv
+
+SMALL = NNQLConfig(
+    hidden_sizes=(16,), cnn_channels=(4, 4), cnn_strides=(1, 1), batch_size=8, learning_starts=8, seed=3
+)
+
+
+def patch_nav(size: int = 6, **observation) -> NavConfig:
+    return NavConfig(sensors=SensorConfig(n_beams=8, n_rays=16),
+                     observation=ObservationConfig(patch_size=size, **observation))  # fmt: skip
+
+
+def learner_for(nav: NavConfig, config: NNQLConfig = SMALL) -> NNQLLearner:
+    return NNQLLearner(
+        config, observation_dim(nav), nav.robot.n_actions, observation=observation_settings(nav)
+    )
+
+
+def env_observations(nav: NavConfig, n: int = 6, steps: int = 5) -> np.ndarray:
+    env = NavigationVectorEnv(n, config=nav, seed=1)
+    obs, _ = env.reset(seed=1)
+    rng = np.random.default_rng(0)
+    for _ in range(steps):
+        obs, *_ = env.step(rng.integers(0, nav.robot.n_actions, size=n))
+    env.close()
+    return obs
+
+
+def test_split_puts_each_frames_patch_values_in_their_channel_and_cell():
+    """Observation value i = i: every image pixel and every vector entry says where it came from."""
+    nav = patch_nav(5, frame_stack=2, previous_action=True, subgoal="own_map")
+    net = build_q_network(SMALL, observation_dim(nav), 5, observation_settings(nav))
+    assert isinstance(net, PatchQNetwork)
+    fdim, (start, stop) = frame_dim(nav), frame_layout(nav)["patch"]
+    assert stop == fdim  # the patch closes the frame: readings, goal, subgoal, previous action, patch
+    obs = torch.arange(observation_dim(nav), dtype=torch.float32)
+    images, rest = net.split(obs.unsqueeze(0))
+    assert images.shape == (1, 4, 5, 5) and rest.shape == (1, 2 * start)
+    for frame in range(2):
+        for channel in range(2):  # occupancy, visits: interleaved per cell in the observation
+            for u, v in [(0, 0), (0, 4), (3, 1), (4, 4)]:
+                want = frame * fdim + start + 2 * (u * 5 + v) + channel
+                assert images[0, 2 * frame + channel, u, v].item() == want
+    # the rest: the first frame's non-patch inputs, then the second's, in order
+    assert rest[0].tolist() == [*range(start), *range(fdim, fdim + start)]
+
+
+def test_split_of_a_real_observation_separates_map_from_the_other_inputs():
+    nav = patch_nav(6, subgoal="own_map")
+    obs = env_observations(nav)
+    net = build_q_network(SMALL, obs.shape[1], 5, observation_settings(nav))
+    images, rest = net.split(torch.as_tensor(obs))
+    start = frame_layout(nav)["patch"][0]
+    np.testing.assert_array_equal(rest.numpy(), obs[:, :start])
+    occupancy, visits = images[:, 0].numpy(), images[:, 1].numpy()
+    assert set(np.unique(occupancy)) <= {0.0, 0.5, 1.0} and (occupancy == 0.0).any()
+    assert ((visits >= 0) & (visits < 1)).all() and (visits > 0).any(axis=(1, 2)).all()  # it has been here
+
+
+def test_without_a_patch_or_with_mlp_the_network_is_the_plain_mlp():
+    plain = patch_nav(0)
+    net = build_q_network(SMALL, observation_dim(plain), 5, observation_settings(plain))
+    assert not isinstance(net, PatchQNetwork)
+    nav = patch_nav(6)
+    mlp = NNQLConfig(**{**SMALL.to_dict(), "q_network": "mlp"})
+    net = build_q_network(mlp, observation_dim(nav), 5, observation_settings(nav))
+    assert not isinstance(net, PatchQNetwork) and "patch" not in net.architecture
+    auto = build_q_network(SMALL, observation_dim(nav), 5, observation_settings(nav))
+    assert isinstance(auto, PatchQNetwork)
+
+
+def test_actor_forward_equals_the_learners_after_updates():
+    nav = patch_nav(6)
+    learner = learner_for(nav)
+    obs = env_observations(nav, n=8)
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        learner.add({
+            "obs": obs, "action": rng.integers(0, 5, 8), "reward": rng.normal(size=8).astype(np.float32),
+            "next_obs": obs[::-1].copy(), "terminated": np.zeros(8, bool), "truncated": np.zeros(8, bool),
+        })  # fmt: skip
+    learner.update(4)
+    # the actor's policy is built from what travels on the wire: weights and a JSON architecture
+    wire = json.loads(json.dumps(learner.architecture))
+    policy = NNQLPolicy(learner.get_weights(), wire, version=learner.version)
+    assert isinstance(policy.forward, TorchForward)
+    np.testing.assert_allclose(policy.q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6)
+    before = policy.q_values(obs)
+    learner.update(2)
+    policy.set_weights(learner.get_weights(), learner.version)
+    assert not np.allclose(policy.q_values(obs), before)
+    np.testing.assert_allclose(policy.q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6)
+
+
+def test_saved_policy_records_the_cnn_and_evaluates_identically_after_reload(tmp_path):
+    nav = patch_nav(6)
+    learner = learner_for(nav)
+    learner.save_policy(tmp_path / "p")
+    config = json.loads((tmp_path / "p" / "config.json").read_text())
+    patch = config["architecture"]["patch"]
+    assert patch["size"] == 6 and patch["channels"] == [4, 4] and patch["start"] == 11
+    assert config["observation"]["observation.patch_size"] == 6
+    episodes = make_eval_set("unseen", 6, seed=2)
+    runs = [
+        evaluate(learner.policy(), episodes, config=nav),
+        evaluate(NNQLPolicy.load(tmp_path / "p"), episodes, config=nav),
+        evaluate(load_policy(tmp_path / "p"), episodes),  # `navlearn evaluate`'s loader
+    ]
+    traces = [[(e.outcome, e.steps, e.path_length) for e in r.episodes["unseen"]] for r in runs]
+    assert traces[0] == traces[1] == traces[2]
+
+
+def test_bad_values_raise_value_errors_naming_the_field():
+    with pytest.raises(ValueError, match="cnn_channels"):
+        NNQLConfig(cnn_channels=(8, 0))
+    with pytest.raises(ValueError, match="cnn_strides"):
+        NNQLConfig(cnn_strides=(1,))
+    with pytest.raises(ValueError, match="cnn_kernel_sizes"):
+        NNQLConfig(cnn_kernel_sizes=())
+    with pytest.raises(ValueError, match="q_network"):
+        NNQLConfig(q_network="cnn")
+    with pytest.raises(ValueError, match="patch_size"):
+        ObservationConfig(patch_size=-1)
+    net = PatchQNetwork({"obs_dim": 83, "n_actions": 5, "hidden_sizes": [8], "activation": "relu",
+                         "patch": {"size": 6, "start": 11, "frame_dim": 83, "frames": 1, "channels": [4],
+                                   "kernel_sizes": [3], "strides": [1]}})  # fmt: skip
+    with pytest.raises(ValueError, match="patch"):
+        PatchQNetwork({**net.architecture, "obs_dim": 84})
+    with pytest.raises(ValueError, match="too small"):  # default CNN: 3x3 stride 2, then 3x3
+        build_q_network(NNQLConfig(), 43, 5, observation_settings(patch_nav(4)))
+    weights = {k: v.numpy() for k, v in net.state_dict().items()}
+    weights["cnn.0.weight"] = weights["cnn.0.weight"][:2]
+    with pytest.raises(ValueError, match="do not fit"):
+        NNQLPolicy(weights, net.architecture)
+
+
+def test_train_local_cli_patch_option(tmp_path, capsys):
+    assert main(["train", "--local", "--patch", "-2"]) == 2
+    assert "patch_size" in capsys.readouterr().err
+    out = tmp_path / "f"
+    argv = ["train", "--local", "--patch", "8", "--no-subgoal", "--steps", "600", "--envs", "4",
+            "--out", str(out), "--eval-every", "0", "--final-eval-episodes", "0", "--hidden", "16",
+            "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["architecture"]["patch"]["size"] == 8
+    assert config["observation"]["observation.subgoal"] == "none"
+    assert config["nnql_config"]["q_network"] == "auto"
+
+
+def test_an_actor_process_runs_a_cnn_policy_on_one_torch_thread(tmp_path):
+    """Loading a CNN policy brings torch in (MLP actors never do); it then runs on one thread."""
+    import subprocess
+    import sys
+
+    learner_for(patch_nav(6)).save_policy(tmp_path / "p")
+    script = (
+        "import sys\n"
+        "from agents.nnql.policy import NNQLPolicy\n"
+        "assert 'torch' not in sys.modules\n"
+        f"policy = NNQLPolicy.load({str(tmp_path / 'p')!r})\n"
+        "import torch\n"
+        "print(torch.get_num_threads())\n"
+    )
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split()[-1] == "1"
+
+
+def test_world_show_draws_the_patch(tmp_path, capsys):
+    assert main(["world", "show", "--patch", "-1"]) == 2
+    assert "--patch" in capsys.readouterr().err
+    out = tmp_path / "w.png"
+    assert main(["world", "show", "--learning", "--patch", "8", "--steps", "5", "--out", str(out)]) == 0
+    assert out.stat().st_size > 0
