@@ -124,7 +124,7 @@ def build_q_network(
     if layout is None:
         return QNetwork.from_config(config, obs_dim, n_actions)
     if config.dueling:
-        raise ValueError("NNQLConfig.dueling: the patch CNN has a plain head; use q_network='mlp' or no dueling")
+        raise ValueError("NNQLConfig.dueling: the patch CNN has a plain head (q_network='mlp' or no dueling)")
     return PatchQNetwork({
         "obs_dim": obs_dim, "n_actions": n_actions, "hidden_sizes": config.hidden_sizes,
         "activation": config.activation,
