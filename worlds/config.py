@@ -142,6 +142,9 @@ class ObstacleConfig:
     """longest patrol segment (m); shortened so the disc never touches a wall"""
     spawn_clearance: float = 1.5
     """no disc starts closer than this to the robot's start (m, between the disc edges)"""
+    mix: bool = False
+    """draw each episode's disc count uniformly from 0..count (a training mix of static and crowded
+    episodes; evaluation sets keep a fixed count)"""
 
     def __post_init__(self) -> None:
         _check(
@@ -319,3 +322,12 @@ LEARNING_NAV = NavConfig(
 evaluator and demonstrator of ``navlearn up``): 24 sector minima of 96 rays, the goal, the subgoal
 from the robot's own map, trained with the geodesic progress reward - the winner on validation
 success of the observation ablation (``bench/perception.py``, variant "D+geo"; bench/RESULTS.md)"""
+
+
+def with_moving_discs(nav: NavConfig, count: int) -> NavConfig:
+    """``nav`` whose episodes each have 0..``count`` moving discs (uniform, the evaluation sets'
+    disc settings otherwise): training that sees the dynamic set's crowds. ``count`` 0: ``nav``."""
+    _check(count >= 0, f"moving discs must be >= 0, got {count}")
+    if count == 0:
+        return nav
+    return replace(nav, obstacles=replace(nav.obstacles, count=count, mix=True))

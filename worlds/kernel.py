@@ -63,6 +63,7 @@ P_STEP, P_RADIUS, P_TNOISE, P_RNOISE, P_HEADINGS, P_MAXR, P_SNOISE = range(7)
 P_DROP, P_RGOAL, P_RCOLL, P_RSTEP, P_RPROG, P_MAXSTEPS, P_GOALTOL = range(7, 14)
 P_OCOUNT, P_ORAD, P_OSPEED, P_OPATROL, P_OLENGTH, P_OSPAWN = range(14, 20)
 P_PER = 20  # rays per range reading (sector)
+P_OMIX = 21  # 1.0: each episode draws its disc count from 0..P_OCOUNT
 
 RUNNING, GOAL = int(Outcome.RUNNING), int(Outcome.GOAL)
 HIT_STATIC, HIT_DYNAMIC, TIMEOUT = (
@@ -86,7 +87,7 @@ def make_params(config: NavConfig) -> np.ndarray:
         config.goal_tolerance,
     ]
     values += [o.count, o.radius, o.speed, float(o.mode == "patrol"), o.patrol_length, o.spawn_clearance]
-    values += [s.rays_per_beam]
+    values += [s.rays_per_beam, float(o.mix)]
     return np.asarray(values, dtype=np.float64)
 
 
@@ -278,6 +279,8 @@ def _reset(
         ocount[i] = 0
     elif not keep_discs:
         count = min(int(params[P_OCOUNT]), ox.shape[1])
+        if params[P_OMIX] > 0.0:
+            count = randint(rng, i, count + 1)
         spec = (count, params[P_ORAD], params[P_OSPEED], params[P_OPATROL] > 0.0, params[P_OLENGTH])
         keep_out = params[P_RADIUS] + params[P_ORAD] + params[P_OSPAWN]
         ocount[i] = place_discs(

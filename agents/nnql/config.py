@@ -56,6 +56,12 @@ class NNQLConfig:
     """Polyak factor of soft target updates"""
     target_period: int = 500
     """updates between hard target copies"""
+    n_step: int = 1
+    """bootstrap after n steps: target sum_k<n gamma^k r_k + gamma^n Q(s_n) (Ape-X / Rainbow); the learner
+    builds the returns per (actor, robot) stream, stopping at episode ends (agents/nnql/nstep.py)"""
+    dueling: bool = False
+    """dueling head: Q = V(s) + A(s, a) - mean_a A(s, a) over the last hidden layer (Wang et al. 2016);
+    saved and shipped folded into one linear layer, so actors run the plain MLP forward"""
     double_q: bool = True
     """double Q-learning: the online network picks the next action, the target network values it"""
     sarsa: bool = False
@@ -134,6 +140,10 @@ class NNQLConfig:
             raise ValueError("NNQLConfig: need 0 < target_tau <= 1 and target_period >= 1")
         if min(self.temperature_start, self.temperature_end) <= 0:
             raise ValueError("NNQLConfig: Boltzmann temperatures must be > 0")
+        if isinstance(self.n_step, bool) or int(self.n_step) != self.n_step or self.n_step < 1:
+            raise ValueError(f"NNQLConfig.n_step={self.n_step!r}: expected an integer >= 1")
+        if self.sarsa and self.n_step > 1:
+            raise ValueError("NNQLConfig.n_step: SARSA bootstraps one step ahead; use n_step=1 with sarsa")
         for name in ("lstm_size", "seq_len", "sequences"):
             if getattr(self, name) < 1:
                 raise ValueError(f"NNQLConfig.{name}={getattr(self, name)}: expected >= 1")
@@ -141,6 +151,8 @@ class NNQLConfig:
             raise ValueError(f"NNQLConfig.burn_in={self.burn_in}: expected >= 0")
         if self.recurrent and (self.sarsa or self.prioritized):
             raise ValueError("NNQLConfig.recurrent: uniform sequence replay; no sarsa/prioritized")
+        if self.recurrent and (self.n_step > 1 or self.dueling):
+            raise ValueError("NNQLConfig.recurrent: one-step targets and a plain head; no n_step/dueling")
         if self.sarsa and self.double_q:
             raise ValueError("NNQLConfig: sarsa bootstraps on the taken action; set double_q=False")
 

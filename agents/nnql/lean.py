@@ -51,6 +51,8 @@ class Batch(NamedTuple):
     """the action taken next (SARSA only)"""
     weight: torch.Tensor | None = None
     """importance-sampling weights (prioritized replay only)"""
+    discount: torch.Tensor | None = None
+    """factor of the bootstrap per transition, gamma^m (n-step returns only; else config.gamma)"""
 
     @classmethod
     def from_tensordict(cls, td: TensorDictBase, weight: torch.Tensor | None = None) -> Batch:
@@ -58,6 +60,7 @@ class Batch(NamedTuple):
         following = td.get("next")
         n = td.batch_size[0]
         next_action = following.get("action", None)
+        discount = following.get("discount", None)
         return cls(
             obs=td.get("observation"),
             action=td.get("action").reshape(n),
@@ -66,6 +69,7 @@ class Batch(NamedTuple):
             terminated=following.get("terminated").reshape(n),
             next_action=None if next_action is None else next_action.reshape(n),
             weight=None if weight is None else weight.reshape(n),
+            discount=None if discount is None else discount.reshape(n),
         )
 
     def to(self, device: torch.device) -> Batch:
@@ -130,7 +134,8 @@ class LeanUpdate:
         """The TD loss (reduced as DQNLoss reduces it) and the squared TD error per transition."""
         predicted = self.network(batch.obs).gather(-1, batch.action.long().unsqueeze(-1)).squeeze(-1)
         with torch.no_grad():
-            target = td_target(batch.reward, batch.terminated, self.next_value(batch), self.config.gamma)
+            gamma = self.config.gamma if batch.discount is None else batch.discount
+            target = td_target(batch.reward, batch.terminated, self.next_value(batch), gamma)
             priority = (predicted - target).pow(2)
         distance = distance_loss(predicted, target, self.config.loss_function)
         if batch.weight is None:

@@ -36,7 +36,8 @@ from agents.device import resolve_device
 from agents.nnql.config import NNQLConfig
 from agents.nnql.lean import Batch, LeanUpdate, Step
 from agents.nnql.losses import PRIORITY_KEY, make_loss
-from agents.nnql.networks import make_q_actor
+from agents.nnql.networks import export_weights, import_weights, make_q_actor
+from agents.nnql.nstep import NStepAccumulator
 from agents.nnql.patch_network import build_q_network
 from agents.nnql.policy import NNQLPolicy, save_policy_dir
 from agents.nnql.replay_storage import (
@@ -52,7 +53,9 @@ from agents.replay_files import load_replay, save_replay
 TRANSITION_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "truncated")
 """Flat transition batch (the field names of protocols' TransitionBatch): float32 (N, obs_dim), int (N,),
 float (N,), float32 (N, obs_dim) - the true next observation, terminal one at episode ends -, bool (N,),
-bool (N,); plus ``next_action`` int (N,) for the SARSA variant."""
+bool (N,); plus ``next_action`` int (N,) for the SARSA variant, ``env_ids`` int (N,) for n-step returns
+(agents/nnql/nstep.py) and, once those are built, ``discount`` float32 (N,): the bootstrap's factor."""
+OPTIONAL_FIELDS = ("next_action", "env_ids", "discount")
 CHECKPOINT_STATE = "learner.pt"
 CHECKPOINT_REPLAY = "replay"
 CHECKPOINT_POLICY = "policy"
@@ -69,12 +72,15 @@ def _flat_fields(batch: Any) -> dict[str, Any]:
             "terminated": batch.get(("next", "terminated")),
             "truncated": batch.get(("next", "truncated"), torch.zeros(batch.batch_size[0], dtype=torch.bool)),
         }
-        if ("next", "action") in batch.keys(include_nested=True):
-            flat["next_action"] = batch.get(("next", "action"))
+        for key, name in ((("next", "action"), "next_action"), (("next", "discount"), "discount")):
+            if key in batch.keys(include_nested=True):
+                flat[name] = batch.get(key)
         return flat
     if not isinstance(batch, Mapping):  # e.g. a protocols.messages.TransitionBatch
         batch = {
-            name: getattr(batch, name) for name in (*TRANSITION_FIELDS, "next_action") if hasattr(batch, name)
+            name: getattr(batch, name)
+            for name in (*TRANSITION_FIELDS, *OPTIONAL_FIELDS)
+            if hasattr(batch, name)
         }
     missing = [name for name in TRANSITION_FIELDS if name not in batch]
     if missing:
@@ -101,6 +107,8 @@ def transitions_to_tensordict(batch: Any, obs_dim: int) -> TensorDict:
         "truncated": truncated,
         "done": terminated | truncated,
     }
+    if "discount" in flat:
+        following["discount"] = torch.as_tensor(np.asarray(flat["discount"], dtype=np.float32)).reshape(n, 1)
     if "next_action" in flat:
         following["action"] = torch.as_tensor(np.asarray(flat["next_action"], dtype=np.int64)).reshape(n)
     return TensorDict(
@@ -154,6 +162,8 @@ class NNQLLearner:
         self.replay_rng = torch.Generator().manual_seed(config.seed)
         self.replay = self._make_replay(replay_dir)
         self._stored: Batch | None = None
+        self.nstep = NStepAccumulator(config.n_step, config.gamma) if config.n_step > 1 else None
+        """builds n-step transitions per (actor, env_id) stream when ``config.n_step > 1``"""
         self.updates = 0
         self.transitions_added = 0
 
@@ -190,7 +200,17 @@ class NNQLLearner:
         return self.updates
 
     def add(self, batch: Any) -> int:
-        """Insert a batch of transitions; returns how many were added."""
+        """Insert a batch of transitions; returns how many were added.
+
+        With ``n_step > 1`` the batch needs ``env_ids`` (and an ``actor`` name when several actors
+        feed the learner: a TransitionBatch has both); what is added are the n-step transitions
+        that became complete, which lag the one-step ones by up to n - 1 per stream."""
+        if self.nstep is not None:
+            flat = _flat_fields(batch)
+            if "env_ids" not in flat:
+                raise KeyError("n-step returns need env_ids in every transition batch")
+            actor = batch.get("actor", "") if isinstance(batch, Mapping) else getattr(batch, "actor", "")
+            batch = self.nstep(flat, str(actor))
         td = transitions_to_tensordict(batch, self.architecture["obs_dim"])
         if self.config.sarsa and ("next", "action") not in td.keys(include_nested=True):
             raise KeyError("the SARSA variant needs next_action in every transition batch")
@@ -266,6 +286,10 @@ class NNQLLearner:
         The reference path: ``update`` runs the same arithmetic on plain tensors, and
         tests/test_nnql_lean.py holds the two to the same parameters on the same batches.
         """
+        if self.config.n_step > 1:
+            raise ValueError(
+                "train_step is the TD(0) reference (TorchRL's DQNLoss); n-step targets are update()'s"
+            )
         batch = batch.to(self.device)
         loss = self.loss(batch)["loss"]
         self.optimizer.zero_grad(set_to_none=True)
@@ -295,14 +319,11 @@ class NNQLLearner:
 
     def get_weights(self) -> dict[str, np.ndarray]:
         """Online-network weights as float32 arrays (the payload of a WeightsUpdate)."""
-        return {name: t.detach().cpu().numpy().copy() for name, t in self.network.state_dict().items()}
+        return export_weights(self.network)
 
     def set_weights(self, weights: Mapping[str, np.ndarray], sync_target: bool = True) -> None:
         """Load online weights (e.g. a warm start); by default the target network copies them too."""
-        state = {
-            name: torch.as_tensor(np.asarray(value), device=self.device) for name, value in weights.items()
-        }
-        self.network.load_state_dict(state)
+        import_weights(self.network, weights)
         if sync_target:
             self.loss.target_value_network_params.data.update_(self.loss.value_network_params.data)
 

@@ -23,9 +23,10 @@ PRIORITY_KEY = "td_error"
 
 
 def td_target(
-    reward: torch.Tensor, terminated: torch.Tensor, next_value: torch.Tensor, gamma: float
+    reward: torch.Tensor, terminated: torch.Tensor, next_value: torch.Tensor, gamma: float | torch.Tensor
 ) -> torch.Tensor:
-    """One-step TD target r + gamma * (1 - terminated) * V(s').
+    """One-step TD target r + gamma * (1 - terminated) * V(s'); with n-step transitions (agents/nnql/nstep.py)
+    r is the discounted n-step return and ``gamma`` the per-transition factor gamma^m.
 
     Truncated (time-limit) transitions are not terminated: they bootstrap, as they
     should - the episode was cut, the state still has a future. For Q-learning V(s')

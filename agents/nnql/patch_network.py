@@ -123,6 +123,8 @@ def build_q_network(
     layout = patch_layout(observation) if config.q_network == "auto" else None
     if layout is None:
         return QNetwork.from_config(config, obs_dim, n_actions)
+    if config.dueling:
+        raise ValueError("NNQLConfig.dueling: the patch CNN has a plain head (q_network='mlp' or no dueling)")
     return PatchQNetwork({
         "obs_dim": obs_dim, "n_actions": n_actions, "hidden_sizes": config.hidden_sizes,
         "activation": config.activation,

@@ -27,7 +27,7 @@ from agents.nnql.ratelimit import RateLimiter
 from agents.nnql.recurrent_learner import RecurrentNNQLLearner
 from agents.nnql.recurrent_rollout import RecurrentRollout
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
-from worlds.config import LEARNING_NAV, NavConfig, observation_settings
+from worlds.config import LEARNING_NAV, NavConfig, observation_settings, with_moving_discs
 from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
@@ -45,6 +45,8 @@ class LocalTrainConfig:
     """robots stepped together in the vector env"""
     maps: str = "mixed:16"
     """training map spec (worlds.tasks.parse_map_spec)"""
+    moving_discs: int = 0
+    """each training episode has 0..moving_discs moving discs, uniform (0: none; the dynamic set has 4)"""
     seed: int = 0
     """seeds the env, the learner and the exploration"""
     out: str = "runs/nnql-local"
@@ -104,10 +106,10 @@ def train_local(
     nnql: NNQLConfig | None = None,
     nav: NavConfig | None = None,
 ) -> TrainResult:
-    """Train NNQL for ``run.steps`` robot-steps in ``nav`` (default :data:`worlds.config.LEARNING_NAV`);
-    writes the outputs to ``run.out`` if set."""
+    """Train NNQL for ``run.steps`` robot-steps in ``nav`` (default :data:`worlds.config.LEARNING_NAV`
+    with ``run.moving_discs``); writes the outputs to ``run.out`` if set."""
     nnql = nnql or NNQLConfig(seed=run.seed)
-    nav = nav or LEARNING_NAV
+    nav = nav or with_moving_discs(LEARNING_NAV, run.moving_discs)
     env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
     obs_dim = int(env.single_observation_space.shape[0])
     n_actions = int(env.single_action_space.n)
@@ -126,6 +128,7 @@ def train_local(
     # The learner service's rate logic, with no slack: one update per 1 / utd_ratio transitions once
     # the replay holds learning_starts (and a batch).
     limiter = RateLimiter(nnql.utd_ratio, max(nnql.learning_starts, nnql.batch_size), tolerance=1.0)
+    env_ids = np.arange(run.envs, dtype=np.int32)  # the streams of n-step returns
 
     recent: deque[EpisodeEnd] = deque(maxlen=200)
     curve: list[dict[str, float]] = []
@@ -140,7 +143,7 @@ def train_local(
     while rollout.steps < run.steps:
         batch, ended = rollout.step()
         recent.extend(ended)
-        limiter.inserted(learner.add(batch))
+        limiter.inserted(learner.add({**batch, "env_ids": env_ids}))
         due = limiter.updates_allowed(len(learner.replay))
         if due:
             t0 = time.perf_counter()

@@ -44,7 +44,7 @@ from services.common.outbox import Outbox, decode_ack
 from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.common.warmup import COMPILE_NOTE
 from services.common.weights import WeightsReceiver
-from worlds.config import LEARNING_NAV
+from worlds.config import LEARNING_NAV, with_moving_discs
 from worlds.vector_env import NavigationVectorEnv
 
 log = logging.getLogger("navlearn.actor")
@@ -299,7 +299,8 @@ def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Even
     keys.check_name(config.id, "actor id")
     seed = config.seed if config.seed is not None else seed_for(config.id)
     log.info("actor %s: building %d robots on %s (%s)", config.id, config.envs, config.maps, COMPILE_NOTE)
-    env = NavigationVectorEnv(config.envs, config=LEARNING_NAV, maps=config.maps, seed=seed)
+    nav = with_moving_discs(LEARNING_NAV, config.moving_discs)
+    env = NavigationVectorEnv(config.envs, config=nav, maps=config.maps, seed=seed)
     limits = Limits(n_actions=int(env.single_action_space.n))
     with contextlib.closing(env):
         session = open_session(settings, stop=stop)

@@ -15,6 +15,8 @@ class ActorConfig:
     """robots stepped together in the vector env"""
     maps: str = "mixed:16"
     """training map spec (worlds.tasks): rooms:16, rects:24x32, maze:15, mixed:16, a .map/.scen path"""
+    moving_discs: int = 0
+    """each episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
     seed: int | None = None
     """env and exploration seed; empty: derived from the actor id (give each actor its own)"""
     model: str = "nnql"

@@ -62,6 +62,18 @@ def register(subparsers) -> None:
         "--utd-ratio", type=float, default=defaults.utd_ratio, help="gradient updates per transition"
     )
     parser.add_argument("--prioritized", action="store_true", help="prioritized replay (PrioritizedSampler)")
+    parser.add_argument(
+        "--n-step", type=int, default=defaults.n_step, help="n-step returns (1: one-step Q-learning)"
+    )
+    parser.add_argument(
+        "--dueling", action="store_true", help="dueling head: Q = V + A - mean(A) (saved folded)"
+    )
+    parser.add_argument(
+        "--moving-discs",
+        type=int,
+        default=0,
+        help="train with 0..N moving discs per episode, uniform (the dynamic test set has 4)",
+    )
     parser.add_argument("--sarsa", action="store_true", help="SARSA: bootstrap on the next action taken")
     parser.add_argument(
         "--recurrent",
@@ -127,6 +139,8 @@ def run(args: argparse.Namespace) -> int:
             batch_size=args.batch_size,
             utd_ratio=args.utd_ratio,
             prioritized=args.prioritized,
+            n_step=args.n_step,
+            dueling=args.dueling,
             sarsa=args.sarsa,
             double_q=not args.sarsa,
             exploration="epsilon" if args.epsilon_greedy else "boltzmann",
@@ -141,6 +155,8 @@ def run(args: argparse.Namespace) -> int:
         nav = observation_of(args)
         if args.steps < 1 or args.envs < 1:
             raise ValueError("--steps and --envs must be positive")
+        if args.moving_discs < 0:
+            raise ValueError("--moving-discs must be >= 0")
         resolve_device(args.device)
         from worlds.tasks import parse_map_spec
 
@@ -155,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
         steps=args.steps,
         envs=args.envs,
         maps=args.maps,
+        moving_discs=args.moving_discs,
         seed=args.seed,
         out=args.out,
         eval_every=args.eval_every,

@@ -183,6 +183,8 @@ class Up:
                     str(cfg.envs),
                     "--maps",
                     cfg.maps,
+                    "--moving-discs",
+                    str(cfg.moving_discs),
                     "--seed",
                     str(cfg.seed + i),
                     *self._recurrent_actor(),

@@ -24,6 +24,8 @@ class UpConfig:
     """robots per actor"""
     maps: str = "mixed:16"
     """training map spec for the actors (worlds.tasks)"""
+    moving_discs: int = 0
+    """each actor episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
     seed: int = 0
     """seed of the learner (network, replay sampling); actor i uses seed + i"""
     duration: float = 90.0
