@@ -53,7 +53,8 @@ import numpy as np
 import torch
 
 from agents.nnql.config import NNQLConfig
-from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
+from agents.nnql.learner import NNQLLearner
+from agents.nnql.transitions import transitions_to_tensordict
 from bench._capacity_roles import RUN, actor_batch
 from bench._common import N_ACTIONS, OBS_DIM, free_port, process_cpu, settings, spawn, stop, wait_ready
 from protocols.codec import decode, encode

@@ -63,10 +63,11 @@ from agents.nirl.losses import max_margin_loss
 from agents.nirl.max_margin import Q_KEYS
 from agents.nirl.train_local import train_nirl
 from agents.nnql.config import NNQLConfig
-from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
+from agents.nnql.learner import NNQLLearner
 from agents.nnql.ratelimit import RateLimiter
 from agents.nnql.rollout import VectorRollout
 from agents.nnql.train_local import LocalTrainConfig, train_local
+from agents.nnql.transitions import transitions_to_tensordict
 from agents.planning.demonstrate import generate_demos
 from bench._common import machine_load
 from bench._nirl_report import FAMILIES, METHODS, SETS, report

@@ -7,8 +7,9 @@ import pytest
 import torch
 
 from agents.nnql.config import NNQLConfig
-from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
+from agents.nnql.learner import NNQLLearner
 from agents.nnql.losses import td_target
+from agents.nnql.transitions import transitions_to_tensordict
 
 OBS_DIM, N_ACTIONS, GAMMA = 4, 3, 0.9
 

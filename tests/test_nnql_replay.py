@@ -7,8 +7,9 @@ import pytest
 import torch
 
 from agents.nnql.config import NNQLConfig
-from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
+from agents.nnql.learner import NNQLLearner
 from agents.nnql.ratelimit import RateLimiter
+from agents.nnql.transitions import transitions_to_tensordict
 
 OBS_DIM, N_ACTIONS = 6, 3
 

@@ -36,8 +36,9 @@ from agents.nirl.losses import KEEP, Refinement, map_posterior, refine_steps, st
 from agents.nirl.max_margin import MaxMarginFit
 from agents.nirl.networks import RewardNetwork
 from agents.nirl.soft_q import SoftQFit
-from agents.nnql.learner import NNQLLearner, transitions_to_tensordict
+from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
+from agents.nnql.transitions import transitions_to_tensordict
 from worlds.config import NavConfig, observation_settings
 from worlds.perception import observation_dim
 

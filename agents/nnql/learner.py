@@ -14,21 +14,19 @@ do not copy the buffer).
 
 Transitions come as a TensorDict in TorchRL's layout (``observation``, ``action``,
 ``("next", "observation"|"reward"|"done"|"terminated"|"truncated")``), as a flat
-dict of arrays (see ``TRANSITION_FIELDS``) or as any object with those attributes (a
+dict of arrays (see ``agents.nnql.transitions``) or as any object with those attributes (a
 protocols TransitionBatch), N transitions per call.
 """
 
 from __future__ import annotations
 
-import os
-import shutil
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDictBase
 from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
 from torchrl.objectives import HardUpdate, SoftUpdate
 
@@ -39,7 +37,8 @@ from agents.nnql.losses import PRIORITY_KEY, make_loss
 from agents.nnql.networks import export_weights, import_weights, make_q_actor
 from agents.nnql.nstep import NStepAccumulator
 from agents.nnql.patch_network import build_q_network
-from agents.nnql.policy import NNQLPolicy, save_policy_dir
+from agents.nnql.persistence import CHECKPOINT_STATE, LearnerOutputs
+from agents.nnql.policy import NNQLPolicy
 from agents.nnql.replay_storage import (
     columns,
     has_memmap_state,
@@ -48,80 +47,11 @@ from agents.nnql.replay_storage import (
     make_storage,
     save_memmap,
 )
+from agents.nnql.transitions import flat_fields, transitions_to_tensordict
 from agents.replay_files import load_replay, save_replay
 
-TRANSITION_FIELDS = ("obs", "action", "reward", "next_obs", "terminated", "truncated")
-"""Flat transition batch (the field names of protocols' TransitionBatch): float32 (N, obs_dim), int (N,),
-float (N,), float32 (N, obs_dim) - the true next observation, terminal one at episode ends -, bool (N,),
-bool (N,); plus ``next_action`` int (N,) for the SARSA variant, ``env_ids`` int (N,) for n-step returns
-(agents/nnql/nstep.py) and, once those are built, ``discount`` float32 (N,): the bootstrap's factor."""
-OPTIONAL_FIELDS = ("next_action", "env_ids", "discount")
-CHECKPOINT_STATE = "learner.pt"
-CHECKPOINT_REPLAY = "replay"
-CHECKPOINT_POLICY = "policy"
 
-
-def _flat_fields(batch: Any) -> dict[str, Any]:
-    """The flat fields of a TorchRL-layout TensorDict, a mapping, or an object with those attributes."""
-    if isinstance(batch, TensorDictBase):
-        flat = {
-            "obs": batch.get("observation"),
-            "action": batch.get("action"),
-            "reward": batch.get(("next", "reward")),
-            "next_obs": batch.get(("next", "observation")),
-            "terminated": batch.get(("next", "terminated")),
-            "truncated": batch.get(("next", "truncated"), torch.zeros(batch.batch_size[0], dtype=torch.bool)),
-        }
-        for key, name in ((("next", "action"), "next_action"), (("next", "discount"), "discount")):
-            if key in batch.keys(include_nested=True):
-                flat[name] = batch.get(key)
-        return flat
-    if not isinstance(batch, Mapping):  # e.g. a protocols.messages.TransitionBatch
-        batch = {
-            name: getattr(batch, name)
-            for name in (*TRANSITION_FIELDS, *OPTIONAL_FIELDS)
-            if hasattr(batch, name)
-        }
-    missing = [name for name in TRANSITION_FIELDS if name not in batch]
-    if missing:
-        raise KeyError(f"transition batch lacks {missing}")
-    return dict(batch)
-
-
-def transitions_to_tensordict(batch: Any, obs_dim: int) -> TensorDict:
-    """A transition batch (see ``_flat_fields``) as a replay-ready TensorDict in TorchRL's layout."""
-    flat = _flat_fields(batch)
-    n = len(flat["action"])
-    obs = torch.as_tensor(np.asarray(flat["obs"], dtype=np.float32))
-    next_obs = torch.as_tensor(np.asarray(flat["next_obs"], dtype=np.float32))
-    if obs.shape != (n, obs_dim) or next_obs.shape != (n, obs_dim):
-        raise ValueError(
-            f"observations must be ({n}, {obs_dim}); got {tuple(obs.shape)}, {tuple(next_obs.shape)}"
-        )
-    terminated = torch.as_tensor(np.asarray(flat["terminated"], dtype=bool)).reshape(n, 1)
-    truncated = torch.as_tensor(np.asarray(flat["truncated"], dtype=bool)).reshape(n, 1)
-    following = {
-        "observation": next_obs,
-        "reward": torch.as_tensor(np.asarray(flat["reward"], dtype=np.float32)).reshape(n, 1),
-        "terminated": terminated,
-        "truncated": truncated,
-        "done": terminated | truncated,
-    }
-    if "discount" in flat:
-        following["discount"] = torch.as_tensor(np.asarray(flat["discount"], dtype=np.float32)).reshape(n, 1)
-    if "next_action" in flat:
-        following["action"] = torch.as_tensor(np.asarray(flat["next_action"], dtype=np.int64)).reshape(n)
-    return TensorDict(
-        {
-            "observation": obs,
-            "action": torch.as_tensor(np.asarray(flat["action"], dtype=np.int64)).reshape(n),
-            "next": TensorDict(following, batch_size=[n]),
-        },
-        batch_size=[n],
-    )
-
-
-class NNQLLearner:
+class NNQLLearner(LearnerOutputs):
     """Q-learning (or SARSA) over a TorchRL replay buffer.
 
     ``add(batch)`` inserts transitions; ``update(n)`` runs n updates (how many, the caller's
@@ -190,15 +120,6 @@ class NNQLLearner:
 
     # ------------------------------------------------------------ data in
 
-    @property
-    def architecture(self) -> dict[str, Any]:
-        return dict(self.network.architecture)
-
-    @property
-    def version(self) -> int:
-        """Policy version: the number of gradient updates so far."""
-        return self.updates
-
     def add(self, batch: Any) -> int:
         """Insert a batch of transitions; returns how many were added.
 
@@ -206,7 +127,7 @@ class NNQLLearner:
         feed the learner: a TransitionBatch has both); what is added are the n-step transitions
         that became complete, which lag the one-step ones by up to n - 1 per stream."""
         if self.nstep is not None:
-            flat = _flat_fields(batch)
+            flat = flat_fields(batch)
             if "env_ids" not in flat:
                 raise KeyError("n-step returns need env_ids in every transition batch")
             actor = batch.get("actor", "") if isinstance(batch, Mapping) else getattr(batch, "actor", "")
@@ -332,14 +253,6 @@ class NNQLLearner:
         kwargs.setdefault("observation", self.observation)
         return NNQLPolicy(self.get_weights(), self.architecture, version=self.version, **kwargs)
 
-    def save_policy(self, path: str | Path, **metadata: Any) -> Path:
-        """model.safetensors + config.json (loadable by NNQLPolicy.load and `navlearn evaluate`), with
-        the observation settings when known."""
-        metadata.setdefault("nnql_config", self.config.to_dict())
-        if self.observation is not None:
-            metadata.setdefault("observation", self.observation)
-        return save_policy_dir(path, self.get_weights(), self.architecture, self.version, **metadata)
-
     # ------------------------------------------------------------ checkpoints
 
     def state_dict(self) -> dict[str, Any]:
@@ -393,15 +306,6 @@ class NNQLLearner:
         elif path.exists():
             load_replay(self.replay, path)
 
-    def save_checkpoint(self, path: str | Path) -> Path:
-        """A directory with learner.pt, replay/ and policy/, replaced atomically."""
-        return write_checkpoint(self, path)
-
-    def load_checkpoint(self, path: str | Path) -> None:
-        path = Path(path)
-        self.load_state_dict(torch.load(path / CHECKPOINT_STATE, map_location=self.device, weights_only=True))
-        self.load_replay(path / CHECKPOINT_REPLAY)
-
     @classmethod
     def from_checkpoint(
         cls, path: str | Path, device: str = "cpu", replay_dir: str | Path | None = None
@@ -415,21 +319,3 @@ class NNQLLearner:
                       observation=state.get("observation"))  # fmt: skip
         learner.load_checkpoint(path)
         return learner
-
-
-def write_checkpoint(learner: Any, path: str | Path) -> Path:
-    """``learner``'s checkpoint directory (``state_dict`` as learner.pt, ``save_replay`` into replay/,
-    ``save_policy`` into policy/), written beside ``path`` and swapped in atomically."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    torch.save(learner.state_dict(), tmp / CHECKPOINT_STATE)
-    learner.save_replay(tmp / CHECKPOINT_REPLAY)
-    learner.save_policy(tmp / CHECKPOINT_POLICY)
-    old = path.with_name(f".{path.name}.old{os.getpid()}")
-    if path.exists():
-        os.replace(path, old)
-    os.replace(tmp, path)
-    shutil.rmtree(old, ignore_errors=True)
-    return path

@@ -32,9 +32,8 @@ import torch.nn.functional as F
 
 from agents.device import resolve_device
 from agents.nnql.config import NNQLConfig
-from agents.nnql.learner import CHECKPOINT_REPLAY, CHECKPOINT_STATE, _flat_fields, write_checkpoint
 from agents.nnql.losses import td_target
-from agents.nnql.policy import save_policy_dir
+from agents.nnql.persistence import LearnerOutputs
 from agents.nnql.recurrent_net import RecurrentQNetwork, State
 from agents.nnql.recurrent_policy import RecurrentNNQLPolicy
 from agents.nnql.sequence_replay import (
@@ -44,12 +43,13 @@ from agents.nnql.sequence_replay import (
     StreamEpisodes,
     sequence_tensordict,
 )
+from agents.nnql.transitions import flat_fields
 from agents.replay_files import load_replay, save_replay
 
 LOSSES = {"l2": F.mse_loss, "smooth_l1": F.smooth_l1_loss, "l1": F.l1_loss}
 
 
-class RecurrentNNQLLearner:
+class RecurrentNNQLLearner(LearnerOutputs):
     """Double Q-learning of the recurrent Q-network over a sequence replay (see the module docstring)."""
 
     def __init__(
@@ -78,20 +78,12 @@ class RecurrentNNQLLearner:
         self.updates = 0
         self.transitions_added = 0
 
-    @property
-    def architecture(self) -> dict[str, Any]:
-        return dict(self.network.architecture)
-
-    @property
-    def version(self) -> int:
-        return self.updates
-
     # ------------------------------------------------------------ data in
 
     def add(self, batch: Any) -> int:
         """Insert N transitions with their sequence fields (a mapping or an object with those attributes,
         such as a protocols SequenceBatch); ``actor`` (attribute or key, "" if absent) names the stream."""
-        flat = _flat_fields(batch)
+        flat = flat_fields(batch)
         for name in (*SEQUENCE_FIELDS, "actor"):
             if name not in flat:
                 flat[name] = getattr(batch, name, "" if name == "actor" else None)
@@ -194,12 +186,6 @@ class RecurrentNNQLLearner:
         kwargs.setdefault("observation", self.observation)
         return RecurrentNNQLPolicy(self.get_weights(), self.architecture, version=self.version, **kwargs)
 
-    def save_policy(self, path: str | Path, **metadata: Any) -> Path:
-        metadata.setdefault("nnql_config", self.config.to_dict())
-        if self.observation is not None:
-            metadata.setdefault("observation", self.observation)
-        return save_policy_dir(path, self.get_weights(), self.architecture, self.version, **metadata)
-
     # ------------------------------------------------------------ checkpoints
 
     def state_dict(self) -> dict[str, Any]:
@@ -234,12 +220,3 @@ class RecurrentNNQLLearner:
             load_replay(self.replay, path)
             stored = self.replay.storage.get(torch.arange(len(self.replay)))
             self.streams.start_after(int(stored.get("episode").max()))
-
-    def save_checkpoint(self, path: str | Path) -> Path:
-        """learner.pt, replay/ and policy/ in a directory replaced atomically (as NNQLLearner's)."""
-        return write_checkpoint(self, path)
-
-    def load_checkpoint(self, path: str | Path) -> None:
-        path = Path(path)
-        self.load_state_dict(torch.load(path / CHECKPOINT_STATE, map_location=self.device, weights_only=True))
-        self.load_replay(path / CHECKPOINT_REPLAY)

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 from torchrl.data import LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
 
-from agents.nnql.learner import transitions_to_tensordict
+from agents.nnql.transitions import transitions_to_tensordict
 from agents.replay_files import load_replay, save_replay
 from protocols.messages import DemoBatch
 

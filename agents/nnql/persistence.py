@@ -1,0 +1,74 @@
+"""What both NNQL learners (feed-forward and recurrent) share about their outputs: the policy
+version, saved policies and checkpoint directories.
+
+A checkpoint is a directory: ``learner.pt`` (the learner's ``state_dict``), ``replay/`` (its
+``save_replay``) and ``policy/`` (its ``save_policy``), written beside its final path and swapped
+in atomically, so a crash leaves either the old checkpoint or the new one.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from agents.nnql.config import NNQLConfig
+from agents.nnql.policy import save_policy_dir
+
+CHECKPOINT_STATE = "learner.pt"
+CHECKPOINT_REPLAY = "replay"
+CHECKPOINT_POLICY = "policy"
+
+
+class LearnerOutputs:
+    """Mixin of an NNQL learner with ``config``, ``network`` (with an ``architecture``), ``observation``,
+    ``updates``, ``device`` and the methods ``get_weights``, ``state_dict`` / ``load_state_dict`` and
+    ``save_replay`` / ``load_replay``."""
+
+    config: NNQLConfig
+    network: torch.nn.Module
+    observation: dict[str, Any] | None
+    updates: int
+    device: torch.device
+
+    @property
+    def architecture(self) -> dict[str, Any]:
+        return dict(self.network.architecture)
+
+    @property
+    def version(self) -> int:
+        """Policy version: the number of gradient updates so far."""
+        return self.updates
+
+    def save_policy(self, path: str | Path, **metadata: Any) -> Path:
+        """model.safetensors + config.json (loadable by ``navlearn evaluate``), with the learner's
+        config and the observation settings when known."""
+        metadata.setdefault("nnql_config", self.config.to_dict())
+        if self.observation is not None:
+            metadata.setdefault("observation", self.observation)
+        return save_policy_dir(path, self.get_weights(), self.architecture, self.version, **metadata)
+
+    def save_checkpoint(self, path: str | Path) -> Path:
+        """A directory with learner.pt, replay/ and policy/, replaced atomically."""
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir(parents=True)
+        torch.save(self.state_dict(), tmp / CHECKPOINT_STATE)
+        self.save_replay(tmp / CHECKPOINT_REPLAY)
+        self.save_policy(tmp / CHECKPOINT_POLICY)
+        old = path.with_name(f".{path.name}.old{os.getpid()}")
+        if path.exists():
+            os.replace(path, old)
+        os.replace(tmp, path)
+        shutil.rmtree(old, ignore_errors=True)
+        return path
+
+    def load_checkpoint(self, path: str | Path) -> None:
+        """Inverse of save_checkpoint (the policy/ copy is for readers, not needed here)."""
+        path = Path(path)
+        self.load_state_dict(torch.load(path / CHECKPOINT_STATE, map_location=self.device, weights_only=True))
+        self.load_replay(path / CHECKPOINT_REPLAY)
