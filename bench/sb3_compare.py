@@ -108,6 +108,14 @@ def paired(a: dict, b: dict, name: str) -> dict:
     return {"only_nnql": only_a, "only_other": only_b, "p": mcnemar_exact(only_a, only_b)}
 
 
+def pooled_pairs(tests: list[dict]) -> dict:
+    """McNemar's exact test over every seed's episodes, each NNQL seed paired with the same seed of the
+    other learner (as bench/nirl.py pools its seeds)."""
+    only_a = sum(t["only_nnql"] for t in tests)
+    only_b = sum(t["only_other"] for t in tests)
+    return {"only_nnql": only_a, "only_other": only_b, "p": mcnemar_exact(only_a, only_b)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -142,6 +150,9 @@ def main() -> None:
                        if r["seed"] in nnql]
                 for name, _, _ in SETS
             }  # fmt: skip
+            entry["mcnemar_nnql_vs_pooled"] = {
+                name: pooled_pairs(tests) for name, tests in entry["mcnemar_nnql_vs"].items()
+            }
         report["algos"][algo] = entry
     others = [a for a in report["algos"] if a != "nnql"]
     if "nnql" in report["algos"] and others:
@@ -166,6 +177,9 @@ def main() -> None:
             for t in tests:
                 print(f"   nnql vs {algo}, {name}, seed {t['seed']}: only nnql {t['only_nnql']}, "
                       f"only {algo} {t['only_other']}, p = {t['p']:.3g}")  # fmt: skip
+        for name, t in e.get("mcnemar_nnql_vs_pooled", {}).items():
+            print(f"   nnql vs {algo}, {name}, seeds pooled: only nnql {t['only_nnql']}, "
+                  f"only {algo} {t['only_other']}, p = {t['p']:.3g}")  # fmt: skip
     if "target_met" in report:
         print(f"target (NNQL ahead of SB3's best, {report['sb3_best']}, p < 0.01, less wall time): "
               f"{'met' if report['target_met'] else 'not met'}")  # fmt: skip
