@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import copy
 import os
-import shutil
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -16,6 +15,7 @@ from safetensors.numpy import save_file
 from agents.mlp import save_policy
 from agents.nirl.config import FORMAT_VERSION
 from agents.nirl.networks import RewardNetwork
+from agents.nnql.persistence import replace_dir
 from agents.replay_files import load_replay, save_replay
 
 MODEL_NAME = "nirl"
@@ -102,20 +102,14 @@ def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
 def save_checkpoint(learner: Any, path: str | Path) -> Path:
     """A directory with q/ (the NNQLLearner checkpoint), nirl.pt (reward network, optimiser,
     counters) and demos/ when the learner owns its demonstration buffer; replaced atomically."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    learner.q.save_checkpoint(tmp / "q")
-    torch.save(learner.state_dict(), tmp / STATE_FILE)
-    if learner.owns_demos and len(learner.demos):
-        save_replay(learner.demos, tmp / "demos")
-    old = path.with_name(f".{path.name}.old{os.getpid()}")
-    if path.exists():
-        os.replace(path, old)
-    os.replace(tmp, path)
-    shutil.rmtree(old, ignore_errors=True)
-    return path
+
+    def write(tmp: Path) -> None:
+        learner.q.save_checkpoint(tmp / "q")
+        torch.save(learner.state_dict(), tmp / STATE_FILE)
+        if learner.owns_demos and len(learner.demos):
+            save_replay(learner.demos, tmp / "demos")
+
+    return replace_dir(path, write)
 
 
 def load_checkpoint(learner: Any, path: str | Path) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +22,22 @@ from agents.nnql.policy import save_policy_dir
 CHECKPOINT_STATE = "learner.pt"
 CHECKPOINT_REPLAY = "replay"
 CHECKPOINT_POLICY = "policy"
+
+
+def replace_dir(path: str | Path, write: Callable[[Path], None]) -> Path:
+    """Have ``write`` fill a fresh directory beside ``path``, then swap it in for ``path``: a crash
+    leaves either the old directory or the new one (a checkpoint's write)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    write(tmp)
+    old = path.with_name(f".{path.name}.old{os.getpid()}")
+    if path.exists():
+        os.replace(path, old)
+    os.replace(tmp, path)
+    shutil.rmtree(old, ignore_errors=True)
+    return path
 
 
 class LearnerOutputs:
@@ -53,19 +70,13 @@ class LearnerOutputs:
 
     def save_checkpoint(self, path: str | Path) -> Path:
         """A directory with learner.pt, replay/ and policy/, replaced atomically."""
-        path = Path(path)
-        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-        shutil.rmtree(tmp, ignore_errors=True)
-        tmp.mkdir(parents=True)
-        torch.save(self.state_dict(), tmp / CHECKPOINT_STATE)
-        self.save_replay(tmp / CHECKPOINT_REPLAY)
-        self.save_policy(tmp / CHECKPOINT_POLICY)
-        old = path.with_name(f".{path.name}.old{os.getpid()}")
-        if path.exists():
-            os.replace(path, old)
-        os.replace(tmp, path)
-        shutil.rmtree(old, ignore_errors=True)
-        return path
+
+        def write(tmp: Path) -> None:
+            torch.save(self.state_dict(), tmp / CHECKPOINT_STATE)
+            self.save_replay(tmp / CHECKPOINT_REPLAY)
+            self.save_policy(tmp / CHECKPOINT_POLICY)
+
+        return replace_dir(path, write)
 
     def load_checkpoint(self, path: str | Path) -> None:
         """Inverse of save_checkpoint (the policy/ copy is for readers, not needed here)."""
