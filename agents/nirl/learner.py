@@ -83,34 +83,26 @@ class NIRLLearner:
         self.experience = experience if experience is not None else self.q.replay
         self.owns_demos = demos is None
         self.demos = demos if demos is not None else demo_buffer(config.demo_capacity, config.seed + 1)
-        self.margin_fit = MaxMarginFit(
-            config,
-            self.reward,
-            self.reward_optimizer,
-            self.q,
-            self.demos,
-            self.experience,
-            self.refine,
-            structured_margins(torch.as_tensor(nav.robot.turns), config.margin).to(self.device),
-            self.goal_tolerance,
-            self.max_range,
-            self._clip_step,
-            self._freeze_prior,
-        )
-        self.soft_q_fit = SoftQFit(
-            config,
-            self.reward,
-            self.reward_optimizer,
-            self.q,
-            self.demos,
-            self.experience,
-            self.refine,
-            self.goal_tolerance,
-            self.max_range,
-            self._clip_step,
-            self._freeze_prior,
-            lambda: self.demo_path_steps / max(self.demo_episodes, 1),
-        )
+        common = {
+            "config": config,
+            "reward": self.reward,
+            "reward_optimizer": self.reward_optimizer,
+            "q": self.q,
+            "demos": self.demos,
+            "experience": self.experience,
+            "refine": self.refine,
+            "goal_tolerance": self.goal_tolerance,
+            "max_range": self.max_range,
+            "clip_step": self._clip_step,
+            "after_update": self._freeze_prior,
+        }
+        self.fit: MaxMarginFit | SoftQFit
+        """the core this learner trains with (``config.core``), handed the parts both cores use"""
+        if config.core == "max_margin":
+            margins = structured_margins(torch.as_tensor(nav.robot.turns), config.margin).to(self.device)
+            self.fit = MaxMarginFit(**common, margins=margins)
+        else:
+            self.fit = SoftQFit(**common, path_length=self._demo_path_length)
         self.prior_network: torch.nn.Module | None = None
         self.demo_episodes = 0
         self.demo_path_steps = 0
@@ -227,10 +219,8 @@ class NIRLLearner:
     def reward_step(self, myopic: bool = False) -> dict[str, float]:
         """One reward-network update. iq/sqil: regression of ``R(s, a)`` on the Q-function's implicit
         reward ``Q(s, a) - gamma V(s')`` over a mixed batch; max_margin: its margin fit."""
-        if self.config.core == "max_margin":
-            metrics = self.margin_fit.reward_step(myopic)
-        else:
-            metrics = self.soft_q_fit.reward_step()
+        fit = self.fit
+        metrics = fit.reward_step(myopic) if isinstance(fit, MaxMarginFit) else fit.reward_step()
         self.reward_steps += 1
         return metrics
 
@@ -247,17 +237,21 @@ class NIRLLearner:
         return metrics
 
     def _warm_step(self) -> dict[str, float]:
-        if self.config.core == "max_margin":
-            metrics = self.margin_fit.warm_step()
+        if isinstance(self.fit, MaxMarginFit):
+            metrics = self.fit.warm_step()
             self.reward_steps += 1
         else:
-            metrics = self.soft_q_fit.q_step(offline=True)
+            metrics = self.fit.q_step(offline=True)
         self.warm_updates += 1
         self.metrics.update(metrics)
         return metrics
 
     def _q_update(self) -> dict[str, float]:
-        return self.margin_fit.q_step() if self.config.core == "max_margin" else self.soft_q_fit.q_step()
+        return self.fit.q_step()
+
+    def _demo_path_length(self) -> float:
+        """Mean steps of the demonstrated paths so far (SoftQFit logs the reward's scale beside it)."""
+        return self.demo_path_steps / max(self.demo_episodes, 1)
 
     def iterate(self) -> dict[str, float]:
         """One round of neural policy iteration's learning. iq/sqil: ``q_updates`` soft policy

@@ -20,27 +20,23 @@ thesis' formulation stays runnable and comparable; the default core is IQ-Learn
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
 
 import torch
 from tensordict import TensorDict
-from torchrl.data import TensorDictReplayBuffer
 
 from agents.nirl.buffers import sample
-from agents.nirl.config import NIRLConfig
+from agents.nirl.fit_parts import FitParts
 from agents.nirl.losses import (
     KEEP,
     RELABEL,
     REWEIGHT,
-    Refinement,
     absorbing_rewards,
     margin_violations,
     max_margin_loss,
     ranking_margin_loss,
 )
-from agents.nirl.networks import RewardNetwork, goal_reached
-from agents.nnql.learner import NNQLLearner
+from agents.nirl.networks import goal_reached
 
 Q_KEYS = (
     "observation",
@@ -51,44 +47,18 @@ Q_KEYS = (
     ("next", "truncated"),
     ("next", "done"),
 )
-ClipStep = Callable[[torch.Tensor, Any, torch.optim.Optimizer], float]
 
 
-class MaxMarginFit:
+@dataclass(eq=False)
+class MaxMarginFit(FitParts):
     """Reward updates by maximum margin planning and Q updates under the learned cost.
 
-    Handed its parts by ``NIRLLearner``: the reward network and its optimiser, NNQL's learner,
-    both buffers, the refinement function, the margin matrix and the goal test's constants.
+    Handed its parts by ``NIRLLearner`` (``FitParts``) and the margin matrix.
     Sampled batches go to the Q-learner's device (as the networks and the margin matrix).
     """
 
-    def __init__(
-        self,
-        config: NIRLConfig,
-        reward: RewardNetwork,
-        reward_optimizer: torch.optim.Optimizer,
-        q: NNQLLearner,
-        demos: TensorDictReplayBuffer,
-        experience: TensorDictReplayBuffer,
-        refine: Callable[[torch.Tensor, torch.Tensor], Refinement],
-        margins: torch.Tensor,
-        goal_tolerance: float,
-        max_range: float,
-        clip_step: ClipStep,
-        after_update: Callable[[], None],
-    ):
-        self.config = config
-        self.reward = reward
-        self.reward_optimizer = reward_optimizer
-        self.q = q
-        self.demos = demos
-        self.experience = experience
-        self.refine = refine
-        self.margins = margins
-        self.goal_tolerance = goal_tolerance
-        self.max_range = max_range
-        self.clip_step = clip_step
-        self.after_update = after_update
+    margins: torch.Tensor
+    """(n_actions, n_actions) structured margin L(a_d, a) of the hinge"""
 
     def reward_step(self, myopic: bool = False) -> dict[str, float]:
         """One maximum-margin update of the reward network on refined demonstration steps
@@ -96,7 +66,7 @@ class MaxMarginFit:
         cfg = self.config
         batch = sample(self.demos, cfg.demo_batch_size, self.q.device)
         obs = batch["observation"]
-        refined = self.refine(obs, batch["action"])
+        refined = self.refine(obs, batch["action"], None)
         reward = self.reward(obs)
         if myopic:
             q_hat = reward
@@ -160,7 +130,7 @@ class MaxMarginFit:
         margin = torch.zeros(())
         if coef > 0 and len(self.demos):
             demo = sample(self.demos, self.config.demo_batch_size, self.q.device)
-            refined = self.refine(demo["observation"], demo["action"])
+            refined = self.refine(demo["observation"], demo["action"], None)
             margin = max_margin_loss(
                 q.network(demo["observation"]), refined.labels, self.margins, refined.weights
             )

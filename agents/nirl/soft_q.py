@@ -10,19 +10,17 @@ same machinery. Sampled batches are moved to the Q-learner's device; the buffers
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
 
 import torch
 from tensordict import TensorDict
-from torchrl.data import TensorDictReplayBuffer
 
 from agents.nirl.buffers import sample
-from agents.nirl.config import NIRLConfig
+from agents.nirl.fit_parts import FitParts
 from agents.nirl.losses import (
     KEEP,
     RELABEL,
     REWEIGHT,
-    Refinement,
     crash_absorbing_value,
     implicit_reward,
     iq_loss,
@@ -30,48 +28,21 @@ from agents.nirl.losses import (
     soft_value,
     sqil_rewards,
 )
-from agents.nirl.networks import RewardNetwork, goal_reached
-from agents.nnql.learner import NNQLLearner
+from agents.nirl.networks import goal_reached
 
 BATCH_KEYS = ("observation", "action", ("next", "observation"), ("next", "terminated"))
-ClipStep = Callable[[torch.Tensor, Any, torch.optim.Optimizer], float]
 
 
-class SoftQFit:
+@dataclass(eq=False)
+class SoftQFit(FitParts):
     """Q updates of the iq or sqil core and the reward network's regression on the implicit reward.
 
-    Handed its parts by ``NIRLLearner`` (as ``MaxMarginFit`` is): the reward network and its
-    optimiser, NNQL's learner, both buffers, the refinement function, the goal test's constants,
-    the clipped optimiser step, what runs after each Q update and the demonstrated path length.
+    Handed its parts by ``NIRLLearner`` (``FitParts``, as ``MaxMarginFit`` is) and the demonstrated
+    path length.
     """
 
-    def __init__(
-        self,
-        config: NIRLConfig,
-        reward: RewardNetwork,
-        reward_optimizer: torch.optim.Optimizer,
-        q: NNQLLearner,
-        demos: TensorDictReplayBuffer,
-        experience: TensorDictReplayBuffer,
-        refine: Callable[[torch.Tensor, torch.Tensor, torch.Tensor | None], Refinement],
-        goal_tolerance: float,
-        max_range: float,
-        clip_step: ClipStep,
-        after_update: Callable[[], None],
-        path_length: Callable[[], float],
-    ):
-        self.config = config
-        self.reward = reward
-        self.reward_optimizer = reward_optimizer
-        self.q = q
-        self.demos = demos
-        self.experience = experience
-        self.refine = refine
-        self.goal_tolerance = goal_tolerance
-        self.max_range = max_range
-        self.clip_step = clip_step
-        self.after_update = after_update
-        self.path_length = path_length
+    path_length: Callable[[], float]
+    """mean steps of a demonstrated path (logged beside the learned reward's scale)"""
 
     def mixed_batch(self, offline: bool) -> tuple[TensorDict, torch.Tensor]:
         """Demonstration steps and own experience, ``demo_fraction`` of the batch demonstrated
