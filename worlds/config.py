@@ -179,8 +179,16 @@ class ObservationConfig:
     patch_size: int = 0
     """side of the egocentric, heading-aligned patch of the robot's own map (cells; 0: off), two
     channels: occupancy (1 seen blocked, 0 seen free, 0.5 unknown) and visits (1 - 1/(1+n))"""
+    range_rate: bool = False
+    """append each reading's change since the previous step, in metres, clipped to [-1, 1] (negative:
+    something came closer; 0 at the first step): a cheap motion cue for moving discs in place of a
+    frame stack"""
 
     def __post_init__(self) -> None:
+        _check(
+            isinstance(self.range_rate, bool | np.bool_),
+            f"observation.range_rate={self.range_rate!r}: must be True or False",
+        )
         _check(self.frame_stack >= 1, f"observation.frame_stack={self.frame_stack}: must be >= 1")
         _check(self.subgoal in SUBGOALS, f"observation.subgoal={self.subgoal!r}: expected one of {SUBGOALS}")
         _check(
@@ -201,6 +209,7 @@ class ObservationConfig:
             and self.frame_stack == 1
             and self.subgoal == "none"
             and not self.patch_size
+            and not self.range_rate
         )
 
 
@@ -243,6 +252,7 @@ OBSERVATION_FIELDS = (
     "observation.subgoal",
     "observation.subgoal_distance",
     "observation.patch_size",
+    "observation.range_rate",
 )
 """the settings that fix what a policy observes (and its action count); saved policies record them"""
 
@@ -257,6 +267,7 @@ LEGACY_OBSERVATION = {
     "observation.subgoal": "none",
     "observation.subgoal_distance": 2.5,
     "observation.patch_size": 0,
+    "observation.range_rate": False,
 }
 """what a policy saved without an ``observation`` record observes: 8 beams, goal, one frame
 (every navlearn policy saved before these settings existed, e.g. the first ``pretrained/nnql``)"""

@@ -5,8 +5,12 @@ readings, goal distance and bearing) and the noise-free range of every cast ray.
 turns them into the observation of :class:`worlds.config.ObservationConfig`, one frame per
 step, the last ``frame_stack`` frames observed newest first::
 
-    frame = [readings (n_beams), goal (3), subgoal (3)?, previous action one-hot (n_actions)?,
-             own-map patch (2 * patch_size**2)?]
+    frame = [readings (n_beams), goal (3), subgoal (3)?, range rates (n_beams)?,
+             previous action one-hot (n_actions)?, own-map patch (2 * patch_size**2)?]
+
+* **Range rates** (``range_rate``): each reading's change since the robot's previous step, in
+  metres, clipped to [-1, 1] (0 at an episode's first step): negative when something comes
+  closer, so one frame shows a moving disc's approach without a frame stack.
 
 * **The robot's own map** (``own_map`` subgoal, patch): a grid on the map's cells, per robot and
   episode, written only from the robot's own rays and poses: every cell a ray crosses before
@@ -56,6 +60,8 @@ SUB_NONE, SUB_OWN, SUB_KNOWN = 0, 1, 2
 REUSE_PARAM = 10
 """index in :attr:`Perception.params` of the reuse switch: 1 keeps plans per cell and pauses the geodesic
 field's Dijkstra, 0 is the straightforward program (a search at every replan, the whole field per reset)"""
+RATE_PARAM = 11
+"""index in :attr:`Perception.params` of the range rates' frame offset (-1: absent)"""
 
 
 def frame_layout(config: NavConfig) -> dict[str, tuple[int, int]]:
@@ -64,6 +70,8 @@ def frame_layout(config: NavConfig) -> dict[str, tuple[int, int]]:
     parts = [("readings", n), ("goal", 3)]
     if o.subgoal != "none":
         parts.append(("subgoal", 3))
+    if o.range_rate:
+        parts.append(("range_rate", n))
     if o.previous_action:
         parts.append(("previous_action", config.robot.n_actions))
     if o.patch_size:
@@ -92,6 +100,9 @@ def observation_bounds(config: NavConfig) -> tuple[np.ndarray, np.ndarray]:
         if part in layout:
             a, _ = layout[part]
             low[a + 1 : a + 3] = -1.0
+    if "range_rate" in layout:
+        a, b = layout["range_rate"]
+        low[a:b] = -1.0
     k = config.observation.frame_stack
     return np.tile(low, k), np.tile(high, k)
 
@@ -194,8 +205,13 @@ def _waypoint(blocked, cell, x, y, gx, gy, goal_r, goal_c, along):
 
 @njit(cache=True)
 def _frame(out, base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions, action, patch_at, patch, occ,
-           visits, height, width, cell, value):  # fmt: skip
-    """Write one frame into ``out``: the base observation, then the optional parts."""
+           visits, height, width, cell, value, rate_at, n_beams):  # fmt: skip
+    """Write one frame into ``out`` (which holds the robot's previous frame, or anything when
+    ``action`` < 0: a fresh episode): the base observation, then the optional parts."""
+    if rate_at >= 0:  # before the readings are overwritten: out[:n_beams] are the previous ones
+        for k in range(n_beams):
+            rate = (base[k] - out[k]) * max_range if action >= 0 else 0.0
+            out[rate_at + k] = min(max(rate, -1.0), 1.0)
     for k in range(base.shape[0]):
         out[k] = base[k]
     cos_t, sin_t = math.cos(theta), math.sin(theta)
@@ -239,6 +255,7 @@ def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal
     max_range, sub_kind, along = params[0], int(params[1]), params[2]
     sub_at, act_at, patch_at = int(params[3]), int(params[4]), int(params[5])
     patch, w_geo, n_actions, per = int(params[6]), params[7], int(params[8]), int(params[9])
+    rate_at, n_beams = int(params[RATE_PARAM]), ray_c.shape[0] // per
     reuse = params[REUSE_PARAM] > 0.0
     uses_map = occ.shape[1] > 0
     for n in range(indices.shape[0]):
@@ -300,7 +317,7 @@ def perceive(indices, fresh, actions, field, moff, mh, mw, mcell, mp, pose, goal
                 stack[i, j, :] = stack[i, j - 1, :]
         _frame(stack[i, 0], base[n], x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions,
                -1 if fresh[n] else actions[n], patch_at, patch, occ[i], visits[i], height, width, cell,
-               PATCH_VALUE)  # fmt: skip
+               PATCH_VALUE, rate_at, n_beams)  # fmt: skip
         if fresh[n]:
             for j in range(1, k):
                 stack[i, j, :] = stack[i, 0, :]
@@ -335,6 +352,7 @@ class Perception:
                 config.robot.n_actions,
                 config.sensors.rays_per_beam,
                 reuse,
+                layout.get("range_rate", (-1,))[0],
             ],
             dtype=np.float64,
         )

@@ -55,6 +55,9 @@ class LocalTrainConfig:
     """robot-steps between greedy evaluations on held-out maps (0: only the final one)"""
     eval_episodes: int = 100
     """episodes of each periodic evaluation (validation set, seed 1)"""
+    eval_dynamic_episodes: int = 0
+    """episodes with 4 moving discs added to each periodic evaluation (the validation seed's dynamic set);
+    keep_best then scores the success pooled over both sets (0: unseen static maps only)"""
     keep_best: bool = True
     """save the weights that scored best on the validation evaluations (seed 1) rather than the last"""
     final_eval_episodes: int = 100
@@ -96,9 +99,19 @@ TEST_SEED = 0
 """the final, reported evaluation uses the set of this seed (the one `navlearn evaluate` uses)"""
 
 
-def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None) -> Any:
-    """Greedy evaluation on the shared held-out "unseen" set (agents.evaluation) -> EvalResult."""
-    return evaluate(policy.greedy(), make_eval_set("unseen", episodes, seed=seed), config=nav)
+def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None, dynamic: int = 0) -> Any:
+    """Greedy evaluation on the shared held-out "unseen" set (agents.evaluation), plus ``dynamic``
+    episodes of its "dynamic" set when positive -> EvalResult."""
+    sets = [make_eval_set("unseen", episodes, seed=seed)]
+    if dynamic > 0:
+        sets.append(make_eval_set("dynamic", dynamic, seed=seed))
+    return evaluate(policy.greedy(), sets, config=nav)
+
+
+def training_nav(run: LocalTrainConfig, nav: NavConfig | None = None) -> NavConfig:
+    """The task trained on: ``nav`` (default :data:`worlds.config.LEARNING_NAV`) with the disc mix of
+    ``run.moving_discs``, a given ``nav`` included (`train --local` passes its observation flags')."""
+    return with_moving_discs(nav or LEARNING_NAV, run.moving_discs)
 
 
 def train_local(
@@ -106,10 +119,10 @@ def train_local(
     nnql: NNQLConfig | None = None,
     nav: NavConfig | None = None,
 ) -> TrainResult:
-    """Train NNQL for ``run.steps`` robot-steps in ``nav`` (default :data:`worlds.config.LEARNING_NAV`
-    with ``run.moving_discs``); writes the outputs to ``run.out`` if set."""
+    """Train NNQL for ``run.steps`` robot-steps in ``nav`` (default :data:`worlds.config.LEARNING_NAV`)
+    with ``run.moving_discs`` applied to it; writes the outputs to ``run.out`` if set."""
     nnql = nnql or NNQLConfig(seed=run.seed)
-    nav = nav or with_moving_discs(LEARNING_NAV, run.moving_discs)
+    nav = training_nav(run, nav)
     env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
     obs_dim = int(env.single_observation_space.shape[0])
     n_actions = int(env.single_action_space.n)
@@ -206,9 +219,15 @@ class Candidate:
 
 def _validate(policy: Any, run: LocalTrainConfig, nav: Any, point: dict[str, float], best: Candidate | None):
     """Evaluate on the validation set, note it on the curve point, return the better candidate."""
-    metrics = evaluate_policy(policy, run.eval_episodes, VALIDATION_SEED, nav).metrics["unseen"]
+    report = evaluate_policy(policy, run.eval_episodes, VALIDATION_SEED, nav, run.eval_dynamic_episodes)
+    metrics = report.metrics["unseen"]
     point["eval_success"] = metrics.success.value
-    score = (metrics.success.value, metrics.spl)
+    solved, episodes = metrics.success.value * run.eval_episodes, run.eval_episodes
+    if run.eval_dynamic_episodes > 0:
+        point["eval_dynamic_success"] = report.metrics["dynamic"].success.value
+        solved += point["eval_dynamic_success"] * run.eval_dynamic_episodes
+        episodes += run.eval_dynamic_episodes
+    score = (solved / episodes, metrics.spl)
     if not run.keep_best:
         return None
     if best is None or score >= best.score:

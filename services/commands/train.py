@@ -41,6 +41,13 @@ def register(subparsers) -> None:
         help="episodes per validation evaluation (seed 1)",
     )
     parser.add_argument(
+        "--eval-dynamic-episodes",
+        type=int,
+        default=0,
+        help="episodes with 4 moving discs added to each validation evaluation; the kept weights are then "
+        "chosen on the success pooled over both",
+    )
+    parser.add_argument(
         "--keep-last",
         action="store_true",
         help="save the last weights instead of those that scored best on the validation evaluations",
@@ -109,6 +116,15 @@ def register(subparsers) -> None:
         help="drop the subgoal planned on the robot's own map (learning alone; e.g. with --patch 16)",
     )
     parser.add_argument(
+        "--frame-stack", type=int, default=1, help="observe the last K frames, newest first (1: one frame)"
+    )
+    parser.add_argument("--previous-action", action="store_true", help="observe the previous action, one-hot")
+    parser.add_argument(
+        "--range-rate",
+        action="store_true",
+        help="observe each reading's change since the previous step (a motion cue for moving discs)",
+    )
+    parser.add_argument(
         "--q-network",
         choices=Q_NETWORKS,
         default=defaults.q_network,
@@ -119,11 +135,19 @@ def register(subparsers) -> None:
 
 
 def observation_of(args: argparse.Namespace):
-    """worlds.config.LEARNING_NAV with --patch and --no-subgoal applied."""
+    """worlds.config.LEARNING_NAV with the observation flags (--patch, --no-subgoal, --frame-stack,
+    --previous-action, --range-rate) applied."""
     from worlds.config import LEARNING_NAV
 
     subgoal = "none" if args.no_subgoal else LEARNING_NAV.observation.subgoal
-    observation = replace(LEARNING_NAV.observation, patch_size=args.patch, subgoal=subgoal)
+    observation = replace(
+        LEARNING_NAV.observation,
+        patch_size=args.patch,
+        subgoal=subgoal,
+        frame_stack=args.frame_stack,
+        previous_action=args.previous_action or LEARNING_NAV.observation.previous_action,
+        range_rate=args.range_rate or LEARNING_NAV.observation.range_rate,
+    )
     return replace(LEARNING_NAV, observation=observation)
 
 
@@ -155,8 +179,8 @@ def run(args: argparse.Namespace) -> int:
         nav = observation_of(args)
         if args.steps < 1 or args.envs < 1:
             raise ValueError("--steps and --envs must be positive")
-        if args.moving_discs < 0:
-            raise ValueError("--moving-discs must be >= 0")
+        if args.moving_discs < 0 or args.eval_dynamic_episodes < 0:
+            raise ValueError("--moving-discs and --eval-dynamic-episodes must be >= 0")
         resolve_device(args.device)
         from worlds.tasks import parse_map_spec
 
@@ -176,6 +200,7 @@ def run(args: argparse.Namespace) -> int:
         out=args.out,
         eval_every=args.eval_every,
         eval_episodes=args.eval_episodes,
+        eval_dynamic_episodes=args.eval_dynamic_episodes,
         keep_best=not args.keep_last,
         final_eval_episodes=args.final_eval_episodes,
         progress=not args.no_progress,
