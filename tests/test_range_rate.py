@@ -87,10 +87,10 @@ def test_rates_reset_to_zero_at_a_new_episode_and_stay_in_bounds():
 
 
 def test_range_rate_is_validated_and_recorded_in_the_observation_settings():
-    with pytest.raises(ValueError, match="observation.range_rate"):
+    with pytest.raises(ValueError, match=r"observation\.range_rate"):
         ObservationConfig(range_rate=1)
     assert observation_settings(RATES)["observation.range_rate"] is True
-    with pytest.raises(ValueError, match="observation.range_rate=True"):
+    with pytest.raises(ValueError, match=r"observation\.range_rate=True"):
         check_observation(observation_settings(RATES), NavConfig(robot=STILL, sensors=RATES.sensors))
 
 
