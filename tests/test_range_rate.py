@@ -4,6 +4,7 @@ the `train --local` options that reach the trained task (range rate, frame stack
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from worlds.config import (
     SensorConfig,
     check_observation,
     observation_settings,
+    saved_observation,
 )
 from worlds.env import NavigationEnv
 from worlds.maps import GridMap, Task
@@ -92,6 +94,12 @@ def test_range_rate_is_validated_and_recorded_in_the_observation_settings():
     assert observation_settings(RATES)["observation.range_rate"] is True
     with pytest.raises(ValueError, match=r"observation\.range_rate=True"):
         check_observation(observation_settings(RATES), NavConfig(robot=STILL, sensors=RATES.sensors))
+    # a policy saved before the option existed observes without it, and says so in an env with it
+    before = {k: v for k, v in observation_settings(LEARNING_NAV).items() if k != "observation.range_rate"}
+    assert saved_observation(before)["observation.range_rate"] is False
+    with_rates = replace(LEARNING_NAV, observation=replace(LEARNING_NAV.observation, range_rate=True))
+    with pytest.raises(ValueError, match=r"observation\.range_rate=False"):
+        check_observation(saved_observation(before), with_rates)
 
 
 def test_train_local_flags_reach_the_trained_task_and_the_saved_policy(tmp_path):

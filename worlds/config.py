@@ -273,6 +273,12 @@ LEGACY_OBSERVATION = {
 (every navlearn policy saved before these settings existed, e.g. the first ``pretrained/nnql``)"""
 
 
+def saved_observation(record: dict | None) -> dict:
+    """The observation settings of a saved policy's ``observation`` record: a field the record lacks
+    did not exist when it was saved, so the policy observes its :data:`LEGACY_OBSERVATION` value (off)."""
+    return {**LEGACY_OBSERVATION, **(record or {})}
+
+
 def observation_settings(config: NavConfig) -> dict:
     """The :data:`OBSERVATION_FIELDS` of ``config``, as a flat JSON-able dict."""
     settings = {}

@@ -11,7 +11,8 @@ A policy directory holds two files (written atomically, temp + rename):
   {"obs_dim", "n_actions", "hidden_sizes", "activation"}, "observation": {...}, ...}`` plus any
   metadata. ``observation`` holds the settings that fix what the policy observes
   (:data:`worlds.config.OBSERVATION_FIELDS`); a policy saved without it observes
-  :data:`worlds.config.LEGACY_OBSERVATION` (8 beams and the goal, one frame).
+  :data:`worlds.config.LEGACY_OBSERVATION` (8 beams and the goal, one frame), and a setting it lacks
+  (added after it was saved) its legacy value (:func:`worlds.config.saved_observation`).
 
 An NNQL policy whose ``architecture`` also has ``lstm_size`` is recurrent (encoder, LSTM, Q head;
 agents/nnql/recurrent_policy.py): ``load_policy`` gives a :class:`GreedyRecurrentPolicy`, which
@@ -39,7 +40,7 @@ from safetensors.numpy import load_file
 from agents.forward import network_forward
 from agents.mlp import ACTIVATIONS, ARCHITECTURE_KEYS, CONFIG_FILE, KINDS, WEIGHTS_FILE, save_policy
 from agents.nnql.recurrent_policy import Memory, RecurrentQ, is_recurrent
-from worlds.config import LEGACY_OBSERVATION, NavConfig, with_observation
+from worlds.config import NavConfig, saved_observation, with_observation
 from worlds.heuristics import goal_seeking_policy
 from worlds.perception import observation_dim
 
@@ -68,7 +69,7 @@ class GreedyMLPPolicy:
         self.model = str(config.get("model", ""))
         self.kind = str(config["kind"])
         self.version = int(config.get("version", 0))
-        self.observation = dict(config.get("observation") or LEGACY_OBSERVATION)
+        self.observation = saved_observation(config.get("observation"))
         try:
             nav = self.nav_config()
         except (TypeError, ValueError) as exc:

@@ -23,7 +23,7 @@ from safetensors.numpy import load_file
 from agents.forward import network_forward
 from agents.mlp import CONFIG_FILE, WEIGHTS_FILE, save_policy
 from agents.nnql.config import NNQLConfig
-from worlds.config import LEGACY_OBSERVATION
+from worlds.config import saved_observation
 
 MODEL_NAME = "nnql"
 POLICY_KIND = "q_network"
@@ -153,7 +153,7 @@ class NNQLPolicy:
         """Read a policy directory written by ``save``/``save_policy_dir`` (greedy unless told)."""
         weights, config = load_policy_dir(path)
         kwargs.setdefault("version", config.get("version", 0))
-        kwargs.setdefault("observation", config.get("observation") or LEGACY_OBSERVATION)
+        kwargs.setdefault("observation", saved_observation(config.get("observation")))
         return cls(weights, config["architecture"], **kwargs)
 
 
