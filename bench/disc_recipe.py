@@ -97,9 +97,7 @@ def report(groups: dict[str, list[dict]], references: list[str]) -> dict:
     out = {}
     for label, runs in groups.items():
         entry = {
-            "runs": [
-                {k: r[k] for k in ("dir", "seed", "wall_time", "selected_version", "env_steps")} for r in runs
-            ],
+            "runs": [{k: r[k] for k in RUN_FIELDS} for r in runs],
             "sets": {name: pooled(runs, name) for name in sets if all(name in r["episodes"] for r in runs)},
         }
         entry["vs"] = {
