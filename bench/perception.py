@@ -157,8 +157,9 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
     run = LocalTrainConfig(
         steps=args.steps, envs=16, seed=seed, out=str(out), eval_every=args.steps // 4,
         eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False,
+        moving_discs=0,  # the variant's nav as it is: static maps, as the recorded runs
     )  # fmt: skip
-    nnql = NNQLConfig(seed=seed, **NNQL_OPTIONS.get(variant, {}))
+    nnql = NNQLConfig(seed=seed, **{"dueling": False, **NNQL_OPTIONS.get(variant, {})})  # plain head
     trained = finished(out, run, nav)
     if trained is None:
         start = time.perf_counter()

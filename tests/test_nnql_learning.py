@@ -65,6 +65,7 @@ def test_nnql_learns_a_corridor(tmp_path, variant):
         eval_every=0,
         final_eval_episodes=0,
         progress=False,
+        moving_discs=0,
     )
     result = train_local(run, nnql, nav=NavConfig())  # the plain observation greedy_success steps
     assert result.updates == pytest.approx(0.125 * (4000 - 496), abs=20)
@@ -89,7 +90,7 @@ def test_keep_best_saves_the_weights_that_validated_best(tmp_path, monkeypatch):
     scores = iter([0.2, 0.9, 0.5, 0.1])  # three periodic validations, then the final weights
     seen_versions = []
 
-    def fake_evaluate(policy, episodes, seed, nav=None):
+    def fake_evaluate(policy, episodes, seed, nav=None, dynamic=0):
         seen_versions.append(policy.version)
         success = next(scores)
         rate = SimpleNamespace(value=success)

@@ -27,7 +27,7 @@ from agents.nnql.ratelimit import RateLimiter
 from agents.nnql.recurrent_learner import RecurrentNNQLLearner
 from agents.nnql.recurrent_rollout import RecurrentRollout
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
-from worlds.config import LEARNING_NAV, NavConfig, observation_settings, with_moving_discs
+from worlds.config import LEARNING_NAV, TRAINING_DISCS, NavConfig, observation_settings, with_moving_discs
 from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
@@ -45,7 +45,7 @@ class LocalTrainConfig:
     """robots stepped together in the vector env"""
     maps: str = "mixed:16"
     """training map spec (worlds.tasks.parse_map_spec)"""
-    moving_discs: int = 0
+    moving_discs: int = TRAINING_DISCS
     """each training episode has 0..moving_discs moving discs, uniform (0: none; the dynamic set has 4)"""
     seed: int = 0
     """seeds the env, the learner and the exploration"""
@@ -110,7 +110,8 @@ def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None, dyna
 
 def training_nav(run: LocalTrainConfig, nav: NavConfig | None = None) -> NavConfig:
     """The task trained on: ``nav`` (default :data:`worlds.config.LEARNING_NAV`) with the disc mix of
-    ``run.moving_discs``, a given ``nav`` included (`train --local` passes its observation flags')."""
+    ``run.moving_discs`` (default 0..4), a given ``nav`` included (`train --local` passes its observation
+    flags' nav); a caller that wants ``nav`` as it is sets ``moving_discs=0``."""
     return with_moving_discs(nav or LEARNING_NAV, run.moving_discs)
 
 
