@@ -114,6 +114,8 @@ def test_train_local_flags_reach_the_trained_task_and_the_saved_policy(tmp_path)
             "--eval-dynamic-episodes", "3", "--final-eval-episodes", "0", "--hidden", "16",
             "--no-progress"]  # fmt: skip
     assert main(argv) == 0
+    trained = json.loads((out / "summary.json").read_text())["obstacles"]
+    assert trained["count"] == 2 and trained["mix"]  # what the env had, not only what was asked
     saved = json.loads((out / "config.json").read_text())["observation"]
     assert saved["observation.range_rate"] is True and saved["observation.frame_stack"] == 2
     curve = [json.loads(line) for line in (out / "curve.jsonl").read_text().splitlines()]

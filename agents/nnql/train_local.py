@@ -205,7 +205,7 @@ def train_local(
         result.final_eval = report.to_dict(with_episodes=False)["metrics"]["unseen"]
         result.final_table = report.table()
     if run.out:
-        result.out = str(write_outputs(Path(run.out), policy, result, run, nnql))
+        result.out = str(write_outputs(Path(run.out), policy, result, run, nnql, nav))
     return result
 
 
@@ -268,14 +268,18 @@ def _postfix(point: dict[str, float], updates: int, update_time: float) -> str:
     return text
 
 
-def write_outputs(out: Path, policy: NNQLPolicy, result: TrainResult, run, nnql: NNQLConfig) -> Path:
-    """Policy files, the learning curve (JSON lines + PNG) and a summary in ``out``."""
+def write_outputs(
+    out: Path, policy: NNQLPolicy, result: TrainResult, run, nnql: NNQLConfig, nav: NavConfig
+) -> Path:
+    """Policy files, the learning curve (JSON lines + PNG) and a summary in ``out`` (with the moving
+    discs the env really had, ``obstacles``)."""
     out.mkdir(parents=True, exist_ok=True)
     policy.save(out, nnql_config=nnql.to_dict(), env_steps=result.env_steps, maps=run.maps)
     with open(out / "curve.jsonl", "w") as fh:
         for point in result.curve:
             fh.write(json.dumps(point) + "\n")
-    summary = {"run": asdict(run), "nnql": nnql.to_dict(), **result.to_dict()}
+    summary = {"run": asdict(run), "nnql": nnql.to_dict(), "obstacles": asdict(nav.obstacles)}
+    summary.update(result.to_dict())
     summary.pop("curve")
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     plot_curve(result, out / "curve.png")
