@@ -2,10 +2,16 @@
 
 The reward (``rewards.geodesic_progress``, :mod:`worlds.perception`) needs the true shortest-path
 distance from the robot's cell to the goal at every step. The Dijkstra from the goal
-(:func:`worlds.gridsearch.search_run`) is paused once the robot's cell is settled and resumed
-when the robot reaches a cell not settled yet: the same search, so the same distances as the
-whole field made at the reset, for the cells the episode needs. Its flat work arrays
-``geo = (g, f, parent, pos, closed, heap)`` hold one row per robot.
+(:func:`worlds.gridsearch.search_run`) runs on the kernel's map field in place (it has the padded
+layout of :mod:`worlds.gridsearch`), is paused once the robot's cell is settled and resumed when
+the robot reaches a cell not settled yet: the same distances as the whole field made at the reset,
+for the cells the episode needs. A Dijkstra's settled distances do not depend on the order in which
+equal keys leave its heap (each is the least of its settled neighbours' distance plus the step),
+so pausing changes none.
+
+``geo = (g, pos, seen, heap, meta)`` holds one row of work arrays per robot
+(:func:`worlds.gridsearch.new_work`; f is g, and parents are written to a shared ``scratch`` row
+no one reads).
 """
 
 from __future__ import annotations
@@ -14,34 +20,33 @@ import math
 
 from numba import njit
 
-from worlds.gridsearch import search_run, search_start
+from worlds.gridsearch import CLOSED, GEN, SIZE, search_run, search_start
 
 
-@njit(cache=True)
-def start_field(truth, goal_r, goal_c, geo, size, i, reuse):
-    """Start robot ``i``'s distance field on its true map: a Dijkstra from the goal, for the geodesic
-    reward. With ``reuse`` it is only started (:func:`field_distance` runs it on as far as each robot
-    cell needs: the same search, paused), else run over the whole component at once."""
-    height, width = truth.shape
-    g, f, parent, pos, closed, heap = geo
-    hw = height * width
-    work = (g[i, :hw], f[i, :hw], parent[i, :hw], pos[i, :hw], closed[i, :hw], heap[i, :hw])
-    size[i] = search_start(truth, goal_r * width + goal_c, -1, True, *work)
+@njit(cache=True, _nrt=False)
+def start_field(field, base, stride, goal, geo, scratch, i, reuse):
+    """Start robot ``i``'s distance field on its true map (the padded field at ``base``): a Dijkstra
+    from padded cell ``goal``. With ``reuse`` it is only started (:func:`field_distance` runs it on as
+    far as each robot cell needs), else run over the whole component at once."""
+    g, pos, seen, heap, meta = geo
+    search_start(goal, -1, stride, True, g[i], g[i], scratch, pos[i], seen[i], heap[i], meta[i])
     if not reuse:
-        size[i], _ = search_run(truth, -1, -1, True, *work, size[i])
+        search_run(field, base, stride, -1, -1, True, g[i], g[i], scratch, pos[i], seen[i], heap[i], meta[i])
 
 
-@njit(cache=True)
-def field_distance(truth, geo, size, i, cell, x, y):
+@njit(cache=True, _nrt=False)
+def field_distance(field, base, height, width, geo, scratch, i, cell, x, y):
     """Robot ``i``'s true shortest-path distance (m) from the cell under (x, y) to its goal (inf off
     the map or unreachable), searching on until that cell is settled."""
-    height, width = truth.shape
     c, r = int(x / cell), int(y / cell)
     if c < 0 or r < 0 or r >= height or c >= width:
         return math.inf
-    g, f, parent, pos, closed, heap = geo
-    hw, node = height * width, r * width + c
-    if not closed[i, node] and size[i] > 0:
-        work = (g[i, :hw], f[i, :hw], parent[i, :hw], pos[i, :hw], closed[i, :hw], heap[i, :hw])
-        size[i], _ = search_run(truth, -1, node, True, *work, size[i])
-    return g[i, node] * cell
+    g, pos, seen, heap, meta = geo
+    stride = width + 2
+    node = (r + 1) * stride + c + 1
+    gen = meta[i, GEN]
+    if not (seen[i, node] == gen and pos[i, node] == CLOSED) and meta[i, SIZE] > 0:
+        search_run(
+            field, base, stride, -1, node, True, g[i], g[i], scratch, pos[i], seen[i], heap[i], meta[i]
+        )
+    return g[i, node] * cell if seen[i, node] == gen else math.inf
