@@ -1,8 +1,8 @@
-"""The compiled grid search (worlds.gridsearch) against plain pure-Python references on random grids:
-Dijkstra distances equal a heapq Dijkstra exactly; A* and Dijkstra parents (which of several equal
-paths, i.e. the ties) equal a plain indexed-heap search written out here; a paused search gives the
-distances of a whole one; work arrays reused across searches (generation stamps, their wrap) change
-nothing."""
+"""The compiled grid searches against plain pure-Python references on random grids: Dijkstra
+distances (worlds.gridsearch, and the geodesic reward's bucket-queue Dijkstra of worlds.geodesic,
+paused at random cells) equal a heapq Dijkstra exactly; A* and Dijkstra parents (which of several
+equal paths, i.e. the ties) equal a plain indexed-heap search written out here; work arrays reused
+across searches (generation stamps, their wrap) change nothing."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from worlds.fields import BLOCKED
-from worlds.gridsearch import CLOSED, GEN, grid_search, new_work, search_run, search_start
+from worlds.geodesic import field_distance, new_fields, start_field
+from worlds.gridsearch import GEN, grid_search, new_work, search_run, search_start
 
 MOVES = [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1)]
 
@@ -154,33 +155,42 @@ def padded(blocked):
     return grid.ravel(), width + 2
 
 
-def test_paused_dijkstra_settles_the_distances_of_a_whole_one_with_reused_work_arrays():
-    work, rng = new_work(16 * 16), np.random.default_rng(3)
-    for _ in range(120):
-        blocked = rng.random((14, 14)) < rng.choice([0.0, 0.2, 0.4])
-        start = int(rng.integers(blocked.size))
-        blocked.flat[start] = False
-        whole, _, _ = grid_search(blocked, start, -1, True)
-        grid, stride = padded(blocked)
-        g, _, _, pos, seen, _, meta = work
-        search_start((start // 14 + 1) * stride + start % 14 + 1, -1, stride, True, g, g, *work[2:])
-        for cell in rng.permutation(blocked.size)[:12]:
-            node = (cell // 14 + 1) * stride + cell % 14 + 1
-            if not (seen[node] == meta[GEN] and pos[node] == CLOSED):
-                search_run(grid, 0, stride, -1, node, True, g, g, *work[2:])
-            settled = seen[node] == meta[GEN] and pos[node] == CLOSED
-            assert (g[node] if settled else math.inf) == whole[cell]
+@pytest.mark.parametrize("reuse", [True, False])
+def test_paused_bucket_dijkstra_gives_the_distances_of_a_heapq_dijkstra(reuse):
+    rng = np.random.default_rng(3)
+    geo = new_fields(3, 16 * 16)
+    for k in range(150):
+        height, width = (int(v) for v in rng.integers(1, 15, size=2))
+        blocked = rng.random((height, width)) < rng.choice([0.0, 0.2, 0.4])
+        goal = int(rng.integers(blocked.size))
+        blocked.flat[goal] = False
+        whole = heapq_dijkstra(blocked, goal, True)
+        field, stride = padded(blocked)
+        i = k % 3  # robots' rows reused episode after episode
+        start_field(field, 0, stride, (goal // width + 1) * stride + goal % width + 1, geo, i, reuse)
+        for cell in rng.integers(-1, blocked.size + 1, size=12):  # -1, size: off the map
+            x, y = ((cell % width + 0.5) * 0.5, (cell // width + 0.5) * 0.5) if cell >= 0 else (-1.0, 1.0)
+            expected = whole[cell] * 0.5 if 0 <= cell < blocked.size else math.inf
+            assert field_distance(field, 0, height, width, geo, i, 0.5, x, y) == expected
 
 
 def test_a_wrapped_generation_stamp_forgets_every_cell():
+    field, stride = padded(np.zeros((4, 4), bool))
+    geo = new_fields(1, field.size)
+    start_field(field, 0, stride, stride + 1, geo, 0, False)
+    geo[-1][0, 0] = 2**31 - 2  # the next field wraps the stamps: cells of the last one must not count
+    geo[1][geo[1] > 0], geo[2][geo[2] > 0] = 2**31 - 1, 2**31 - 1
+    start_field(field, 0, stride, 4 * stride + 4, geo, 0, True)
+    assert field_distance(field, 0, 4, 4, geo, 0, 1.0, 0.5, 0.5) == pytest.approx(3 * math.sqrt(2.0))
+
     blocked = np.zeros((6, 6), bool)
     grid, stride = padded(blocked)
     work = new_work(grid.size)
-    g, seen, meta = work[0], work[4], work[6]
+    g, seen, meta = work[0], work[3], work[7]
     search_start(stride + 1, -1, stride, True, *work)
-    search_run(grid, 0, stride, -1, -1, True, *work)
+    search_run(grid, 0, stride, -1, True, *work)
     meta[GEN] = 2**31 - 2  # the next search wraps the stamp: cells the last one saw must not count
     seen[seen > 0] = 2**31 - 1
     search_start(stride + 1, 7 * stride - 2, stride, True, *work)
-    expanded = search_run(grid, 0, stride, 7 * stride - 2, -1, True, *work)
+    expanded = search_run(grid, 0, stride, 7 * stride - 2, True, *work)
     assert meta[GEN] == 1 and expanded == 6 and g[7 * stride - 2] == pytest.approx(5 * math.sqrt(2.0))

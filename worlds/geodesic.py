@@ -1,52 +1,135 @@
-"""The geodesic reward's distance field, one paused Dijkstra per robot.
+"""The geodesic reward's distance field, one paused Dijkstra per robot, with a bucket queue.
 
 The reward (``rewards.geodesic_progress``, :mod:`worlds.perception`) needs the true shortest-path
-distance from the robot's cell to the goal at every step. The Dijkstra from the goal
-(:func:`worlds.gridsearch.search_run`) runs on the kernel's map field in place (it has the padded
-layout of :mod:`worlds.gridsearch`), is paused once the robot's cell is settled and resumed when
-the robot reaches a cell not settled yet: the same distances as the whole field made at the reset,
-for the cells the episode needs. A Dijkstra's settled distances do not depend on the order in which
-equal keys leave its heap (each is the least of its settled neighbours' distance plus the step),
-so pausing changes none.
+distance from the robot's cell to the goal at every step (8-connected, no corner cutting: the
+moves of :mod:`worlds.gridsearch`). The Dijkstra from the goal runs on the kernel's map field in
+place (it has the padded layout of :mod:`worlds.gridsearch`), is paused once the robot's cell is
+settled and resumed when the robot reaches a cell not settled yet.
 
-``geo = (g, pos, seen, heap, meta)`` holds one row of work arrays per robot
-(:func:`worlds.gridsearch.new_work`; f is g, and parents are written to a shared ``scratch`` row
-no one reads).
+**Bucket queue.** Every move costs at least 1 cell, so cells whose distance has the same integer
+part cannot improve one another: the search takes cells bucket by bucket (bucket k holds the
+reached cells with ``floor(g) = k``), in any order within a bucket, with no heap. When bucket
+``b`` is being taken, every bucket below it is empty, so a reached cell in bucket ``b`` or below
+is settled: its shortest path's last step comes from a cell at least 1 nearer, already taken.
+A move costs less than 2, so the reached cells lie in buckets ``b .. b + 2``, kept in a ring of
+4 stacks; a cell that improves into a lower bucket is pushed again and its old entry skipped.
+Each settled distance is the least of ``g[u] + step`` over the neighbours ``u`` settled before it
+(the floating-point sums of any Dijkstra), so the distances are those of
+:func:`worlds.gridsearch.grid_search`'s Dijkstra, bit for bit (``tests/test_worlds_gridsearch.py``),
+paused or not.
+
+``geo = (g, seen, done, ring, count, meta)``, one row per robot: distances, the generation
+stamps of reached and of taken cells, the ring's stacks ``(4, cells)`` and sizes ``(4,)``, and
+``meta = (generation, current bucket)``.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
-from worlds.gridsearch import CLOSED, GEN, SIZE, search_run, search_start
+from worlds.fields import BLOCKED
+from worlds.gridsearch import SQRT2
+
+GEN, BUCKET = 0, 1
+"""indices into a row of ``meta``"""
+
+
+def new_fields(n: int, cells: int) -> tuple:
+    """Work rows ``geo`` for ``n`` robots on maps of up to ``cells`` padded cells."""
+    i4 = np.int32
+    return (np.zeros((n, cells)), np.zeros((n, cells), i4), np.zeros((n, cells), i4),
+            np.zeros((n, 4, cells), i4), np.zeros((n, 4), i4), np.zeros((n, 2), i4))  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _offer(g, seen, ring, count, gen, node, cand):
+    """Reach ``node`` at distance ``cand`` if that is new or shorter (pushed into its bucket's stack
+    unless it stays in the same bucket)."""
+    if seen[node] == gen:
+        if not cand < g[node]:
+            return
+        same = int(g[node]) == int(cand)
+        g[node] = cand
+        if same:
+            return
+    else:
+        seen[node] = gen
+        g[node] = cand
+    slot = int(cand) & 3
+    ring[slot, count[slot]] = node
+    count[slot] += 1
 
 
 @njit(cache=True, _nrt=False)
-def start_field(field, base, stride, goal, geo, scratch, i, reuse):
+def _settle(field, base, stride, target, g, seen, done, ring, count, meta):
+    """Take cells until ``target`` is settled (``target < 0``: until every reachable cell is)."""
+    gen, b = meta[GEN], meta[BUCKET]
+    while not (target >= 0 and seen[target] == gen and int(g[target]) <= b):
+        slot = b & 3
+        if count[slot] == 0:
+            if count[(b + 1) & 3] == 0 and count[(b + 2) & 3] == 0:
+                break  # every reachable cell is settled
+            b += 1
+            continue
+        count[slot] -= 1
+        node = ring[slot, count[slot]]
+        if done[node] == gen or int(g[node]) != b:
+            continue  # taken already, or moved to a lower bucket
+        done[node] = gen
+        at, one, diag = base + node, g[node] + 1.0, g[node] + SQRT2
+        up, down = field[at - stride] != BLOCKED, field[at + stride] != BLOCKED
+        left, right = field[at - 1] != BLOCKED, field[at + 1] != BLOCKED
+        if up and done[node - stride] != gen:
+            _offer(g, seen, ring, count, gen, node - stride, one)
+        if down and done[node + stride] != gen:
+            _offer(g, seen, ring, count, gen, node + stride, one)
+        if left and done[node - 1] != gen:
+            _offer(g, seen, ring, count, gen, node - 1, one)
+        if right and done[node + 1] != gen:
+            _offer(g, seen, ring, count, gen, node + 1, one)
+        # a diagonal move needs both cells it brushes past free (no corner cutting)
+        if up and left and field[at - stride - 1] != BLOCKED and done[node - stride - 1] != gen:
+            _offer(g, seen, ring, count, gen, node - stride - 1, diag)
+        if up and right and field[at - stride + 1] != BLOCKED and done[node - stride + 1] != gen:
+            _offer(g, seen, ring, count, gen, node - stride + 1, diag)
+        if down and left and field[at + stride - 1] != BLOCKED and done[node + stride - 1] != gen:
+            _offer(g, seen, ring, count, gen, node + stride - 1, diag)
+        if down and right and field[at + stride + 1] != BLOCKED and done[node + stride + 1] != gen:
+            _offer(g, seen, ring, count, gen, node + stride + 1, diag)
+    meta[BUCKET] = b
+
+
+@njit(cache=True, _nrt=False)
+def start_field(field, base, stride, goal, geo, i, reuse):
     """Start robot ``i``'s distance field on its true map (the padded field at ``base``): a Dijkstra
     from padded cell ``goal``. With ``reuse`` it is only started (:func:`field_distance` runs it on as
     far as each robot cell needs), else run over the whole component at once."""
-    g, pos, seen, heap, meta = geo
-    search_start(goal, -1, stride, True, g[i], g[i], scratch, pos[i], seen[i], heap[i], meta[i])
+    g, seen, done, ring, count, meta = geo
+    gen = meta[i, GEN] + 1
+    if gen >= 2**31 - 1:  # the stamps wrap: forget every cell once
+        for k in range(seen.shape[1]):
+            seen[i, k], done[i, k] = 0, 0
+        gen = 1
+    meta[i, GEN], meta[i, BUCKET] = gen, 0
+    for slot in range(4):
+        count[i, slot] = 0
+    _offer(g[i], seen[i], ring[i], count[i], gen, goal, 0.0)
     if not reuse:
-        search_run(field, base, stride, -1, -1, True, g[i], g[i], scratch, pos[i], seen[i], heap[i], meta[i])
+        _settle(field, base, stride, -1, g[i], seen[i], done[i], ring[i], count[i], meta[i])
 
 
 @njit(cache=True, _nrt=False)
-def field_distance(field, base, height, width, geo, scratch, i, cell, x, y):
+def field_distance(field, base, height, width, geo, i, cell, x, y):
     """Robot ``i``'s true shortest-path distance (m) from the cell under (x, y) to its goal (inf off
     the map or unreachable), searching on until that cell is settled."""
     c, r = int(x / cell), int(y / cell)
     if c < 0 or r < 0 or r >= height or c >= width:
         return math.inf
-    g, pos, seen, heap, meta = geo
+    g, seen, done, ring, count, meta = geo
     stride = width + 2
     node = (r + 1) * stride + c + 1
-    gen = meta[i, GEN]
-    if not (seen[i, node] == gen and pos[i, node] == CLOSED) and meta[i, SIZE] > 0:
-        search_run(
-            field, base, stride, -1, node, True, g[i], g[i], scratch, pos[i], seen[i], heap[i], meta[i]
-        )
-    return g[i, node] * cell if seen[i, node] == gen else math.inf
+    _settle(field, base, stride, node, g[i], seen[i], done[i], ring[i], count[i], meta[i])
+    return g[i, node] * cell if seen[i, node] == meta[i, GEN] else math.inf

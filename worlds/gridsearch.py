@@ -18,11 +18,13 @@ around the map, so the neighbour loop has no bounds tests; cell (r, c) is index
 ``(r + 1) * stride + c + 1``. It is the layout of the kernel's map field
 (:func:`worlds.fields.kernel_field`), which the geodesic reward searches in place.
 
-**Work arrays** (:func:`new_work`): ``(g, f, parent, pos, seen, heap, meta)``, one entry per
-padded cell, reused from search to search. ``meta = (generation, heap size)``; a cell's entries
-are valid only when ``seen[cell]`` equals the search's generation, so starting a search writes
-one cell, not every cell. ``pos`` is the cell's place in the heap, :data:`CLOSED` once expanded.
-A Dijkstra (``goal < 0``) may hand the same array as ``g`` and ``f`` (its f is its g).
+**Work arrays** (:func:`new_work`): ``(g, parent, pos, seen, heap, key_f, key_g, meta)``, one
+entry per padded cell, reused from search to search. ``meta = (generation, heap size)``; a cell's
+``g``, ``parent`` and ``pos`` are valid only when ``seen[cell]`` equals the search's generation, so
+starting a search writes one cell, not every cell. ``pos`` is the cell's place in the heap,
+:data:`CLOSED` once expanded. The heap holds its cells' keys beside them (``key_f``, ``key_g``,
+indexed like ``heap``), so comparing two entries reads no other array; a Dijkstra (``goal < 0``)
+may hand one array as both (its f is its g).
 """
 
 from __future__ import annotations
@@ -40,59 +42,56 @@ CLOSED = -2
 GEN, SIZE = 0, 1
 """indices into a search's ``meta``: its generation stamp and its heap's size"""
 
-# Neighbour offsets: the 4 straight moves first, then the 4 diagonals.
-_DR = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
-_DC = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
-
 
 def new_work(cells: int) -> tuple:
-    """Work arrays ``(g, f, parent, pos, seen, heap, meta)`` for searches on grids of up to ``cells``
-    padded cells."""
+    """Work arrays ``(g, parent, pos, seen, heap, key_f, key_g, meta)`` for searches on grids of up to
+    ``cells`` padded cells."""
     i4 = np.int32
-    return (np.zeros(cells), np.zeros(cells), np.full(cells, -1, i4), np.full(cells, -1, i4),
-            np.zeros(cells, i4), np.zeros(cells, i4), np.zeros(2, i4))  # fmt: skip
+    return (np.zeros(cells), np.full(cells, -1, i4), np.full(cells, -1, i4), np.zeros(cells, i4),
+            np.zeros(cells, i4), np.zeros(cells), np.zeros(cells), np.zeros(2, i4))  # fmt: skip
 
 
 @njit(cache=True, inline="always")
-def _before(f, g, a, b):
+def _before(fa, ga, fb, gb):
     """Heap order: smaller f first; on equal f the deeper node (larger g)."""
-    if f[a] != f[b]:
-        return f[a] < f[b]
-    return g[a] > g[b]
+    if fa != fb:
+        return fa < fb
+    return ga > gb
 
 
 @njit(cache=True, inline="always")
-def _sift_up(heap, pos, f, g, i):
-    node = heap[i]
-    while i > 0:
-        parent = (i - 1) >> 1
-        other = heap[parent]
-        if not _before(f, g, node, other):
-            break
-        heap[i] = other
-        pos[other] = i
-        i = parent
-    heap[i] = node
+def _put(heap, key_f, key_g, pos, i, node, f, g):
+    heap[i], key_f[i], key_g[i] = node, f, g
     pos[node] = i
 
 
 @njit(cache=True, inline="always")
-def _sift_down(heap, pos, f, g, i, size):
-    node = heap[i]
+def _sift_up(heap, key_f, key_g, pos, i):
+    node, f, g = heap[i], key_f[i], key_g[i]
+    while i > 0:
+        parent = (i - 1) >> 1
+        if not _before(f, g, key_f[parent], key_g[parent]):
+            break
+        _put(heap, key_f, key_g, pos, i, heap[parent], key_f[parent], key_g[parent])
+        i = parent
+    _put(heap, key_f, key_g, pos, i, node, f, g)
+
+
+@njit(cache=True, inline="always")
+def _sift_down(heap, key_f, key_g, pos, i, size):
+    node, f, g = heap[i], key_f[i], key_g[i]
     while True:
         child = 2 * i + 1
         if child >= size:
             break
         right = child + 1
-        if right < size and _before(f, g, heap[right], heap[child]):
+        if right < size and _before(key_f[right], key_g[right], key_f[child], key_g[child]):
             child = right
-        if not _before(f, g, heap[child], node):
+        if not _before(key_f[child], key_g[child], f, g):
             break
-        heap[i] = heap[child]
-        pos[heap[i]] = i
+        _put(heap, key_f, key_g, pos, i, heap[child], key_f[child], key_g[child])
         i = child
-    heap[i] = node
-    pos[node] = i
+    _put(heap, key_f, key_g, pos, i, node, f, g)
 
 
 @njit(cache=True, inline="always")
@@ -104,7 +103,7 @@ def _octile(dr, dc, diagonal):
 
 
 @njit(cache=True, _nrt=False)
-def search_start(start, goal, stride, diagonal, g, f, parent, pos, seen, heap, meta):
+def search_start(start, goal, stride, diagonal, g, parent, pos, seen, heap, key_f, key_g, meta):
     """Begin a search from padded cell ``start`` in the work arrays: A* towards ``goal`` if
     ``goal >= 0``, else Dijkstra. Costs O(1): only ``start`` is written."""
     gen = meta[GEN] + 1
@@ -113,63 +112,78 @@ def search_start(start, goal, stride, diagonal, g, f, parent, pos, seen, heap, m
             seen[k] = 0
         gen = 1
     meta[GEN], meta[SIZE] = gen, 1
-    seen[start], pos[start], parent[start], heap[0] = gen, 0, -1, start
-    g[start] = 0.0
-    f[start] = (
+    seen[start], parent[start], g[start] = gen, -1, 0.0
+    h = (
         _octile(start // stride - goal // stride, start % stride - goal % stride, diagonal)
         if goal >= 0
         else 0.0
     )
+    _put(heap, key_f, key_g, pos, 0, start, h, 0.0)
+
+
+@njit(cache=True, inline="always")
+def _relax(ctx, step, cand, hr, hc, size):
+    """Offer the neighbour ``node + step`` the cost ``cand`` (via the expanded ``node`` of ``ctx``;
+    ``hr``, ``hc``: its offset from the goal); returns the heap's size."""
+    grid, at, node, goal, diagonal, gen, work = ctx
+    g, parent, pos, seen, heap, key_f, key_g = work
+    if grid[at + step] == BLOCKED:
+        return size
+    nb = node + step
+    if seen[nb] == gen:
+        if pos[nb] == CLOSED or not cand < g[nb]:
+            return size
+        i = pos[nb]
+    else:
+        seen[nb] = gen
+        i = size
+        size += 1
+    g[nb] = cand
+    parent[nb] = node
+    f = cand + (_octile(hr, hc, diagonal) if goal >= 0 else 0.0)
+    _put(heap, key_f, key_g, pos, i, nb, f, cand)
+    _sift_up(heap, key_f, key_g, pos, i)
+    return size
 
 
 @njit(cache=True, _nrt=False)
-def search_run(grid, base, stride, goal, stop, diagonal, g, f, parent, pos, seen, heap, meta):
+def search_run(grid, base, stride, goal, diagonal, g, parent, pos, seen, heap, key_f, key_g, meta):
     """Run the search held in the work arrays on the padded grid at ``grid[base:]`` until it
-    expands ``goal`` (A*; not expanded further) or has expanded ``stop`` and its neighbours (so
-    that a later call goes on exactly where this one stopped), or the heap is empty. Returns the
-    number of nodes expanded."""
+    expands ``goal`` (A*; not expanded further) or the heap is empty. Returns the number of nodes
+    expanded."""
     gen, size = meta[GEN], meta[SIZE]
-    n_moves = 8 if diagonal else 4
     gr, gc = goal // stride, goal % stride
+    work = (g, parent, pos, seen, heap, key_f, key_g)
     expanded = 0
     while size > 0:
         node = heap[0]
         size -= 1
         pos[node] = CLOSED
         if size > 0:
-            heap[0] = heap[size]
-            pos[heap[0]] = 0
-            _sift_down(heap, pos, f, g, 0, size)
+            _put(heap, key_f, key_g, pos, 0, heap[size], key_f[size], key_g[size])
+            _sift_down(heap, key_f, key_g, pos, 0, size)
         expanded += 1
         if node == goal:
             break
         r, c = node // stride, node % stride
-        g_node = g[node]
-        for k in range(n_moves):
-            dr, dc = _DR[k], _DC[k]
-            nb = node + dr * stride + dc
-            if grid[base + nb] == BLOCKED:
-                continue
-            if k >= 4:
-                if grid[base + node + dc] == BLOCKED or grid[base + node + dr * stride] == BLOCKED:
-                    continue  # no corner cutting
-                cand = g_node + SQRT2
-            else:
-                cand = g_node + 1.0
-            if seen[nb] == gen:
-                if pos[nb] == CLOSED or not cand < g[nb]:
-                    continue
-            else:
-                seen[nb] = gen
-                heap[size] = nb
-                pos[nb] = size
-                size += 1
-            g[nb] = cand
-            parent[nb] = node
-            f[nb] = cand + (_octile(r + dr - gr, c + dc - gc, diagonal) if goal >= 0 else 0.0)
-            _sift_up(heap, pos, f, g, pos[nb])
-        if node == stop:
-            break
+        at, one, diag = base + node, g[node] + 1.0, g[node] + SQRT2
+        hr, hc = r - gr, c - gc  # the heuristic's offsets (A* only)
+        ctx = (grid, at, node, goal, diagonal, gen, work)
+        size = _relax(ctx, -stride, one, hr - 1, hc, size)
+        size = _relax(ctx, stride, one, hr + 1, hc, size)
+        size = _relax(ctx, -1, one, hr, hc - 1, size)
+        size = _relax(ctx, 1, one, hr, hc + 1, size)
+        if diagonal:  # a diagonal move needs both cells it brushes past free (no corner cutting)
+            up, down = grid[at - stride] != BLOCKED, grid[at + stride] != BLOCKED
+            left, right = grid[at - 1] != BLOCKED, grid[at + 1] != BLOCKED
+            if up and left:
+                size = _relax(ctx, -stride - 1, diag, hr - 1, hc - 1, size)
+            if up and right:
+                size = _relax(ctx, -stride + 1, diag, hr - 1, hc + 1, size)
+            if down and left:
+                size = _relax(ctx, stride - 1, diag, hr + 1, hc - 1, size)
+            if down and right:
+                size = _relax(ctx, stride + 1, diag, hr + 1, hc + 1, size)
     meta[SIZE] = size
     return expanded
 
@@ -192,13 +206,14 @@ def grid_search(blocked, start, goal, diagonal):
             if not blocked[r, c]:
                 grid[(r + 1) * stride + c + 1] = 0
     cells = grid.shape[0]
-    g, f = np.empty(cells), np.empty(cells)
-    parent, pos = np.empty(cells, np.int32), np.empty(cells, np.int32)
+    g, parent, pos = np.empty(cells), np.empty(cells, np.int32), np.empty(cells, np.int32)
     seen, heap, meta = np.zeros(cells, np.int32), np.empty(cells, np.int32), np.zeros(2, np.int32)
+    key_f, key_g = np.empty(cells), np.empty(cells)
+    work = (g, parent, pos, seen, heap, key_f, key_g, meta)
     padded = (start // width + 1) * stride + start % width + 1
     target = (goal // width + 1) * stride + goal % width + 1 if goal >= 0 else -1
-    search_start(padded, target, stride, diagonal, g, f, parent, pos, seen, heap, meta)
-    expanded = search_run(grid, 0, stride, target, -1, diagonal, g, f, parent, pos, seen, heap, meta)
+    search_start(padded, target, stride, diagonal, *work)
+    expanded = search_run(grid, 0, stride, target, diagonal, *work)
     out_g, out_parent = np.full(height * width, np.inf), np.full(height * width, -1, np.int64)
     for r in range(height):
         for c in range(width):

@@ -98,7 +98,7 @@ def waypoint(plan, height, width, cell, x, y, gx, gy, goal_r, goal_c, along, wor
     goal cell (counted free); the centre of the cell ``along`` metres down the path, or the goal
     itself when the path ends first, the robot is off the map or on a blocked cell, or no path
     exists. ``work``: the search's work arrays (:func:`worlds.gridsearch.new_work`)."""
-    g, f, parent, pos, seen, heap, meta = work
+    g, parent, seen, meta = work[0], work[1], work[3], work[7]
     stride = width + 2
     c, r = int(x / cell), int(y / cell)
     if c < 0 or r < 0 or c >= width or r >= height:
@@ -108,8 +108,8 @@ def waypoint(plan, height, width, cell, x, y, gx, gy, goal_r, goal_c, along, wor
         return gx, gy
     was = plan[goal]
     plan[goal] = 0
-    search_start(start, goal, stride, True, g, f, parent, pos, seen, heap, meta)
-    search_run(plan, 0, stride, goal, -1, True, g, f, parent, pos, seen, heap, meta)
+    search_start(start, goal, stride, True, *work)
+    search_run(plan, 0, stride, goal, True, *work)
     plan[goal] = was
     if seen[goal] != meta[GEN]:
         return gx, gy

@@ -76,7 +76,6 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     reuse = params[REUSE_PARAM] > 0.0
     field, moff, mh, mw, mcell = world
     occ, visits, plan, dirty, wpt, last, plan_x, plan_y, stamp, version, geo, pgeo, stack = mem
-    scratch = work[2]  # the geodesic Dijkstra's parents, never read
     height, width, cell, at = mh[m], mw[m], mcell[m], moff[m]
     uses_map = occ.shape[1] > 0
     shaped, shaping = False, 0.0
@@ -87,13 +86,13 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
                     occ[i, r, c], visits[i, r, c] = UNKNOWN, 0
         if w_geo > 0.0:
             stride = width + 2
-            start_field(field, at, stride, (gr + 1) * stride + gc + 1, geo, scratch, i, reuse)
-            pgeo[i] = field_distance(field, at, height, width, geo, scratch, i, cell, x, y)
+            start_field(field, at, stride, (gr + 1) * stride + gc + 1, geo, i, reuse)
+            pgeo[i] = field_distance(field, at, height, width, geo, i, cell, x, y)
         if sub_kind == SUB_KNOWN:
             plan_from_field(field, at, plan[i], height, width)
         dirty[i] = sub_kind == SUB_OWN
     elif w_geo > 0.0:
-        now = field_distance(field, at, height, width, geo, scratch, i, cell, x, y)
+        now = field_distance(field, at, height, width, geo, i, cell, x, y)
         if math.isfinite(now) and math.isfinite(pgeo[i]):
             shaped, shaping = True, w_geo * (pgeo[i] - now)
         pgeo[i] = now

@@ -39,6 +39,7 @@ from __future__ import annotations
 import numpy as np
 
 from worlds.config import NavConfig
+from worlds.geodesic import new_fields
 from worlds.gridsearch import new_work
 from worlds.own_map import FREE, SEEN_BLOCKED, UNKNOWN
 from worlds.perceive import (
@@ -171,14 +172,11 @@ class Perception:
         self.plan_y = grow(getattr(self, "plan_y", None), np.float64, self.plans)
         self.stamp = grow(getattr(self, "stamp", None), np.int64, self.plans, -1)
         # the geodesic field's Dijkstra, one row of work arrays per robot (worlds.geodesic)
-        old = getattr(self, "geo", (None,) * 5)
-        self.geo = (
-            grow(old[0], np.float64, self.geodesic, flat=True),  # g (= f)
-            grow(old[1], np.int32, self.geodesic, -1, flat=True),  # pos
-            grow(old[2], np.int32, self.geodesic, flat=True),  # seen (generation stamps)
-            grow(old[3], np.int32, self.geodesic, flat=True),  # heap
-            np.zeros((self.n, 2), np.int32) if old[4] is None else old[4],  # meta: generation, heap size
-        )
+        old = getattr(self, "geo", None)  # the geodesic field's Dijkstra, one row per robot
+        self.geo = new_fields(self.n, cells if self.geodesic else 0)
+        if old is not None and self.geodesic:
+            for new, prev in zip(self.geo, old, strict=True):
+                new[(slice(None), *(slice(0, k) for k in prev.shape[1:]))] = prev
         self.work = new_work(cells)  # the subgoal's A*, one search at a time
         self.shape = (h, w)
 
