@@ -186,7 +186,7 @@ def test_a_wrapped_generation_stamp_forgets_every_cell():
     blocked = np.zeros((6, 6), bool)
     grid, stride = padded(blocked)
     work = new_work(grid.size)
-    g, seen, meta = work[0], work[3], work[7]
+    g, seen, meta = work[0], work[3], work[8]
     search_start(stride + 1, -1, stride, True, *work)
     search_run(grid, 0, stride, -1, True, *work)
     meta[GEN] = 2**31 - 2  # the next search wraps the stamp: cells the last one saw must not count

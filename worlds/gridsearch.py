@@ -18,10 +18,11 @@ around the map, so the neighbour loop has no bounds tests; cell (r, c) is index
 ``(r + 1) * stride + c + 1``. It is the layout of the kernel's map field
 (:func:`worlds.fields.kernel_field`), which the geodesic reward searches in place.
 
-**Work arrays** (:func:`new_work`): ``(g, parent, pos, seen, heap, key_f, key_g, meta)``, one
-entry per padded cell, reused from search to search. ``meta = (generation, heap size)``; a cell's
-``g``, ``parent`` and ``pos`` are valid only when ``seen[cell]`` equals the search's generation, so
-starting a search writes one cell, not every cell. ``pos`` is the cell's place in the heap,
+**Work arrays** (:func:`new_work`): ``(g, parent, pos, seen, heap, key_f, key_g, order, meta)``,
+one entry per padded cell (``order``: the cells in the order the search expanded them), reused
+from search to search. ``meta = (generation, heap size)``; a cell's ``g``, ``parent`` and ``pos``
+are valid only when ``seen[cell]`` equals the search's generation, so starting a search writes
+one cell, not every cell. ``pos`` is the cell's place in the heap,
 :data:`CLOSED` once expanded. The heap holds its cells' keys beside them (``key_f``, ``key_g``,
 indexed like ``heap``), so comparing two entries reads no other array; a Dijkstra (``goal < 0``)
 may hand one array as both (its f is its g).
@@ -44,11 +45,12 @@ GEN, SIZE = 0, 1
 
 
 def new_work(cells: int) -> tuple:
-    """Work arrays ``(g, parent, pos, seen, heap, key_f, key_g, meta)`` for searches on grids of up to
-    ``cells`` padded cells."""
+    """Work arrays ``(g, parent, pos, seen, heap, key_f, key_g, order, meta)`` for searches on grids
+    of up to ``cells`` padded cells."""
     i4 = np.int32
     return (np.zeros(cells), np.full(cells, -1, i4), np.full(cells, -1, i4), np.zeros(cells, i4),
-            np.zeros(cells, i4), np.zeros(cells), np.zeros(cells), np.zeros(2, i4))  # fmt: skip
+            np.zeros(cells, i4), np.zeros(cells), np.zeros(cells), np.zeros(cells, i4),
+            np.zeros(2, i4))  # fmt: skip
 
 
 @njit(cache=True, inline="always")
@@ -103,7 +105,7 @@ def _octile(dr, dc, diagonal):
 
 
 @njit(cache=True, _nrt=False)
-def search_start(start, goal, stride, diagonal, g, parent, pos, seen, heap, key_f, key_g, meta):
+def search_start(start, goal, stride, diagonal, g, parent, pos, seen, heap, key_f, key_g, order, meta):
     """Begin a search from padded cell ``start`` in the work arrays: A* towards ``goal`` if
     ``goal >= 0``, else Dijkstra. Costs O(1): only ``start`` is written."""
     gen = meta[GEN] + 1
@@ -147,7 +149,7 @@ def _relax(ctx, step, cand, hr, hc, size):
 
 
 @njit(cache=True, _nrt=False)
-def search_run(grid, base, stride, goal, diagonal, g, parent, pos, seen, heap, key_f, key_g, meta):
+def search_run(grid, base, stride, goal, diagonal, g, parent, pos, seen, heap, key_f, key_g, order, meta):
     """Run the search held in the work arrays on the padded grid at ``grid[base:]`` until it
     expands ``goal`` (A*; not expanded further) or the heap is empty. Returns the number of nodes
     expanded."""
@@ -162,6 +164,7 @@ def search_run(grid, base, stride, goal, diagonal, g, parent, pos, seen, heap, k
         if size > 0:
             _put(heap, key_f, key_g, pos, 0, heap[size], key_f[size], key_g[size])
             _sift_down(heap, key_f, key_g, pos, 0, size)
+        order[expanded] = node
         expanded += 1
         if node == goal:
             break
@@ -208,8 +211,8 @@ def grid_search(blocked, start, goal, diagonal):
     cells = grid.shape[0]
     g, parent, pos = np.empty(cells), np.empty(cells, np.int32), np.empty(cells, np.int32)
     seen, heap, meta = np.zeros(cells, np.int32), np.empty(cells, np.int32), np.zeros(2, np.int32)
-    key_f, key_g = np.empty(cells), np.empty(cells)
-    work = (g, parent, pos, seen, heap, key_f, key_g, meta)
+    key_f, key_g, order = np.empty(cells), np.empty(cells), np.empty(cells, np.int32)
+    work = (g, parent, pos, seen, heap, key_f, key_g, order, meta)
     padded = (start // width + 1) * stride + start % width + 1
     target = (goal // width + 1) * stride + goal % width + 1 if goal >= 0 else -1
     search_start(padded, target, stride, diagonal, *work)

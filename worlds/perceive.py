@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from worlds.geodesic import field_distance, start_field
-from worlds.own_map import UNKNOWN, map_rays, plan_from_field, plan_from_own_map, waypoint
+from worlds.own_map import CHANGED, ON_PLAN, UNKNOWN, map_rays, plan_clear, plan_from_field, waypoint
 
 PATCH_VALUE = np.array([0.5, 0.0, 1.0], dtype=np.float32)
 """occupancy channel of the patch for UNKNOWN, FREE, SEEN_BLOCKED"""
@@ -61,6 +61,38 @@ def _frame(out, base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions,
 
 
 @njit(cache=True, _nrt=False)
+def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell, along, reuse, plans, work):
+    """Robot ``i``'s waypoint into ``wpt[i]`` (``plans``). The plan depends on the map, the goal and
+    the robot's cell only: it is searched again when one of them changed (``fresh``: a new episode;
+    ``dirty``: a cell became blocked or free; ``replan``: one where the last search looked), else
+    kept; with ``reuse``, from the plans kept per cell of this plan map, and kept on a new plan map
+    when no change lies where the search that made it looked."""
+    plan, wpt, last, plan_x, plan_y, stamp, version, exam, exam_id, searches = plans
+    rc, cc = int(y / cell), int(x / cell)
+    moved = rc != last[i, 0] or cc != last[i, 1]
+    if not (fresh or dirty or moved):
+        return
+    if fresh or dirty:
+        version[i] += 1  # a new plan map: the plans kept for the previous one are void
+    last[i, 0], last[i, 1] = rc, cc
+    on_map = 0 <= rc < height and 0 <= cc < width
+    if reuse and on_map and not (fresh or moved or replan):
+        stamp[i, rc, cc] = version[i]  # the search would read the same cells: same plan, still valid
+    elif reuse and on_map and stamp[i, rc, cc] == version[i]:
+        # a cell already planned from on this plan map (same map, goal, cell: same plan)
+        wpt[i, 0], wpt[i, 1] = plan_x[i, rc, cc], plan_y[i, rc, cc]
+        exam_id[i] = -1  # where its search looked is not known
+    else:
+        searches[i] += 1
+        wpt[i, 0], wpt[i, 1], searched = waypoint(plan[i], height, width, cell, x, y, gx, gy, gr, gc, along,
+                                                  work, exam[i], searches[i])  # fmt: skip
+        exam_id[i] = searches[i] if searched else -1
+        if on_map:
+            plan_x[i, rc, cc], plan_y[i, rc, cc] = wpt[i, 0], wpt[i, 1]
+            stamp[i, rc, cc] = version[i]
+
+
+@njit(cache=True, _nrt=False)
 def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, world, mem, work, params, ray_c,
            ray_s):  # fmt: skip
     """Robot ``i``'s frame at pose (x, y, theta) on map ``m`` with goal (gx, gy) in cell (gr, gc),
@@ -75,7 +107,8 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     patch, w_geo, n_actions, per = int(params[6]), params[7], int(params[8]), int(params[9])
     reuse = params[REUSE_PARAM] > 0.0
     field, moff, mh, mw, mcell = world
-    occ, visits, plan, dirty, wpt, last, plan_x, plan_y, stamp, version, geo, pgeo, stack = mem
+    occ, visits, plans, geo, pgeo, stack = mem
+    plan, wpt, exam, exam_id = plans[0], plans[1], plans[7], plans[8]
     height, width, cell, at = mh[m], mw[m], mcell[m], moff[m]
     uses_map = occ.shape[1] > 0
     shaped, shaping = False, 0.0
@@ -90,37 +123,26 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
             pgeo[i] = field_distance(field, at, height, width, geo, i, cell, x, y)
         if sub_kind == SUB_KNOWN:
             plan_from_field(field, at, plan[i], height, width)
-        dirty[i] = sub_kind == SUB_OWN
+        elif sub_kind == SUB_OWN:
+            plan_clear(plan[i], height, width)
     elif w_geo > 0.0:
         now = field_distance(field, at, height, width, geo, i, cell, x, y)
         if math.isfinite(now) and math.isfinite(pgeo[i]):
             shaped, shaping = True, w_geo * (pgeo[i] - now)
         pgeo[i] = now
+    dirty, replan = fresh, fresh
     if uses_map:
-        changed = map_rays(occ[i], visits[i], height, width, cell, x, y, theta, ray_c, ray_s, rays, max_range,
-                           per)  # fmt: skip
-        dirty[i] = dirty[i] or (changed and sub_kind == SUB_OWN)
+        own = sub_kind == SUB_OWN  # the plan grid follows the own map
+        tracked, seen_by = (plan[i], exam_id[i]) if own else (plan[i, :0], -1)
+        flags = map_rays(occ[i], visits[i], tracked, exam[i], seen_by, height, width, cell, x, y, theta,
+                         ray_c, ray_s, rays, max_range, per)  # fmt: skip
+        dirty = dirty or (own and flags & CHANGED != 0)
+        replan = replan or (own and flags & ON_PLAN != 0)
     wx, wy = gx, gy
     if sub_kind != SUB_NONE:
-        # the plan depends on the map, the goal and the robot's cell only: search again when one changed
-        rc, cc = int(y / cell), int(x / cell)
-        if fresh or dirty[i] or rc != last[i, 0] or cc != last[i, 1]:
-            if fresh or dirty[i]:
-                version[i] += 1  # a new plan map: the plans kept for the previous one are void
-            if dirty[i]:
-                plan_from_own_map(occ[i], plan[i], height, width)
-                dirty[i] = False
-            on_map = 0 <= rc < height and 0 <= cc < width
-            if reuse and on_map and stamp[i, rc, cc] == version[i]:
-                # a cell already planned from on this plan map (same map, goal, cell: same plan)
-                wpt[i, 0], wpt[i, 1] = plan_x[i, rc, cc], plan_y[i, rc, cc]
-            else:
-                wpt[i, 0], wpt[i, 1] = waypoint(plan[i], height, width, cell, x, y, gx, gy, gr, gc, along,
-                                                work)  # fmt: skip
-                if on_map:
-                    plan_x[i, rc, cc], plan_y[i, rc, cc] = wpt[i, 0], wpt[i, 1]
-                    stamp[i, rc, cc] = version[i]
-            last[i, 0], last[i, 1] = rc, cc
+        _subgoal(
+            i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell, along, reuse, plans, work
+        )
         wx, wy = wpt[i, 0], wpt[i, 1]
     k, d = stack.shape[1], stack.shape[2]
     if not fresh:

@@ -142,10 +142,10 @@ class Perception:
         self.uses_map, self.plans = o.needs_map, o.subgoal != "none"
         self.geodesic = config.rewards.geodesic_progress > 0
         self.stack = np.zeros((n, o.frame_stack, self.frame_dim), np.float32)
-        self.dirty = np.zeros(n, np.bool_)
         self.waypoint = np.zeros((n, 2), np.float64)
         self.last = np.zeros((n, 2), np.int64)
         self.version = np.zeros(n, np.int64)
+        self.exam_id, self.searches = np.full(n, -1, np.int64), np.zeros(n, np.int64)
         self.pgeo = np.zeros(n, np.float64)
         self.shape, self._sized_for = (0, 0), None
         self._allocate((1, 1))
@@ -171,6 +171,7 @@ class Perception:
         self.plan_x = grow(getattr(self, "plan_x", None), np.float64, self.plans)
         self.plan_y = grow(getattr(self, "plan_y", None), np.float64, self.plans)
         self.stamp = grow(getattr(self, "stamp", None), np.int64, self.plans, -1)
+        self.exam = grow(getattr(self, "exam", None), np.int64, self.plans, flat=True)  # searches' cells
         # the geodesic field's Dijkstra, one row of work arrays per robot (worlds.geodesic)
         old = getattr(self, "geo", None)  # the geodesic field's Dijkstra, one row per robot
         self.geo = new_fields(self.n, cells if self.geodesic else 0)
@@ -185,21 +186,9 @@ class Perception:
         if mh is not self._sized_for:  # the bank's maps changed: grids big enough for its largest
             self._allocate((int(mh.max()), int(mw.max())))
             self._sized_for = mh
-        return (
-            self.occ,
-            self.visits,
-            self.plan,
-            self.dirty,
-            self.waypoint,
-            self.last,
-            self.plan_x,
-            self.plan_y,
-            self.stamp,
-            self.version,
-            self.geo,
-            self.pgeo,
-            self.stack,
-        )
+        plans = (self.plan, self.waypoint, self.last, self.plan_x, self.plan_y, self.stamp, self.version,
+                 self.exam, self.exam_id, self.searches)  # fmt: skip
+        return self.occ, self.visits, plans, self.geo, self.pgeo, self.stack
 
     def observe_fresh(self, indices: np.ndarray, maps: tuple, robots: tuple, obs: np.ndarray) -> None:
         """First frames of the episodes robots ``indices`` just started (see
