@@ -12,9 +12,12 @@ import math
 import numpy as np
 import pytest
 
+from worlds.config import LEARNING_NAV
 from worlds.fields import BLOCKED
 from worlds.geodesic import field_distance, new_fields, start_field
 from worlds.gridsearch import GEN, grid_search, new_work, search_run, search_start
+from worlds.perceive import STAMP_WRAP
+from worlds.vector_env import NavigationVectorEnv
 
 MOVES = [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1)]
 
@@ -178,8 +181,8 @@ def test_a_wrapped_generation_stamp_forgets_every_cell():
     field, stride = padded(np.zeros((4, 4), bool))
     geo = new_fields(1, field.size)
     start_field(field, 0, stride, stride + 1, geo, 0, False)
-    geo[-1][0, 0] = 2**31 - 2  # the next field wraps the stamps: cells of the last one must not count
-    geo[1][geo[1] > 0], geo[2][geo[2] > 0] = 2**31 - 1, 2**31 - 1
+    geo[-1][0, 0] = 2**30 - 2  # the next field wraps the stamps: cells of the last one must not count
+    geo[1][geo[1] > 0] = 2 * (2**30 - 1) + 1
     start_field(field, 0, stride, 4 * stride + 4, geo, 0, True)
     assert field_distance(field, 0, 4, 4, geo, 0, 1.0, 0.5, 0.5) == pytest.approx(3 * math.sqrt(2.0))
 
@@ -194,3 +197,22 @@ def test_a_wrapped_generation_stamp_forgets_every_cell():
     search_start(stride + 1, 7 * stride - 2, stride, True, *work)
     expanded = search_run(grid, 0, stride, 7 * stride - 2, True, *work)
     assert meta[GEN] == 1 and expanded == 6 and g[7 * stride - 2] == pytest.approx(5 * math.sqrt(2.0))
+
+
+def test_wrapped_plan_stamps_change_no_observation():
+    """The own-map subgoal's int32 stamps (plan-map versions, search ids) start again when they wrap,
+    forgetting the plans they mark: the observations stay those of a run that never wraps."""
+
+    def rollout(wrap: bool) -> np.ndarray:
+        env = NavigationVectorEnv(8, LEARNING_NAV, maps="rooms:12x20", threads=1)
+        frames = [env.reset(seed=4)[0]]
+        if wrap:
+            env.batch.perception.version[:] = STAMP_WRAP - 1
+            env.batch.perception.searches[:] = STAMP_WRAP - 1
+        rng = np.random.default_rng(4)
+        for _ in range(60):
+            frames.append(env.step(rng.integers(LEARNING_NAV.robot.n_actions, size=8))[0])
+        assert (env.batch.perception.version < (STAMP_WRAP if wrap else 1000)).all()
+        return np.stack(frames)
+
+    np.testing.assert_array_equal(rollout(False), rollout(True))

@@ -18,9 +18,9 @@ Each settled distance is the least of ``g[u] + step`` over the neighbours ``u`` 
 :func:`worlds.gridsearch.grid_search`'s Dijkstra, bit for bit (``tests/test_worlds_gridsearch.py``),
 paused or not.
 
-``geo = (g, seen, done, ring, count, meta)``, one row per robot: distances, the generation
-stamps of reached and of taken cells, the ring's stacks ``(4, cells)`` and sizes ``(4,)``, and
-``meta = (generation, current bucket)``.
+``geo = (g, mark, ring, count, meta)``, one row per robot: distances, the cells' generation
+stamps (``2 * generation`` once reached, ``+ 1`` once taken), the ring's stacks ``(4, cells)`` and
+sizes ``(4,)``, and ``meta = (generation, current bucket)``.
 """
 
 from __future__ import annotations
@@ -40,15 +40,15 @@ GEN, BUCKET = 0, 1
 def new_fields(n: int, cells: int) -> tuple:
     """Work rows ``geo`` for ``n`` robots on maps of up to ``cells`` padded cells."""
     i4 = np.int32
-    return (np.zeros((n, cells)), np.zeros((n, cells), i4), np.zeros((n, cells), i4),
-            np.zeros((n, 4, cells), i4), np.zeros((n, 4), i4), np.zeros((n, 2), i4))  # fmt: skip
+    return (np.zeros((n, cells)), np.zeros((n, cells), i4), np.zeros((n, 4, cells), i4), np.zeros((n, 4), i4),
+            np.zeros((n, 2), i4))  # fmt: skip
 
 
 @njit(cache=True, inline="always")
-def _offer(g, seen, ring, count, gen, node, cand):
-    """Reach ``node`` at distance ``cand`` if that is new or shorter (pushed into its bucket's stack
-    unless it stays in the same bucket)."""
-    if seen[node] == gen:
+def _offer(g, mark, ring, count, gen, node, cand):
+    """Reach ``node`` (not taken yet) at distance ``cand`` if that is new or shorter (pushed into its
+    bucket's stack unless it stays in the same bucket)."""
+    if mark[node] == 2 * gen:
         if not cand < g[node]:
             return
         same = int(g[node]) == int(cand)
@@ -56,7 +56,7 @@ def _offer(g, seen, ring, count, gen, node, cand):
         if same:
             return
     else:
-        seen[node] = gen
+        mark[node] = 2 * gen
         g[node] = cand
     slot = int(cand) & 3
     ring[slot, count[slot]] = node
@@ -64,10 +64,11 @@ def _offer(g, seen, ring, count, gen, node, cand):
 
 
 @njit(cache=True, _nrt=False)
-def _settle(field, base, stride, target, g, seen, done, ring, count, meta):
+def _settle(field, base, stride, target, g, mark, ring, count, meta):
     """Take cells until ``target`` is settled (``target < 0``: until every reachable cell is)."""
     gen, b = meta[GEN], meta[BUCKET]
-    while not (target >= 0 and seen[target] == gen and int(g[target]) <= b):
+    taken = 2 * gen + 1
+    while not (target >= 0 and mark[target] >= 2 * gen and int(g[target]) <= b):
         slot = b & 3
         if count[slot] == 0:
             if count[(b + 1) & 3] == 0 and count[(b + 2) & 3] == 0:
@@ -76,29 +77,29 @@ def _settle(field, base, stride, target, g, seen, done, ring, count, meta):
             continue
         count[slot] -= 1
         node = ring[slot, count[slot]]
-        if done[node] == gen or int(g[node]) != b:
+        if mark[node] == taken or int(g[node]) != b:
             continue  # taken already, or moved to a lower bucket
-        done[node] = gen
+        mark[node] = taken
         at, one, diag = base + node, g[node] + 1.0, g[node] + SQRT2
         up, down = field[at - stride] != BLOCKED, field[at + stride] != BLOCKED
         left, right = field[at - 1] != BLOCKED, field[at + 1] != BLOCKED
-        if up and done[node - stride] != gen:
-            _offer(g, seen, ring, count, gen, node - stride, one)
-        if down and done[node + stride] != gen:
-            _offer(g, seen, ring, count, gen, node + stride, one)
-        if left and done[node - 1] != gen:
-            _offer(g, seen, ring, count, gen, node - 1, one)
-        if right and done[node + 1] != gen:
-            _offer(g, seen, ring, count, gen, node + 1, one)
+        if up and mark[node - stride] != taken:
+            _offer(g, mark, ring, count, gen, node - stride, one)
+        if down and mark[node + stride] != taken:
+            _offer(g, mark, ring, count, gen, node + stride, one)
+        if left and mark[node - 1] != taken:
+            _offer(g, mark, ring, count, gen, node - 1, one)
+        if right and mark[node + 1] != taken:
+            _offer(g, mark, ring, count, gen, node + 1, one)
         # a diagonal move needs both cells it brushes past free (no corner cutting)
-        if up and left and field[at - stride - 1] != BLOCKED and done[node - stride - 1] != gen:
-            _offer(g, seen, ring, count, gen, node - stride - 1, diag)
-        if up and right and field[at - stride + 1] != BLOCKED and done[node - stride + 1] != gen:
-            _offer(g, seen, ring, count, gen, node - stride + 1, diag)
-        if down and left and field[at + stride - 1] != BLOCKED and done[node + stride - 1] != gen:
-            _offer(g, seen, ring, count, gen, node + stride - 1, diag)
-        if down and right and field[at + stride + 1] != BLOCKED and done[node + stride + 1] != gen:
-            _offer(g, seen, ring, count, gen, node + stride + 1, diag)
+        if up and left and field[at - stride - 1] != BLOCKED and mark[node - stride - 1] != taken:
+            _offer(g, mark, ring, count, gen, node - stride - 1, diag)
+        if up and right and field[at - stride + 1] != BLOCKED and mark[node - stride + 1] != taken:
+            _offer(g, mark, ring, count, gen, node - stride + 1, diag)
+        if down and left and field[at + stride - 1] != BLOCKED and mark[node + stride - 1] != taken:
+            _offer(g, mark, ring, count, gen, node + stride - 1, diag)
+        if down and right and field[at + stride + 1] != BLOCKED and mark[node + stride + 1] != taken:
+            _offer(g, mark, ring, count, gen, node + stride + 1, diag)
     meta[BUCKET] = b
 
 
@@ -107,18 +108,18 @@ def start_field(field, base, stride, goal, geo, i, reuse):
     """Start robot ``i``'s distance field on its true map (the padded field at ``base``): a Dijkstra
     from padded cell ``goal``. With ``reuse`` it is only started (:func:`field_distance` runs it on as
     far as each robot cell needs), else run over the whole component at once."""
-    g, seen, done, ring, count, meta = geo
+    g, mark, ring, count, meta = geo
     gen = meta[i, GEN] + 1
-    if gen >= 2**31 - 1:  # the stamps wrap: forget every cell once
-        for k in range(seen.shape[1]):
-            seen[i, k], done[i, k] = 0, 0
+    if gen >= 2**30 - 1:  # the stamps wrap: forget every cell once
+        for k in range(mark.shape[1]):
+            mark[i, k] = 0
         gen = 1
     meta[i, GEN], meta[i, BUCKET] = gen, 0
     for slot in range(4):
         count[i, slot] = 0
-    _offer(g[i], seen[i], ring[i], count[i], gen, goal, 0.0)
+    _offer(g[i], mark[i], ring[i], count[i], gen, goal, 0.0)
     if not reuse:
-        _settle(field, base, stride, -1, g[i], seen[i], done[i], ring[i], count[i], meta[i])
+        _settle(field, base, stride, -1, g[i], mark[i], ring[i], count[i], meta[i])
 
 
 @njit(cache=True, _nrt=False)
@@ -128,8 +129,8 @@ def field_distance(field, base, height, width, geo, i, cell, x, y):
     c, r = int(x / cell), int(y / cell)
     if c < 0 or r < 0 or r >= height or c >= width:
         return math.inf
-    g, seen, done, ring, count, meta = geo
+    g, mark, ring, count, meta = geo
     stride = width + 2
     node = (r + 1) * stride + c + 1
-    _settle(field, base, stride, node, g[i], seen[i], done[i], ring[i], count[i], meta[i])
-    return g[i, node] * cell if seen[i, node] == meta[i, GEN] else math.inf
+    _settle(field, base, stride, node, g[i], mark[i], ring[i], count[i], meta[i])
+    return g[i, node] * cell if mark[i, node] >= 2 * meta[i, GEN] else math.inf

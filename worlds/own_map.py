@@ -114,21 +114,22 @@ def plan_from_field(field, base, plan, height, width):
 
 
 @njit(cache=True, _nrt=False)
-def waypoint(plan, height, width, cell, x, y, gx, gy, goal_r, goal_c, along, work, exam, exam_id):
+def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam, exam_id):
     """A* (8-connected, no corner cutting) on the padded grid ``plan`` from the robot's cell to the
     goal cell (counted free); the centre of the cell ``along`` metres down the path, or the goal
     itself when the path ends first, the robot is off the map or on a blocked cell, or no path
     exists. ``work``: the search's work arrays (:func:`worlds.gridsearch.new_work`). The cells it
     expanded get the stamp ``exam_id`` in ``exam`` (a search reads only their 3x3 neighbourhoods,
-    so changes elsewhere leave its result as it is). Returns (x, y, searched)."""
+    so changes elsewhere leave its result as it is). Returns (the waypoint's padded cell, -1 for the
+    goal itself; searched)."""
     g, parent, seen, order, meta = work[0], work[1], work[3], work[7], work[8]
     stride = width + 2
     c, r = int(x / cell), int(y / cell)
     if c < 0 or r < 0 or c >= width or r >= height:
-        return gx, gy, False
+        return -1, False
     start, goal = (r + 1) * stride + c + 1, (goal_r + 1) * stride + goal_c + 1
     if plan[start] == BLOCKED:
-        return gx, gy, False
+        return -1, False
     was = plan[goal]
     plan[goal] = 0
     search_start(start, goal, stride, True, *work)
@@ -137,12 +138,19 @@ def waypoint(plan, height, width, cell, x, y, gx, gy, goal_r, goal_c, along, wor
     for k in range(expanded):
         exam[order[k]] = exam_id
     if seen[goal] != meta[GEN]:
-        return gx, gy, True
+        return -1, True
     # parent links run goal -> start: the node at path length >= along is the last one walking back
     # from the goal whose g is still >= along (g grows along the path from the start)
     node = goal
     while parent[node] >= 0 and g[parent[node]] * cell >= along:
         node = parent[node]
-    if node == goal:
-        return gx, gy, True
-    return (node % stride - 1 + 0.5) * cell, (node // stride - 1 + 0.5) * cell, True
+    return (-1 if node == goal else node), True
+
+
+@njit(cache=True, inline="always")
+def centre(node, width, cell, gx, gy):
+    """The point a :func:`waypoint` cell stands for: its centre, or the goal (gx, gy) for -1."""
+    if node < 0:
+        return gx, gy
+    stride = width + 2
+    return (node % stride - 1 + 0.5) * cell, (node // stride - 1 + 0.5) * cell

@@ -16,11 +16,13 @@ import numpy as np
 from numba import njit
 
 from worlds.geodesic import field_distance, start_field
-from worlds.own_map import CHANGED, ON_PLAN, UNKNOWN, map_rays, plan_clear, plan_from_field, waypoint
+from worlds.own_map import CHANGED, ON_PLAN, UNKNOWN, centre, map_rays, plan_clear, plan_from_field, waypoint
 
 PATCH_VALUE = np.array([0.5, 0.0, 1.0], dtype=np.float32)
 """occupancy channel of the patch for UNKNOWN, FREE, SEEN_BLOCKED"""
 SUB_NONE, SUB_OWN, SUB_KNOWN = 0, 1, 2
+STAMP_WRAP = 2**31 - 2
+"""a robot's plan-map version or search count at which its int32 stamps start again"""
 REUSE_PARAM = 10
 """index in :attr:`worlds.perception.Perception.params` of the reuse switch: 1 keeps plans per cell
 and pauses the geodesic field's Dijkstra, 0 is the straightforward program (a search at every
@@ -67,29 +69,44 @@ def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell,
     ``dirty``: a cell became blocked or free; ``replan``: one where the last search looked), else
     kept; with ``reuse``, from the plans kept per cell of this plan map, and kept on a new plan map
     when no change lies where the search that made it looked."""
-    plan, wpt, last, plan_x, plan_y, stamp, version, exam, exam_id, searches = plans
+    plan, wpt, last, plan_node, stamp, version, exam, exam_id, searches = plans
     rc, cc = int(y / cell), int(x / cell)
     moved = rc != last[i, 0] or cc != last[i, 1]
     if not (fresh or dirty or moved):
         return
-    if fresh or dirty:
-        version[i] += 1  # a new plan map: the plans kept for the previous one are void
+    if fresh or dirty:  # a new plan map: the plans kept for the previous one are void
+        if version[i] >= STAMP_WRAP:  # the stamps wrap: forget every kept plan once
+            for r in range(stamp.shape[1]):
+                _fill(stamp[i, r], -1)
+            version[i] = 0
+        version[i] += 1
     last[i, 0], last[i, 1] = rc, cc
     on_map = 0 <= rc < height and 0 <= cc < width
     if reuse and on_map and not (fresh or moved or replan):
         stamp[i, rc, cc] = version[i]  # the search would read the same cells: same plan, still valid
-    elif reuse and on_map and stamp[i, rc, cc] == version[i]:
+        return
+    if reuse and on_map and stamp[i, rc, cc] == version[i]:
         # a cell already planned from on this plan map (same map, goal, cell: same plan)
-        wpt[i, 0], wpt[i, 1] = plan_x[i, rc, cc], plan_y[i, rc, cc]
+        node = plan_node[i, rc, cc]
         exam_id[i] = -1  # where its search looked is not known
     else:
+        if searches[i] >= STAMP_WRAP:
+            _fill(exam[i], 0)
+            searches[i] = 0
         searches[i] += 1
-        wpt[i, 0], wpt[i, 1], searched = waypoint(plan[i], height, width, cell, x, y, gx, gy, gr, gc, along,
-                                                  work, exam[i], searches[i])  # fmt: skip
+        node, searched = waypoint(
+            plan[i], height, width, cell, x, y, gr, gc, along, work, exam[i], searches[i]
+        )
         exam_id[i] = searches[i] if searched else -1
         if on_map:
-            plan_x[i, rc, cc], plan_y[i, rc, cc] = wpt[i, 0], wpt[i, 1]
-            stamp[i, rc, cc] = version[i]
+            plan_node[i, rc, cc], stamp[i, rc, cc] = node, version[i]
+    wpt[i, 0], wpt[i, 1] = centre(node, width, cell, gx, gy)
+
+
+@njit(cache=True, inline="always")
+def _fill(row, value):
+    for k in range(row.shape[0]):
+        row[k] = value
 
 
 @njit(cache=True, _nrt=False)
@@ -108,7 +125,7 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     reuse = params[REUSE_PARAM] > 0.0
     field, moff, mh, mw, mcell = world
     occ, visits, plans, geo, pgeo, stack = mem
-    plan, wpt, exam, exam_id = plans[0], plans[1], plans[7], plans[8]
+    plan, wpt, exam, exam_id = plans[0], plans[1], plans[6], plans[7]
     height, width, cell, at = mh[m], mw[m], mcell[m], moff[m]
     uses_map = occ.shape[1] > 0
     shaped, shaping = False, 0.0

@@ -144,8 +144,8 @@ class Perception:
         self.stack = np.zeros((n, o.frame_stack, self.frame_dim), np.float32)
         self.waypoint = np.zeros((n, 2), np.float64)
         self.last = np.zeros((n, 2), np.int64)
-        self.version = np.zeros(n, np.int64)
-        self.exam_id, self.searches = np.full(n, -1, np.int64), np.zeros(n, np.int64)
+        self.version, self.searches = np.zeros(n, np.int32), np.zeros(n, np.int32)
+        self.exam_id = np.full(n, -1, np.int32)
         self.pgeo = np.zeros(n, np.float64)
         self.shape, self._sized_for = (0, 0), None
         self._allocate((1, 1))
@@ -168,10 +168,10 @@ class Perception:
         self.occ = grow(getattr(self, "occ", None), np.int8, self.uses_map)
         self.visits = grow(getattr(self, "visits", None), np.int32, self.uses_map)
         self.plan = grow(getattr(self, "plan", None), np.uint8, self.plans, flat=True)
-        self.plan_x = grow(getattr(self, "plan_x", None), np.float64, self.plans)
-        self.plan_y = grow(getattr(self, "plan_y", None), np.float64, self.plans)
-        self.stamp = grow(getattr(self, "stamp", None), np.int64, self.plans, -1)
-        self.exam = grow(getattr(self, "exam", None), np.int64, self.plans, flat=True)  # searches' cells
+        # per cell: the waypoint cell planned from it (-1: the goal), valid on plan-map version ``stamp``
+        self.plan_node = grow(getattr(self, "plan_node", None), np.int32, self.plans)
+        self.stamp = grow(getattr(self, "stamp", None), np.int32, self.plans, -1)
+        self.exam = grow(getattr(self, "exam", None), np.int32, self.plans, flat=True)  # searches' cells
         # the geodesic field's Dijkstra, one row of work arrays per robot (worlds.geodesic)
         old = getattr(self, "geo", None)  # the geodesic field's Dijkstra, one row per robot
         self.geo = new_fields(self.n, cells if self.geodesic else 0)
@@ -186,8 +186,8 @@ class Perception:
         if mh is not self._sized_for:  # the bank's maps changed: grids big enough for its largest
             self._allocate((int(mh.max()), int(mw.max())))
             self._sized_for = mh
-        plans = (self.plan, self.waypoint, self.last, self.plan_x, self.plan_y, self.stamp, self.version,
-                 self.exam, self.exam_id, self.searches)  # fmt: skip
+        plans = (self.plan, self.waypoint, self.last, self.plan_node, self.stamp, self.version, self.exam,
+                 self.exam_id, self.searches)  # fmt: skip
         return self.occ, self.visits, plans, self.geo, self.pgeo, self.stack
 
     def observe_fresh(self, indices: np.ndarray, maps: tuple, robots: tuple, obs: np.ndarray) -> None:
