@@ -80,15 +80,14 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
         inv_dy = 1.0 / dy if dy != 0.0 else math.inf
         next_c = (c + (1.0 if dx > 0.0 else 0.0) - px) * inv_dx if dx != 0.0 else math.inf
         next_r = (r + (1.0 if dy > 0.0 else 0.0) - py) * inv_dy if dy != 0.0 else math.inf
-        while True:
-            if next_c < next_r:
-                t = next_c
-                c += step_c
-                next_c += abs(inv_dx)
-            else:
-                t = next_r
-                r += step_r
-                next_r += abs(inv_dy)
+        delta_c, delta_r = abs(inv_dx), abs(inv_dy)
+        while True:  # selects, not branches: which boundary comes next is a coin toss per cell
+            on_c = next_c < next_r
+            t = next_c if on_c else next_r
+            c += step_c if on_c else 0
+            r += 0 if on_c else step_r
+            next_c += delta_c if on_c else 0.0
+            next_r += 0.0 if on_c else delta_r
             if t >= length or c < 0 or r < 0 or c >= width or r >= height:
                 break
             flags |= _set(occ, plan, exam, exam_id, stride, r, c, FREE)
