@@ -86,8 +86,8 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
             t = next_c if on_c else next_r
             c += step_c if on_c else 0
             r += 0 if on_c else step_r
-            next_c += delta_c if on_c else 0.0
-            next_r += 0.0 if on_c else delta_r
+            next_c = next_c + delta_c if on_c else next_c  # (not += 0.0: -0.0 would become 0.0)
+            next_r = next_r if on_c else next_r + delta_r
             if t >= length or c < 0 or r < 0 or c >= width or r >= height:
                 break
             flags |= _set(occ, plan, exam, exam_id, stride, r, c, FREE)
