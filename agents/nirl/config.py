@@ -143,6 +143,7 @@ class NIRLConfig:
         """The NNQL configuration of the Q-learning machinery NIRL's policy evaluation reuses."""
         return NNQLConfig(
             hidden_sizes=self.hidden_sizes,
+            dueling=False,  # NIRL's soft Q holds the reward: a plain head
             activation=self.activation,
             lr=self.lr,
             gamma=self.gamma,
