@@ -20,18 +20,20 @@ step, the last ``frame_stack`` frames observed newest first::
   unknown cells counted free, so the robot cannot "see" unseen walls; the waypoint is the cell
   ``subgoal_distance`` metres along the path from the robot's cell (the goal itself when
   nearer); the frame gets its squashed distance and bearing. It is replanned whenever the map
-  changed in a way that matters (a cell became blocked or stopped being blocked), which gives
-  the same plan as replanning every step; the plan found from a cell is kept until the map
-  changes, so coming back to that cell costs no search. ``known_map`` plans on the true map
-  instead, for a user who has one.
+  changed in a way that matters (a cell became blocked or stopped being blocked next to a cell
+  the last search expanded: a search reads nothing else), which gives the same plan as
+  replanning every step; the plan found from a cell is kept until the map changes, so coming
+  back to that cell costs no search. ``known_map`` plans on the true map instead, for a user who
+  has one.
 * **The geodesic reward** (``rewards.geodesic_progress``): potential-based shaping by the true
   shortest-path distance from the robot's cell to the goal. It is a training signal; the policy
-  never observes it. The Dijkstra from the goal is paused once the robot's cell is settled and
-  resumed when the robot reaches a cell it has not settled yet (the same search, so the same
-  distances, at the cost of the cells the episode needs).
+  never observes it. The Dijkstra from the goal (a bucket queue, :mod:`worlds.geodesic`) is paused
+  once the robot's cell is settled and resumed when the robot reaches a cell it has not settled
+  yet (the same distances, at the cost of the cells the episode needs).
 
 Both envs go through :class:`worlds.batch.NavBatch`, which calls :class:`Perception` after every
-kernel call, so the single env and the vector env stay the same program.
+kernel call, so the single env and the vector env stay the same program. The compiled step is
+:mod:`worlds.perceive`, the own map and its planner :mod:`worlds.own_map`.
 """
 
 from __future__ import annotations
