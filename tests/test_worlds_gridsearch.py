@@ -14,7 +14,7 @@ import pytest
 
 from worlds.config import LEARNING_NAV
 from worlds.fields import BLOCKED
-from worlds.geodesic import field_distance, new_fields, start_field
+from worlds.geodesic import field_distance, move_masks, new_fields, start_field
 from worlds.gridsearch import GEN, grid_search, new_work, search_run, search_start
 from worlds.perceive import STAMP_WRAP
 from worlds.vector_env import NavigationVectorEnv
@@ -158,6 +158,13 @@ def padded(blocked):
     return grid.ravel(), width + 2
 
 
+def moves_of(blocked):
+    """The geodesic field's move table of one map (a bank of one, at offset 0)."""
+    field, stride = padded(blocked)
+    height, width = blocked.shape
+    return move_masks(field, np.zeros(1, np.int64), np.array([height]), np.array([width])), stride
+
+
 @pytest.mark.parametrize("reuse", [True, False])
 def test_paused_bucket_dijkstra_gives_the_distances_of_a_heapq_dijkstra(reuse):
     rng = np.random.default_rng(3)
@@ -168,23 +175,23 @@ def test_paused_bucket_dijkstra_gives_the_distances_of_a_heapq_dijkstra(reuse):
         goal = int(rng.integers(blocked.size))
         blocked.flat[goal] = False
         whole = heapq_dijkstra(blocked, goal, True)
-        field, stride = padded(blocked)
+        moves, stride = moves_of(blocked)
         i = k % 3  # robots' rows reused episode after episode
-        start_field(field, 0, stride, (goal // width + 1) * stride + goal % width + 1, geo, i, reuse)
+        start_field(moves, 0, stride, (goal // width + 1) * stride + goal % width + 1, geo, i, reuse)
         for cell in rng.integers(-1, blocked.size + 1, size=12):  # -1, size: off the map
             x, y = ((cell % width + 0.5) * 0.5, (cell // width + 0.5) * 0.5) if cell >= 0 else (-1.0, 1.0)
             expected = whole[cell] * 0.5 if 0 <= cell < blocked.size else math.inf
-            assert field_distance(field, 0, height, width, geo, i, 0.5, x, y) == expected
+            assert field_distance(moves, 0, height, width, geo, i, 0.5, x, y) == expected
 
 
 def test_a_wrapped_generation_stamp_forgets_every_cell():
-    field, stride = padded(np.zeros((4, 4), bool))
-    geo = new_fields(1, field.size)
-    start_field(field, 0, stride, stride + 1, geo, 0, False)
+    moves, stride = moves_of(np.zeros((4, 4), bool))
+    geo = new_fields(1, moves.size)
+    start_field(moves, 0, stride, stride + 1, geo, 0, False)
     geo[-1][0, 0] = 2**30 - 2  # the next field wraps the stamps: cells of the last one must not count
     geo[1][geo[1] > 0] = 2 * (2**30 - 1) + 1
-    start_field(field, 0, stride, 4 * stride + 4, geo, 0, True)
-    assert field_distance(field, 0, 4, 4, geo, 0, 1.0, 0.5, 0.5) == pytest.approx(3 * math.sqrt(2.0))
+    start_field(moves, 0, stride, 4 * stride + 4, geo, 0, True)
+    assert field_distance(moves, 0, 4, 4, geo, 0, 1.0, 0.5, 0.5) == pytest.approx(3 * math.sqrt(2.0))
 
     blocked = np.zeros((6, 6), bool)
     grid, stride = padded(blocked)

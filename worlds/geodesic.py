@@ -2,9 +2,9 @@
 
 The reward (``rewards.geodesic_progress``, :mod:`worlds.perception`) needs the true shortest-path
 distance from the robot's cell to the goal at every step (8-connected, no corner cutting: the
-moves of :mod:`worlds.gridsearch`). The Dijkstra from the goal runs on the kernel's map field in
-place (it has the padded layout of :mod:`worlds.gridsearch`), is paused once the robot's cell is
-settled and resumed when the robot reaches a cell not settled yet.
+moves of :mod:`worlds.gridsearch`). The Dijkstra from the goal runs on the kernel's map field (its
+padded layout, :mod:`worlds.gridsearch`), is paused once the robot's cell is settled and resumed
+when the robot reaches a cell not settled yet.
 
 **Bucket queue.** Every move costs at least 1 cell, so cells whose distance has the same integer
 part cannot improve one another: the search takes cells bucket by bucket (bucket k holds the
@@ -17,6 +17,10 @@ Each settled distance is the least of ``g[u] + step`` over the neighbours ``u`` 
 (the floating-point sums of any Dijkstra), so the distances are those of
 :func:`worlds.gridsearch.grid_search`'s Dijkstra, bit for bit (``tests/test_worlds_gridsearch.py``),
 paused or not.
+
+The moves out of each cell (which of its 8 neighbours it may step to: free, no corner cut) are
+read from a table made once per bank of maps (:func:`move_masks`), one byte per cell, instead of
+up to 8 cells of the field per taken cell.
 
 ``geo = (g, mark, ring, count, meta)``, one row per robot: distances, the cells' generation
 stamps (``2 * generation`` once reached, ``+ 1`` once taken), the ring's stacks ``(4, cells)`` and
@@ -44,6 +48,34 @@ def new_fields(n: int, cells: int) -> tuple:
             np.zeros((n, 2), i4))  # fmt: skip
 
 
+@njit(cache=True)
+def move_masks(field, moff, mh, mw):
+    """Per padded cell of every map in ``field`` (kernel field layout, maps at ``moff``): a byte whose
+    bit k says the move k is allowed (0-3: up, down, left, right; 4-7: up-left, up-right,
+    down-left, down-right, which also need both cells they brush past free); 0 on the ring."""
+    moves = np.zeros(field.shape[0], np.uint8)
+    for m in range(moff.shape[0]):
+        base, stride = moff[m], mw[m] + 2
+        for r in range(1, mh[m] + 1):
+            for c in range(1, mw[m] + 1):
+                at = base + r * stride + c
+                if field[at] == BLOCKED:
+                    continue
+                up, down = field[at - stride] != BLOCKED, field[at + stride] != BLOCKED
+                left, right = field[at - 1] != BLOCKED, field[at + 1] != BLOCKED
+                bits = (1 if up else 0) | (2 if down else 0) | (4 if left else 0) | (8 if right else 0)
+                if up and left and field[at - stride - 1] != BLOCKED:
+                    bits |= 16
+                if up and right and field[at - stride + 1] != BLOCKED:
+                    bits |= 32
+                if down and left and field[at + stride - 1] != BLOCKED:
+                    bits |= 64
+                if down and right and field[at + stride + 1] != BLOCKED:
+                    bits |= 128
+                moves[at] = bits
+    return moves
+
+
 @njit(cache=True, inline="always")
 def _offer(g, mark, ring, count, gen, node, cand):
     """Reach ``node`` (not taken yet) at distance ``cand`` if that is new or shorter (pushed into its
@@ -64,7 +96,7 @@ def _offer(g, mark, ring, count, gen, node, cand):
 
 
 @njit(cache=True, _nrt=False)
-def _settle(field, base, stride, target, g, mark, ring, count, meta):
+def _settle(moves, base, stride, target, g, mark, ring, count, meta):
     """Take cells until ``target`` is settled (``target < 0``: until every reachable cell is)."""
     gen, b = meta[GEN], meta[BUCKET]
     taken = 2 * gen + 1
@@ -80,34 +112,32 @@ def _settle(field, base, stride, target, g, mark, ring, count, meta):
         if mark[node] == taken or int(g[node]) != b:
             continue  # taken already, or moved to a lower bucket
         mark[node] = taken
-        at, one, diag = base + node, g[node] + 1.0, g[node] + SQRT2
-        up, down = field[at - stride] != BLOCKED, field[at + stride] != BLOCKED
-        left, right = field[at - 1] != BLOCKED, field[at + 1] != BLOCKED
-        if up and mark[node - stride] != taken:
+        one, diag, bits = g[node] + 1.0, g[node] + SQRT2, moves[base + node]
+        if bits & 1 and mark[node - stride] != taken:
             _offer(g, mark, ring, count, gen, node - stride, one)
-        if down and mark[node + stride] != taken:
+        if bits & 2 and mark[node + stride] != taken:
             _offer(g, mark, ring, count, gen, node + stride, one)
-        if left and mark[node - 1] != taken:
+        if bits & 4 and mark[node - 1] != taken:
             _offer(g, mark, ring, count, gen, node - 1, one)
-        if right and mark[node + 1] != taken:
+        if bits & 8 and mark[node + 1] != taken:
             _offer(g, mark, ring, count, gen, node + 1, one)
-        # a diagonal move needs both cells it brushes past free (no corner cutting)
-        if up and left and field[at - stride - 1] != BLOCKED and mark[node - stride - 1] != taken:
+        if bits & 16 and mark[node - stride - 1] != taken:
             _offer(g, mark, ring, count, gen, node - stride - 1, diag)
-        if up and right and field[at - stride + 1] != BLOCKED and mark[node - stride + 1] != taken:
+        if bits & 32 and mark[node - stride + 1] != taken:
             _offer(g, mark, ring, count, gen, node - stride + 1, diag)
-        if down and left and field[at + stride - 1] != BLOCKED and mark[node + stride - 1] != taken:
+        if bits & 64 and mark[node + stride - 1] != taken:
             _offer(g, mark, ring, count, gen, node + stride - 1, diag)
-        if down and right and field[at + stride + 1] != BLOCKED and mark[node + stride + 1] != taken:
+        if bits & 128 and mark[node + stride + 1] != taken:
             _offer(g, mark, ring, count, gen, node + stride + 1, diag)
     meta[BUCKET] = b
 
 
 @njit(cache=True, _nrt=False)
-def start_field(field, base, stride, goal, geo, i, reuse):
-    """Start robot ``i``'s distance field on its true map (the padded field at ``base``): a Dijkstra
-    from padded cell ``goal``. With ``reuse`` it is only started (:func:`field_distance` runs it on as
-    far as each robot cell needs), else run over the whole component at once."""
+def start_field(moves, base, stride, goal, geo, i, reuse):
+    """Start robot ``i``'s distance field on its true map (at ``base`` in the table ``moves`` of
+    :func:`move_masks`): a Dijkstra from padded cell ``goal``. With ``reuse`` it is only started
+    (:func:`field_distance` runs it on as far as each robot cell needs), else run over the whole
+    component at once."""
     g, mark, ring, count, meta = geo
     gen = meta[i, GEN] + 1
     if gen >= 2**30 - 1:  # the stamps wrap: forget every cell once
@@ -119,11 +149,11 @@ def start_field(field, base, stride, goal, geo, i, reuse):
         count[i, slot] = 0
     _offer(g[i], mark[i], ring[i], count[i], gen, goal, 0.0)
     if not reuse:
-        _settle(field, base, stride, -1, g[i], mark[i], ring[i], count[i], meta[i])
+        _settle(moves, base, stride, -1, g[i], mark[i], ring[i], count[i], meta[i])
 
 
 @njit(cache=True, _nrt=False)
-def field_distance(field, base, height, width, geo, i, cell, x, y):
+def field_distance(moves, base, height, width, geo, i, cell, x, y):
     """Robot ``i``'s true shortest-path distance (m) from the cell under (x, y) to its goal (inf off
     the map or unreachable), searching on until that cell is settled."""
     c, r = int(x / cell), int(y / cell)
@@ -132,5 +162,5 @@ def field_distance(field, base, height, width, geo, i, cell, x, y):
     g, mark, ring, count, meta = geo
     stride = width + 2
     node = (r + 1) * stride + c + 1
-    _settle(field, base, stride, node, g[i], mark[i], ring[i], count[i], meta[i])
+    _settle(moves, base, stride, node, g[i], mark[i], ring[i], count[i], meta[i])
     return g[i, node] * cell if mark[i, node] >= 2 * meta[i, GEN] else math.inf

@@ -124,7 +124,7 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     patch, w_geo, n_actions, per = int(params[6]), params[7], int(params[8]), int(params[9])
     reuse = params[REUSE_PARAM] > 0.0
     field, moff, mh, mw, mcell = world
-    occ, visits, plans, geo, pgeo, stack = mem
+    occ, visits, plans, moves, geo, pgeo, stack = mem
     plan, wpt, exam, exam_id = plans[0], plans[1], plans[6], plans[7]
     height, width, cell, at = mh[m], mw[m], mcell[m], moff[m]
     uses_map = occ.shape[1] > 0
@@ -136,14 +136,14 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
                     occ[i, r, c], visits[i, r, c] = UNKNOWN, 0
         if w_geo > 0.0:
             stride = width + 2
-            start_field(field, at, stride, (gr + 1) * stride + gc + 1, geo, i, reuse)
-            pgeo[i] = field_distance(field, at, height, width, geo, i, cell, x, y)
+            start_field(moves, at, stride, (gr + 1) * stride + gc + 1, geo, i, reuse)
+            pgeo[i] = field_distance(moves, at, height, width, geo, i, cell, x, y)
         if sub_kind == SUB_KNOWN:
             plan_from_field(field, at, plan[i], height, width)
         elif sub_kind == SUB_OWN:
             plan_clear(plan[i], height, width)
     elif w_geo > 0.0:
-        now = field_distance(field, at, height, width, geo, i, cell, x, y)
+        now = field_distance(moves, at, height, width, geo, i, cell, x, y)
         if math.isfinite(now) and math.isfinite(pgeo[i]):
             shaped, shaping = True, w_geo * (pgeo[i] - now)
         pgeo[i] = now

@@ -41,7 +41,7 @@ from __future__ import annotations
 import numpy as np
 
 from worlds.config import NavConfig
-from worlds.geodesic import new_fields
+from worlds.geodesic import move_masks, new_fields
 from worlds.gridsearch import new_work
 from worlds.own_map import FREE, SEEN_BLOCKED, UNKNOWN
 from worlds.perceive import (
@@ -150,6 +150,7 @@ class Perception:
         self.exam_id = np.full(n, -1, np.int32)
         self.pgeo = np.zeros(n, np.float64)
         self.shape, self._sized_for = (0, 0), None
+        self.moves, self._moves_for = np.zeros(0, np.uint8), None  # the geodesic field's move table
         self._allocate((1, 1))
 
     def _allocate(self, shape: tuple[int, int]) -> None:
@@ -184,13 +185,15 @@ class Perception:
         self.shape = (h, w)
 
     def _memory(self, maps) -> tuple:
-        mh, mw = maps[2], maps[3]
+        field, moff, mh, mw = maps[:4]
         if mh is not self._sized_for:  # the bank's maps changed: grids big enough for its largest
             self._allocate((int(mh.max()), int(mw.max())))
             self._sized_for = mh
+        if self.geodesic and field is not self._moves_for:
+            self.moves, self._moves_for = move_masks(field, moff, mh, mw), field
         plans = (self.plan, self.waypoint, self.last, self.plan_node, self.stamp, self.version, self.exam,
                  self.exam_id, self.searches)  # fmt: skip
-        return self.occ, self.visits, plans, self.geo, self.pgeo, self.stack
+        return self.occ, self.visits, plans, self.moves, self.geo, self.pgeo, self.stack
 
     def observe_fresh(self, indices: np.ndarray, maps: tuple, robots: tuple, obs: np.ndarray) -> None:
         """First frames of the episodes robots ``indices`` just started (see
