@@ -195,38 +195,17 @@ class Perception:
                  self.exam_id, self.searches)  # fmt: skip
         return self.occ, self.visits, plans, self.moves, self.geo, self.pgeo, self.stack
 
+    def _state(self, maps) -> tuple:
+        """What both compiled calls take after the batch's arrays: memory, the subgoal search's work
+        arrays, parameters, ray directions."""
+        return self._memory(maps), self.work, self.params, self.ray_c, self.ray_s
+
     def observe_fresh(self, indices: np.ndarray, maps: tuple, robots: tuple, obs: np.ndarray) -> None:
         """First frames of the episodes robots ``indices`` just started (see
         :func:`worlds.perceive.perceive_fresh`)."""
-        mem = self._memory(maps)
-        perceive_fresh(
-            np.asarray(indices, np.int64),
-            maps,
-            robots,
-            mem,
-            self.work,
-            self.params,
-            self.ray_c,
-            self.ray_s,
-            obs,
-        )
+        perceive_fresh(np.asarray(indices, np.int64), maps, robots, *self._state(maps), obs)
 
     def observe_step(self, actions, autoreset, maps, emap, robots, finals, obs, final_obs, reward) -> None:
         """Frames after a step of every robot (see :func:`worlds.perceive.perceive_step`)."""
-        mem = self._memory(maps)
-        perceive_step(
-            actions,
-            bool(autoreset),
-            maps,
-            emap,
-            robots,
-            finals,
-            mem,
-            self.work,
-            self.params,
-            self.ray_c,
-            self.ray_s,
-            obs,
-            final_obs,
-            reward,
-        )
+        state = self._state(maps)
+        perceive_step(actions, bool(autoreset), maps, emap, robots, finals, *state, obs, final_obs, reward)
