@@ -58,6 +58,7 @@ from agents.imitation.config import ImitationConfig
 from agents.imitation.train import train_policy
 from agents.nirl.buffers import demo_buffer, sample
 from agents.nirl.config import NIRLConfig, NIRLRun
+from agents.nirl.diagnose import demo_figures
 from agents.nirl.learner import NIRLLearner
 from agents.nirl.losses import max_margin_loss
 from agents.nirl.max_margin import Q_KEYS
@@ -85,6 +86,23 @@ ISSUE8 = {
 VALIDATION_SEED = 1
 NAVS = {"learning": LEARNING_NAV, "default": NavConfig()}
 RUNS = {"learning": "bench/nirl_runs_learning.jsonl", "default": "bench/nirl_runs.jsonl"}
+VALIDATION_RUNS = "runs/nirl_validation.jsonl"
+"""screening runs (``--split validation``): never mixed with the test seed's table"""
+
+
+def parse_overrides(parser: argparse.ArgumentParser, items: list[str]) -> dict:
+    """``KEY=VALUE`` strings -> NIRLConfig overrides (values parsed as JSON, else kept as strings)."""
+    fields = set(NIRLConfig.__dataclass_fields__)
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or key not in fields:
+            parser.error(f"--nirl {item!r}: expected KEY=VALUE with KEY a NIRLConfig field")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
 
 
 def demo_sets(
@@ -116,6 +134,8 @@ def figures(result) -> dict:
             "success": m.success.value,
             "success_ci": [m.success.low, m.success.high],
             "collision_static": m.collision_static.value,
+            "collision_dynamic": m.collision_dynamic.value,
+            "timeout": m.timeout.value,
             "path_ratio": None if m.path_ratio is None else float(m.path_ratio),
             "solved": outcomes_of(result, family),
         }
@@ -194,7 +214,9 @@ def train_dqfd(demos, seed: int, env_steps: int, nav: NavConfig, margin: float =
     return q.policy(), rollout.steps
 
 
-def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, sets, nav) -> dict:
+def run_one(
+    method: str, set_name: str, seed: int, demos, expert_labels, args, sets, nav, heldout=None
+) -> dict:
     t0 = time.perf_counter()
     row: dict = {"method": method, "set": set_name, "seed": seed, "episodes": args.episodes}
     if demos is not None:
@@ -213,8 +235,9 @@ def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, s
         curve_run = method == "nirl" and set_name == "20"
         rounds = max(args.iterations, args.curve_iterations) if curve_run else args.iterations
         core = {"nirl": {"core": "iq"}, "sqil": {"core": "sqil"}, "maxmargin": ISSUE8}[method]
+        overrides = args.nirl_overrides if method == "nirl" else {}
         config = NIRLConfig(
-            **core, iterations=rounds, steps_per_iteration=args.steps_per_iteration, seed=seed
+            **(core | overrides), iterations=rounds, steps_per_iteration=args.steps_per_iteration, seed=seed
         )
         curve, tested = [], {}
 
@@ -226,10 +249,15 @@ def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, s
             if learner.iteration == args.iterations:
                 tested["policy"], tested["steps"] = learner.policy(), int(point["env_steps"])
                 tested["scale"] = {k: v for k, v in point.items() if k.startswith("nirl/")}
+                if heldout and method != "maxmargin":  # the learned reward off the demonstrations
+                    tested["diagnosis"] = {"train": demo_figures(learner, demos),
+                                           "heldout": demo_figures(learner, heldout)}  # fmt: skip
 
         run = NIRLRun(out="", eval_every=0, final_eval_episodes=0, progress=False)
         result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
         policy, row["env_steps"], row["reward_scale"] = tested["policy"], tested["steps"], tested["scale"]
+        if "diagnosis" in tested:
+            row["diagnosis"] = tested["diagnosis"]
         if curve_run:
             row["curve"] = curve
         if set_name == "20noisy" and method != "sqil":
@@ -299,21 +327,36 @@ def main() -> int:
     parser.add_argument("--nnql-eval-every", type=int, default=6_144, help="NNQL validation every N steps")
     parser.add_argument("--val-episodes", type=int, default=50, help="validation episodes of the curves")
     parser.add_argument("--noise", type=float, default=0.3, help="random-action probability of the noisy set")
+    parser.add_argument(
+        "--diagnose", action="store_true",
+        help="NIRL/SQIL: also measure the learned reward on 20 held-out expert episodes (other maps)",
+    )  # fmt: skip
     parser.add_argument("--gridcheck", action="store_true", help="also run the grid-world reward recovery")
     parser.add_argument(
         "--nav", choices=list(NAVS), default="learning", help="observation: LEARNING_NAV or NavConfig()"
     )
     parser.add_argument("--runs", default=None, help="JSON lines file runs append to (default by --nav)")
+    parser.add_argument(
+        "--split", choices=("test", "validation"), default="test",
+        help="episodes the policies are tested on: test seed 0 (the table) or the validation seed "
+        f"{VALIDATION_SEED} (screening; runs then default to runs/nirl_validation.jsonl)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--nirl", action="append", default=[], metavar="KEY=VALUE",
+        help="override a NIRLConfig field of the nirl learner (repeatable; JSON values: 1024, true, 0.5)",
+    )  # fmt: skip
     parser.add_argument("--report", action="store_true", help="print the table of --runs and stop")
     args = parser.parse_args()
-    runs = Path(args.runs or RUNS[args.nav])
+    runs = Path(args.runs or (VALIDATION_RUNS if args.split == "validation" else RUNS[args.nav]))
+    args.nirl_overrides = parse_overrides(parser, args.nirl)
     if args.report:
         return report(runs)
     nav = NAVS[args.nav]
     # which code, settings and observation made each line
-    code = {"commit": code_version(), "argv": sys.argv[1:], "nav": args.nav,
-            "observation": observation_settings(nav)}  # fmt: skip
-    sets = [make_eval_set(f, args.episodes, seed=0) for f in FAMILIES]
+    code = {"commit": code_version(), "argv": sys.argv[1:], "nav": args.nav, "split": args.split,
+            "observation": observation_settings(nav), "nirl_overrides": args.nirl_overrides}  # fmt: skip
+    test_seed = VALIDATION_SEED if args.split == "validation" else 0
+    sets = [make_eval_set(f, args.episodes, seed=test_seed) for f in FAMILIES]
     methods = [m for m in args.methods.split(",") if m]
     unknown = sorted(set(methods) - set(METHODS))
     if unknown:
@@ -341,10 +384,12 @@ def main() -> int:
         needs_demos = any(m != "nnql" for m in learners)
         larger = max([int(s) for s in args.sets.split(",") if s.isdigit()] + [0])
         demos, expert_labels = demo_sets(seed, args.noise, nav, larger) if needs_demos else ({}, [])
+        heldout = generate_demos("mixed:16", 20, seed=30_000 + seed, config=nav)[0] if args.diagnose else None
         for method in learners:
             for set_name in ["-"] if method == "nnql" else [s for s in args.sets.split(",") if s]:
                 row = run_one(method, set_name, seed, None if method == "nnql" else demos[set_name],
-                              expert_labels, args, sets, nav) | code | {"load": machine_load()}  # fmt: skip
+                              expert_labels, args, sets, nav, heldout)  # fmt: skip
+                row |= code | {"load": machine_load()}
                 with open(runs, "a") as fh:
                     fh.write(json.dumps(row) + "\n")
                 short = {f: round(row["test"][f]["success"], 3) for f in FAMILIES}

@@ -43,6 +43,10 @@ class NIRLConfig:
     crash_absorbing: bool = True
     """absorbing end states (DAC): iq: a collision leads to one valued at IQ-Learn's optimum there (not
     to nothing); sqil: the goal is an expert absorbing state (reward 1 forever), a collision earns 0"""
+    crash_clip: float = 0.0
+    """iq: weight of a squared hinge (over the chi-squared scale 1 / (4 chi2_alpha)) that keeps the implicit
+    reward of the learner's own crash steps at or below the batch's mean demonstrated reward
+    (losses.crash_clip_loss); 0 disables it"""
     lr: float = 1e-3
     """Adam learning rate of the Q-network"""
     reward_lr: float = 1e-3
