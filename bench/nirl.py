@@ -44,6 +44,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import pickle
 import subprocess
 import sys
 import time
@@ -120,6 +121,25 @@ def demo_sets(
         more, _ = generate_demos("mixed:16", larger - 20, seed=10_000 + seed + 20, config=nav)
         sets[str(larger)] = clean + more
     return sets, expert_labels
+
+
+def heldout_demos(seed: int, nav: NavConfig) -> list:
+    """20 clean expert episodes on maps no demonstration set uses (the reward off the demonstrations)."""
+    return generate_demos("mixed:16", 20, seed=30_000 + seed, config=nav)[0]
+
+
+def cached(directory: str | None, name: str, make, *args):
+    """``make(*args)``, pickled under ``directory`` (None: no cache) so repeated screening runs skip the
+    expert's planning; the demonstrations depend only on the name's seed, noise and observation."""
+    if not directory:
+        return make()
+    path = Path(directory) / f"{name}.pkl"
+    if path.exists():
+        return pickle.loads(path.read_bytes())
+    value = make(*args)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(pickle.dumps(value))
+    return value
 
 
 def outcomes_of(result, family: str) -> list[int]:
@@ -331,6 +351,10 @@ def main() -> int:
         "--diagnose", action="store_true",
         help="NIRL/SQIL: also measure the learned reward on 20 held-out expert episodes (other maps)",
     )  # fmt: skip
+    parser.add_argument(
+        "--demo-cache", default=None, metavar="DIR",
+        help="pickle the generated demonstrations in DIR and reuse them (screening)",
+    )  # fmt: skip
     parser.add_argument("--gridcheck", action="store_true", help="also run the grid-world reward recovery")
     parser.add_argument(
         "--nav", choices=list(NAVS), default="learning", help="observation: LEARNING_NAV or NavConfig()"
@@ -383,8 +407,13 @@ def main() -> int:
         learners = [m for m in methods if m != "expert"]
         needs_demos = any(m != "nnql" for m in learners)
         larger = max([int(s) for s in args.sets.split(",") if s.isdigit()] + [0])
-        demos, expert_labels = demo_sets(seed, args.noise, nav, larger) if needs_demos else ({}, [])
-        heldout = generate_demos("mixed:16", 20, seed=30_000 + seed, config=nav)[0] if args.diagnose else None
+        demos, expert_labels = ({}, [])
+        if needs_demos:
+            name = f"sets-{args.nav}-{seed}-{args.noise}-{larger}"
+            demos, expert_labels = cached(args.demo_cache, name, demo_sets, seed, args.noise, nav, larger)
+        heldout = None
+        if args.diagnose:
+            heldout = cached(args.demo_cache, f"heldout-{args.nav}-{seed}", heldout_demos, seed, nav)
         for method in learners:
             for set_name in ["-"] if method == "nnql" else [s for s in args.sets.split(",") if s]:
                 row = run_one(method, set_name, seed, None if method == "nnql" else demos[set_name],

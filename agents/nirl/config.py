@@ -30,6 +30,9 @@ class NIRLConfig:
     """widths of the Q-network's hidden layers (the policy is softmax(Q / alpha))"""
     activation: str = "relu"
     """hidden activation of both networks: relu, tanh or elu"""
+    dueling: bool = False
+    """dueling head on the Q-network (NNQL's, Wang et al. 2016): V(s) + A(s, a) - mean A, so the state's
+    value and the ranking of its actions are fitted apart"""
     reward_hidden_sizes: tuple[int, ...] = (64, 64)
     """widths of the reward network's hidden layers (input: state-action features)"""
     reward_scale: float = 2.0
@@ -47,6 +50,9 @@ class NIRLConfig:
     """iq: weight of a squared hinge (over the chi-squared scale 1 / (4 chi2_alpha)) that keeps the implicit
     reward of the learner's own crash steps at or below the batch's mean demonstrated reward
     (losses.crash_clip_loss); 0 disables it"""
+    fix_reward_after: int = 0
+    """iq: after this many iterations the reward network is frozen and the Q-network learns by soft
+    Q-learning on it (NNQL policy iteration on the learned reward); 0: IQ-Learn throughout"""
     lr: float = 1e-3
     """Adam learning rate of the Q-network"""
     reward_lr: float = 1e-3
@@ -148,6 +154,7 @@ class NIRLConfig:
         return NNQLConfig(
             hidden_sizes=self.hidden_sizes,
             activation=self.activation,
+            dueling=self.dueling,
             lr=self.lr,
             gamma=self.gamma,
             batch_size=self.batch_size,

@@ -264,10 +264,11 @@ class NIRLLearner:
                 metrics.update(self.reward_step())
         for _ in range(cfg.q_updates):
             metrics.update(self._q_update())
-        if cfg.core != "max_margin":
+        if cfg.core != "max_margin" and not self._reward_frozen():
             for _ in range(cfg.reward_updates):
                 metrics.update(self.reward_step())
         self.iteration += 1
+        self._fix_reward_when_due()
         metrics["charts/iteration"] = float(self.iteration)
         self.metrics.update(metrics)
         return metrics
@@ -280,16 +281,29 @@ class NIRLLearner:
         if self.warm_updates < cfg.warmstart_updates:
             return self._warm_step()
         metrics: dict[str, float] = {}
-        self.reward_credit += cfg.reward_updates / max(cfg.q_updates, 1)
+        if not self._reward_frozen():
+            self.reward_credit += cfg.reward_updates / max(cfg.q_updates, 1)
         while self.reward_credit >= 1.0:
             metrics.update(self.reward_step())
             self.reward_credit -= 1.0
         metrics.update(self._q_update())
         if cfg.q_updates and self.q.updates % cfg.q_updates == 0:
             self.iteration += 1
+            self._fix_reward_when_due()
         metrics["charts/iteration"] = float(self.iteration)
         self.metrics.update(metrics)
         return metrics
+
+    def _reward_frozen(self) -> bool:
+        return isinstance(self.fit, SoftQFit) and self.fit.reward_fixed
+
+    def _fix_reward_when_due(self) -> None:
+        """After ``fix_reward_after`` iterations (iq core), freeze the reward network: from then on
+        the Q-network does NNQL-style policy iteration (soft Q-learning) on the learned reward."""
+        after = self.config.fix_reward_after
+        if self.config.core == "iq" and after and self.iteration >= after and not self._reward_frozen():
+            self.fit.reward_fixed = True
+            self.reward.requires_grad_(False)
 
     def ready(self) -> bool:
         """Updates need demonstrations (experience is optional: demos alone train it)."""

@@ -68,6 +68,9 @@ class SoftQFit(FitParts):
 
     path_length: Callable[[], float]
     """mean steps of a demonstrated path (logged beside the learned reward's scale)"""
+    reward_fixed: bool = False
+    """iq: the reward network is frozen and the Q-network learns by soft Q-learning on it
+    (``NIRLConfig.fix_reward_after``); the reward fit stops"""
 
     def mixed_batch(self, offline: bool) -> tuple[TensorDict, torch.Tensor]:
         """Demonstration steps and own experience, ``demo_fraction`` of the batch demonstrated
@@ -113,7 +116,14 @@ class SoftQFit(FitParts):
         metrics: dict[str, float] = {}
         at_goal = goal_reached(next_obs, self.reward.n_beams, self.goal_tolerance, self.max_range)
         next_value, terminated = absorbing_next(cfg, next_value, terminated, at_goal)
-        if cfg.core == "iq":
+        if cfg.core == "iq" and self.reward_fixed:
+            # NNQL policy iteration on the learned reward, now frozen: soft Q-learning with r = R(s, a)
+            # of the reward network (the absorbing crash state keeps its value)
+            with torch.no_grad():
+                reward = self.reward(obs).gather(1, labels[:, None]).squeeze(1)
+            loss = soft_td_loss(q_taken, reward, next_value, terminated, cfg.gamma)
+            metrics["losses/td_loss"] = float(loss.detach())
+        elif cfg.core == "iq":
             terms = iq_loss(
                 q_taken, soft_value(q_all, cfg.alpha), next_value, terminated, is_expert, cfg.gamma,
                 cfg.chi2_alpha, weights,
