@@ -10,6 +10,7 @@ from typing import Any
 from agents.nnql.config import ACTIVATION_NAMES, NNQLConfig
 
 CORES = ("iq", "sqil", "max_margin")
+FIXED_REWARDS = ("network", "progress")
 FORMAT_VERSION = 2
 """saved-state format: 1 = issue 8's max-margin learner (no ``core`` field, gamma 0.95), 2 = cores"""
 
@@ -53,6 +54,10 @@ class NIRLConfig:
     fix_reward_after: int = 0
     """iq: after this many iterations the reward network is frozen and the Q-network learns by soft
     Q-learning on it (NNQL policy iteration on the learned reward); 0: IQ-Learn throughout"""
+    fixed_reward: str = "network"
+    """iq, once the reward is fixed: the reward the Q-network learns on - network (the reward network
+    distilled from IQ-Learn's implicit reward) or progress (a unit step cost shaped by a progress
+    potential regressed on the demonstrations' steps to go, agents.nirl.progress)"""
     lr: float = 1e-3
     """Adam learning rate of the Q-network"""
     reward_lr: float = 1e-3
@@ -120,6 +125,8 @@ class NIRLConfig:
         self.reward_hidden_sizes = tuple(int(h) for h in self.reward_hidden_sizes)
         if self.core not in CORES:
             raise ValueError(f"NIRLConfig.core={self.core!r}: expected one of {CORES}")
+        if self.fixed_reward not in FIXED_REWARDS:
+            raise ValueError(f"NIRLConfig.fixed_reward={self.fixed_reward!r}: expected {FIXED_REWARDS}")
         if self.alpha <= 0 or self.chi2_alpha <= 0:
             raise ValueError(
                 f"NIRLConfig: need alpha > 0 and chi2_alpha > 0, got {self.alpha}, {self.chi2_alpha}"

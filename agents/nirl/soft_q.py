@@ -30,6 +30,7 @@ from agents.nirl.losses import (
     sqil_rewards,
 )
 from agents.nirl.networks import goal_reached
+from agents.nirl.progress import ProgressPotential, potential_loss, shaped_progress_reward
 
 BATCH_KEYS = ("observation", "action", ("next", "observation"), ("next", "terminated"))
 
@@ -68,6 +69,9 @@ class SoftQFit(FitParts):
 
     path_length: Callable[[], float]
     """mean steps of a demonstrated path (logged beside the learned reward's scale)"""
+    potential: ProgressPotential | None = None
+    """the progress potential (``NIRLConfig.fixed_reward = "progress"``), None otherwise"""
+    potential_optimizer: torch.optim.Optimizer | None = None
     reward_fixed: bool = False
     """iq: the reward network is frozen and the Q-network learns by soft Q-learning on it
     (``NIRLConfig.fix_reward_after``); the reward fit stops"""
@@ -119,8 +123,13 @@ class SoftQFit(FitParts):
         if cfg.core == "iq" and self.reward_fixed:
             # NNQL policy iteration on the learned reward, now frozen: soft Q-learning with r = R(s, a)
             # of the reward network (the absorbing crash state keeps its value)
-            with torch.no_grad():
-                reward = self.reward(obs).gather(1, labels[:, None]).squeeze(1)
+            if self.potential is not None:  # the progress reward (agents.nirl.progress): ends folded in
+                raw_end = batch[("next", "terminated")].reshape(-1).bool()
+                reward = shaped_progress_reward(self.potential, obs, next_obs, raw_end, at_goal, cfg.gamma)
+                terminated = raw_end
+            else:
+                with torch.no_grad():
+                    reward = self.reward(obs).gather(1, labels[:, None]).squeeze(1)
             loss = soft_td_loss(q_taken, reward, next_value, terminated, cfg.gamma)
             metrics["losses/td_loss"] = float(loss.detach())
         elif cfg.core == "iq":
@@ -184,6 +193,20 @@ class SoftQFit(FitParts):
                 out["nirl/collision_value"] = float(q_taken[crashed].mean())
                 out["nirl/crash_reward"] = float(reward[crashed].mean())
         return out
+
+    def potential_step(self) -> dict[str, float]:
+        """One regression step of the progress potential on demonstrated steps (agents.nirl.progress)."""
+        if self.potential is None or self.potential_optimizer is None:
+            return {}
+        demos = sample(self.demos, self.config.batch_size, self.q.device)
+        to_go = demos.get("to_go", None)
+        if to_go is None:
+            return {}
+        loss = potential_loss(self.potential, demos["observation"], to_go, self.config.gamma)
+        if loss is None:
+            return {}
+        norm = self.clip_step(loss, self.potential.parameters(), self.potential_optimizer)
+        return {"losses/potential_fit": float(loss.detach()), "losses/potential_grad_norm": norm}
 
     def reward_step(self) -> dict[str, float]:
         """One reward-network update: regression of ``R(s, a)`` on the Q-function's implicit reward
