@@ -81,9 +81,11 @@ from worlds.perception import observation_dim
 ISSUE8 = {
     "core": "max_margin", "gamma": 0.95, "target_tau": 0.005, "prior_temperature": 0.1,
     "relabel_threshold": 0.6, "demo_noise": 0.2, "refine_start": 0, "demo_fraction": 0.25,
-    "temperature_start": 0.3, "temperature_end": 0.02,
+    "temperature_start": 0.3, "temperature_end": 0.02, "q_updates": 256,
 }  # fmt: skip
 """NIRLConfig of the max-margin learner as issue 8 measured it (its defaults then)"""
+SQIL = {"core": "sqil", "q_updates": 256}
+"""SQIL as the tables measured it (256 Q updates per round, NIRL's default before issue 15 part 3)"""
 VALIDATION_SEED = 1
 NAVS = {"learning": LEARNING_NAV, "default": NavConfig()}
 RUNS = {"learning": "bench/nirl_runs_learning.jsonl", "default": "bench/nirl_runs.jsonl"}
@@ -254,7 +256,7 @@ def run_one(
     elif method in ("nirl", "sqil", "maxmargin"):
         curve_run = method == "nirl" and set_name == "20"
         rounds = max(args.iterations, args.curve_iterations) if curve_run else args.iterations
-        core = {"nirl": {"core": "iq"}, "sqil": {"core": "sqil"}, "maxmargin": ISSUE8}[method]
+        core = {"nirl": {"core": "iq"}, "sqil": SQIL, "maxmargin": ISSUE8}[method]
         overrides = args.nirl_overrides if method == "nirl" else {}
         config = NIRLConfig(
             **(core | overrides), iterations=rounds, steps_per_iteration=args.steps_per_iteration, seed=seed
