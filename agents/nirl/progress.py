@@ -6,8 +6,8 @@ as fast as it can, the premise of every shortest-path demonstrator), its discoun
 ``-(1 - gamma^k) / (1 - gamma)``. ``ProgressPotential`` regresses that value on the observation, so
 it generalises to states and maps no demonstration visited - it is a function of what the robot
 perceives (goal distance and bearing, the subgoal from its own map, free space), never of the
-true map. Issue 15's diagnosis (bench/nirl.py --diagnose): IQ-Learn's own value does not order
-held-out expert states by progress (rank correlation with the steps to go +0.19, the wrong sign).
+true map. Issue 15's diagnosis (bench/nirl.py --diagnose): IQ-Learn's implicit reward does not
+transfer - held-out expert steps earn less (-0.67) than the learner's own (-0.31).
 
 How it is used (``NIRLConfig.fixed_reward`` = ``progress`` or ``both``): once the reward is fixed
 (``fix_reward_after``), NNQL-style soft Q-learning on the learned reward adds the potential-based
