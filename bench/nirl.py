@@ -186,7 +186,7 @@ def train_dqfd(demos, seed: int, env_steps: int, nav: NavConfig, margin: float =
     """NNQL with demonstrations in replay, DQfD-style (see the module docstring)."""
     from worlds.vector_env import NavigationVectorEnv
 
-    cfg = NNQLConfig(seed=seed, learning_starts=256)
+    cfg = NNQLConfig(seed=seed, learning_starts=256, dueling=False)  # the recorded runs' plain head
     obs_dim, n_actions = observation_dim(nav), nav.robot.n_actions
     q = NNQLLearner(cfg, obs_dim, n_actions, observation=observation_settings(nav))
     store = demo_buffer(50_000, seed + 1)
@@ -291,6 +291,7 @@ def run_one(
             LocalTrainConfig(steps=args.nnql_steps, eval_every=args.nnql_eval_every,
                              eval_episodes=args.val_episodes,
                              keep_best=False, final_eval_episodes=0, out="", seed=seed, progress=False),
+            NNQLConfig(seed=seed, dueling=False),  # the recorded runs' plain head, on static maps (nav)
             nav=nav,
         )  # fmt: skip
         policy, row["env_steps"] = result.learner.policy(), result.env_steps

@@ -74,7 +74,7 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
         eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False, moving_discs=discs,
     )  # fmt: skip
     start = time.perf_counter()
-    trained = train_local(run, NNQLConfig(seed=seed, **fields))
+    trained = train_local(run, NNQLConfig(seed=seed, **{"dueling": False, **fields}))  # plain unless named
     wall = time.perf_counter() - start
     policy = NNQLPolicy.load(out).greedy()
     results = {name: evaluate(policy, es, config=LEARNING_NAV) for name, es in sets.items()}

@@ -158,7 +158,7 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
         steps=args.steps, envs=16, seed=seed, out=str(out), eval_every=args.steps // 4,
         eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False,
     )  # fmt: skip
-    nnql = NNQLConfig(seed=seed, **NNQL_OPTIONS.get(variant, {}))
+    nnql = NNQLConfig(seed=seed, **{"dueling": False, **NNQL_OPTIONS.get(variant, {})})  # plain head
     trained = finished(out, run, nav)
     if trained is None:
         start = time.perf_counter()

@@ -1,8 +1,9 @@
 """NNQL against Stable-Baselines3's PPO and DQN on the learning observation (issue 14).
 
 All three learn ``worlds.config.LEARNING_NAV`` (24 sector minima, goal, subgoal from the robot's
-own map, geodesic progress reward) on the training maps ("mixed:16") for the same number of
-robot-steps:
+own map, geodesic progress reward) on the training maps ("mixed:16") with the same training
+episodes (``--train-discs``: 0..N moving discs per episode, default ``navlearn train --local``'s
+0..4; 0 for static maps only) for the same number of robot-steps:
 
     nnql  ``navlearn train --local``'s code (``train_local``, 16 robots, default ``NNQLConfig``,
           keep-best on 4 validation evaluations of 100 episodes, seed 1 - inside its wall time)
@@ -40,10 +41,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.evaluation.compare import mcnemar_exact
 from agents.evaluation.runner import evaluate, make_eval_set
+from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from bench.perception import pooled, scored
-from worlds.config import LEARNING_NAV, observation_settings
+from worlds.config import LEARNING_NAV, TRAINING_DISCS, observation_settings, with_moving_discs
 from worlds.env import NavigationEnv
 
 ALGOS = ("nnql", "ppo", "dqn")
@@ -63,19 +65,19 @@ class SB3Greedy:
         return np.asarray(actions, dtype=np.int64).reshape(len(obs))
 
 
-def train_nnql(steps: int, seed: int, out: Path):
+def train_nnql(steps: int, seed: int, discs: int, out: Path):
     run = LocalTrainConfig(
-        steps=steps, envs=16, seed=seed, maps=TRAIN_MAPS, out=str(out), eval_every=steps // 4,
-        eval_episodes=100, final_eval_episodes=0, progress=False,
+        steps=steps, envs=16, seed=seed, maps=TRAIN_MAPS, moving_discs=discs, out=str(out),
+        eval_every=steps // 4, eval_episodes=100, final_eval_episodes=0, progress=False,
     )  # fmt: skip
-    trained = train_local(run, nav=LEARNING_NAV)
+    trained = train_local(run)
     return NNQLPolicy.load(out).greedy(), {"robot_steps": trained.env_steps, "updates": trained.updates}
 
 
-def train_sb3(algo: str, steps: int, seed: int, out: Path):
+def train_sb3(algo: str, steps: int, seed: int, discs: int, out: Path):
     from stable_baselines3 import DQN, PPO
 
-    env = NavigationEnv(LEARNING_NAV, maps=TRAIN_MAPS)
+    env = NavigationEnv(with_moving_discs(LEARNING_NAV, discs), maps=TRAIN_MAPS)
     model = {"ppo": PPO, "dqn": DQN}[algo]("MlpPolicy", env, seed=seed, device="cpu", verbose=0)
     model.learn(total_timesteps=steps)
     model.save(out / "model.zip")
@@ -86,18 +88,23 @@ def run_one(algo: str, seed: int, args, sets: dict) -> dict:
     out = Path(args.out) / f"{algo}-s{seed}"
     cached = out / "result.json"
     if cached.is_file():
-        return json.loads(cached.read_text())
+        record = json.loads(cached.read_text())
+        if record.get("train_discs", 0) != args.train_discs:  # runs before the option trained static
+            sys.exit(f"{cached}: trained with {record.get('train_discs', 0)} discs, not --train-discs "
+                     f"{args.train_discs}; give another --out")  # fmt: skip
+        return record
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
     wall0, cpu0 = time.perf_counter(), time.process_time()
     if algo == "nnql":
-        policy, info = train_nnql(args.steps, seed, out)
+        policy, info = train_nnql(args.steps, seed, args.train_discs, out)
+        info["dueling"] = NNQLConfig().dueling
     else:
-        policy, info = train_sb3(algo, args.steps, seed, out)
+        policy, info = train_sb3(algo, args.steps, seed, args.train_discs, out)
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     results = {name: evaluate(policy, es, config=LEARNING_NAV) for name, es in sets.items()}
-    record = {"algo": algo, "seed": seed, "train_wall_s": round(wall, 1), "train_cpu_s": round(cpu, 1),
-              **info, **scored(results, sets)}  # fmt: skip
+    record = {"algo": algo, "seed": seed, "train_discs": args.train_discs, "train_wall_s": round(wall, 1),
+              "train_cpu_s": round(cpu, 1), **info, **scored(results, sets)}  # fmt: skip
     cached.write_text(json.dumps(record) + "\n")
     return record
 
@@ -124,6 +131,10 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--steps", type=int, default=200_000, help="robot-steps of training per run")
     parser.add_argument("--episodes", type=int, default=500, help="episodes per test set")
+    parser.add_argument(
+        "--train-discs", type=int, default=TRAINING_DISCS,
+        help="training episodes have 0..N moving discs, for every learner (default %(default)s; 0: static)",
+    )  # fmt: skip
     parser.add_argument("--out", default="runs/sb3")
     parser.add_argument("--cached-only", action="store_true", help="report the runs in --out, train nothing")
     args = parser.parse_args()
@@ -136,7 +147,8 @@ def main() -> None:
             if args.cached_only and not (Path(args.out) / f"{algo}-s{seed}" / "result.json").is_file():
                 continue
             runs.setdefault(algo, []).append(run_one(algo, seed, args, sets))
-    report: dict = {"steps": args.steps, "seeds": args.seeds, "episodes": args.episodes, "algos": {}}
+    report: dict = {"steps": args.steps, "seeds": args.seeds, "episodes": args.episodes,
+                    "train_discs": args.train_discs, "algos": {}}  # fmt: skip
     for algo, records in runs.items():
         entry = {name: pooled(records, name) for name, _, _ in SETS}
         entry["seeds"] = [r["seed"] for r in records]

@@ -73,7 +73,8 @@ def test_set_weights_syncs_target(tmp_path):
     )
     b.set_weights(a.get_weights())
     obs = np.random.default_rng(1).random((5, OBS_DIM), dtype=np.float32)
-    np.testing.assert_array_equal(a.q_values(obs), b.q_values(obs))
+    # the default dueling head travels folded and comes back unfolded: equal Q up to float rounding
+    np.testing.assert_allclose(a.q_values(obs), b.q_values(obs), rtol=1e-5, atol=1e-6)
     target = {k: v for k, v in b.loss.state_dict().items() if k.startswith("target_")}
     online = {k.replace("target_", ""): v for k, v in target.items()}
     for key, value in online.items():

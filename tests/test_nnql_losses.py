@@ -9,6 +9,7 @@ import torch
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.losses import td_target
+from agents.nnql.networks import QNetwork
 from agents.nnql.transitions import transitions_to_tensordict
 
 OBS_DIM, N_ACTIONS, GAMMA = 4, 3, 0.9
@@ -49,7 +50,7 @@ def perturb_target(learner: NNQLLearner) -> None:
 def q_online_and_target(learner: NNQLLearner, obs: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
     obs_t = torch.as_tensor(obs)
     online = learner.network(obs_t).detach()
-    target_net = type(learner.network).from_architecture(learner.architecture)
+    target_net = QNetwork.from_architecture(learner.architecture)  # dueling or plain, as trained
     target_state = {
         name.split("module.0.module.")[-1]: value
         for name, value in learner.loss.state_dict().items()

@@ -324,6 +324,12 @@ from the robot's own map, trained with the geodesic progress reward - the winner
 success of the observation ablation (``bench/perception.py``, variant "D+geo"; bench/RESULTS.md)"""
 
 
+TRAINING_DISCS = 4
+"""moving discs per training episode by default (``navlearn train --local``, the actors of ``navlearn
+up``): 0..4, uniform per episode, so training sees static maps and the dynamic test set's crowds of 4
+(the shipped policy's recipe; bench/RESULTS.md, "Issue 14, learner")"""
+
+
 def with_moving_discs(nav: NavConfig, count: int) -> NavConfig:
     """``nav`` whose episodes each have 0..``count`` moving discs (uniform, the evaluation sets'
     disc settings otherwise): training that sees the dynamic set's crowds. ``count`` 0: ``nav``."""

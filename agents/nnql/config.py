@@ -59,9 +59,11 @@ class NNQLConfig:
     n_step: int = 1
     """bootstrap after n steps: target sum_k<n gamma^k r_k + gamma^n Q(s_n) (Ape-X / Rainbow); the learner
     builds the returns per (actor, robot) stream, stopping at episode ends (agents/nnql/nstep.py)"""
-    dueling: bool = False
-    """dueling head: Q = V(s) + A(s, a) - mean_a A(s, a) over the last hidden layer (Wang et al. 2016);
-    saved and shipped folded into one linear layer, so actors run the plain MLP forward"""
+    dueling: bool = True
+    """dueling head of the MLP Q-network: Q = V(s) + A(s, a) - mean_a A(s, a) over the last hidden layer
+    (Wang et al. 2016), saved folded into one linear layer, so actors run the plain MLP forward; on by
+    default (the shipped policy's recipe, bench/RESULTS.md); the LSTM and patch-CNN Q-networks keep a
+    plain head whatever this says"""
     double_q: bool = True
     """double Q-learning: the online network picks the next action, the target network values it"""
     sarsa: bool = False
@@ -151,8 +153,8 @@ class NNQLConfig:
             raise ValueError(f"NNQLConfig.burn_in={self.burn_in}: expected >= 0")
         if self.recurrent and (self.sarsa or self.prioritized):
             raise ValueError("NNQLConfig.recurrent: uniform sequence replay; no sarsa/prioritized")
-        if self.recurrent and (self.n_step > 1 or self.dueling):
-            raise ValueError("NNQLConfig.recurrent: one-step targets and a plain head; no n_step/dueling")
+        if self.recurrent and self.n_step > 1:
+            raise ValueError("NNQLConfig.recurrent: one-step targets; use n_step=1 with recurrent")
         if self.sarsa and self.double_q:
             raise ValueError("NNQLConfig: sarsa bootstraps on the taken action; set double_q=False")
 

@@ -119,12 +119,11 @@ def build_q_network(
     config: NNQLConfig, obs_dim: int, n_actions: int, observation: Mapping[str, Any] | None = None
 ) -> nn.Module:
     """The learner's Q-network: :class:`PatchQNetwork` when the observation has a patch and
-    ``config.q_network`` is "auto", else the flat-MLP :class:`agents.nnql.networks.QNetwork`."""
+    ``config.q_network`` is "auto" (a plain head: ``config.dueling`` is the MLP's), else the flat-MLP
+    :class:`agents.nnql.networks.QNetwork` (dueling or not, as the config says)."""
     layout = patch_layout(observation) if config.q_network == "auto" else None
     if layout is None:
         return QNetwork.from_config(config, obs_dim, n_actions)
-    if config.dueling:
-        raise ValueError("NNQLConfig.dueling: the patch CNN has a plain head (q_network='mlp' or no dueling)")
     return PatchQNetwork({
         "obs_dim": obs_dim, "n_actions": n_actions, "hidden_sizes": config.hidden_sizes,
         "activation": config.activation,

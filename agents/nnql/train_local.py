@@ -27,7 +27,7 @@ from agents.nnql.ratelimit import RateLimiter
 from agents.nnql.recurrent_learner import RecurrentNNQLLearner
 from agents.nnql.recurrent_rollout import RecurrentRollout
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
-from worlds.config import LEARNING_NAV, NavConfig, observation_settings, with_moving_discs
+from worlds.config import LEARNING_NAV, TRAINING_DISCS, NavConfig, observation_settings, with_moving_discs
 from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
@@ -45,7 +45,7 @@ class LocalTrainConfig:
     """robots stepped together in the vector env"""
     maps: str = "mixed:16"
     """training map spec (worlds.tasks.parse_map_spec)"""
-    moving_discs: int = 0
+    moving_discs: int = TRAINING_DISCS
     """each training episode has 0..moving_discs moving discs, uniform (0: none; the dynamic set has 4)"""
     seed: int = 0
     """seeds the env, the learner and the exploration"""

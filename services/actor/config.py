@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from worlds.config import TRAINING_DISCS
+
 
 @dataclass
 class ActorConfig:
@@ -15,7 +17,7 @@ class ActorConfig:
     """robots stepped together in the vector env"""
     maps: str = "mixed:16"
     """training map spec (worlds.tasks): rooms:16, rects:24x32, maze:15, mixed:16, a .map/.scen path"""
-    moving_discs: int = 0
+    moving_discs: int = TRAINING_DISCS
     """each episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
     seed: int | None = None
     """env and exploration seed; empty: derived from the actor id (give each actor its own)"""

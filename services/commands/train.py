@@ -8,6 +8,7 @@ from dataclasses import replace
 
 from agents.device import DEVICES, resolve_device
 from agents.nnql.config import Q_NETWORKS, NNQLConfig
+from worlds.config import LEARNING_NAV, TRAINING_DISCS
 
 
 def register(subparsers) -> None:
@@ -66,13 +67,17 @@ def register(subparsers) -> None:
         "--n-step", type=int, default=defaults.n_step, help="n-step returns (1: one-step Q-learning)"
     )
     parser.add_argument(
-        "--dueling", action="store_true", help="dueling head: Q = V + A - mean(A) (saved folded)"
+        "--dueling",
+        action=argparse.BooleanOptionalAction,
+        default=defaults.dueling,
+        help="dueling head of the MLP Q-network: Q = V + A - mean(A), saved folded",
     )
     parser.add_argument(
         "--moving-discs",
         type=int,
-        default=0,
-        help="train with 0..N moving discs per episode, uniform (the dynamic test set has 4)",
+        default=TRAINING_DISCS,
+        help="train with 0..N moving discs per episode, uniform; the dynamic test set has 4, 0 trains on "
+        "static maps only",
     )
     parser.add_argument("--sarsa", action="store_true", help="SARSA: bootstrap on the next action taken")
     parser.add_argument(
@@ -120,8 +125,6 @@ def register(subparsers) -> None:
 
 def observation_of(args: argparse.Namespace):
     """worlds.config.LEARNING_NAV with --patch and --no-subgoal applied."""
-    from worlds.config import LEARNING_NAV
-
     subgoal = "none" if args.no_subgoal else LEARNING_NAV.observation.subgoal
     observation = replace(LEARNING_NAV.observation, patch_size=args.patch, subgoal=subgoal)
     return replace(LEARNING_NAV, observation=observation)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from protocols import keys
+from worlds.config import TRAINING_DISCS
 
 
 @dataclass
@@ -24,7 +25,7 @@ class UpConfig:
     """robots per actor"""
     maps: str = "mixed:16"
     """training map spec for the actors (worlds.tasks)"""
-    moving_discs: int = 0
+    moving_discs: int = TRAINING_DISCS
     """each actor episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
     seed: int = 0
     """seed of the learner (network, replay sampling); actor i uses seed + i"""

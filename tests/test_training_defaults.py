@@ -1,0 +1,49 @@
+"""The shipped policy's recipe is the default of every trainer: a dueling head and 0..4 moving discs
+per training episode (`navlearn train --local`, the actors and learner of `navlearn up`)."""
+
+from __future__ import annotations
+
+import json
+
+from agents.nnql.config import NNQLConfig
+from agents.nnql.networks import DuelingQNetwork
+from agents.nnql.patch_network import PatchQNetwork, build_q_network
+from agents.nnql.recurrent_net import RecurrentQNetwork
+from agents.nnql.train_local import LocalTrainConfig
+from services.actor.config import ActorConfig
+from services.cli import main
+from services.ops.up_config import UpConfig
+from worlds.config import TRAINING_DISCS, NavConfig, ObservationConfig, SensorConfig, observation_settings
+from worlds.perception import observation_dim
+
+
+def test_every_trainer_defaults_to_the_disc_mix_and_the_dueling_head():
+    assert TRAINING_DISCS == 4  # the dynamic test set's crowd
+    assert LocalTrainConfig().moving_discs == ActorConfig().moving_discs == UpConfig().moving_discs == 4
+    assert NNQLConfig().dueling
+    assert isinstance(build_q_network(NNQLConfig(), 30, 5), DuelingQNetwork)
+
+
+def test_networks_without_a_dueling_head_take_the_default_config():
+    """The LSTM and patch-CNN Q-networks keep a plain head; the default config must not refuse them."""
+    recurrent = NNQLConfig(recurrent=True)
+    assert isinstance(RecurrentQNetwork.from_config(recurrent, 30, 5), RecurrentQNetwork)
+    nav = NavConfig(sensors=SensorConfig(n_beams=8, n_rays=16), observation=ObservationConfig(patch_size=16))
+    net = build_q_network(NNQLConfig(), observation_dim(nav), 5, observation_settings(nav))
+    assert isinstance(net, PatchQNetwork)
+
+
+def train(tmp_path, *flags: str) -> tuple[dict, dict]:
+    out = tmp_path / "run"
+    argv = ["train", "--local", "--steps", "300", "--envs", "4", "--eval-every", "0"]
+    assert main([*argv, "--final-eval-episodes", "0", "--no-progress", "--out", str(out), *flags]) == 0
+    return json.loads((out / "summary.json").read_text()), json.loads((out / "config.json").read_text())
+
+
+def test_train_local_uses_the_recipe_by_default_and_the_flags_turn_it_off(tmp_path):
+    summary, policy = train(tmp_path)
+    assert summary["run"]["moving_discs"] == TRAINING_DISCS and summary["nnql"]["dueling"] is True
+    assert policy["architecture"]["dueling"] is True
+    summary, policy = train(tmp_path, "--no-dueling", "--moving-discs", "0")
+    assert summary["run"]["moving_discs"] == 0 and summary["nnql"]["dueling"] is False
+    assert "dueling" not in policy["architecture"]
