@@ -162,7 +162,6 @@ class NIRLConfig:
         """The NNQL configuration of the Q-learning machinery NIRL's policy evaluation reuses."""
         return NNQLConfig(
             hidden_sizes=self.hidden_sizes,
-            dueling=False,  # NIRL's soft Q holds the reward: a plain head
             activation=self.activation,
             dueling=self.dueling,
             lr=self.lr,
