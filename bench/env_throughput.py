@@ -19,6 +19,11 @@ wall-clock ratio (what threads buy is wall-clock time).
 40 steps rather than 11); ``--reuse-ablation ROUNDS`` measures only our env, with the perception's
 reuse (kept plans, paused geodesic Dijkstra) off and on, interleaved.
 
+``--compare-tree PATH --rounds R`` measures only our env (1 thread), in this tree and in another
+checkout (e.g. main before a speed change), each in its own subprocess, interleaved (other, this,
+other, this, ...) R times at every robot count and ``--policies``, and reports per CPU second
+both medians and their ratio: the before/after of a change, in the same run and load.
+
 ``--nav learning`` measures :data:`worlds.config.LEARNING_NAV` (sector minima, own-map subgoal
 ..., issue 14) instead of ``NavConfig()``; its target is 200k robot-steps per CPU-second, far
 above what a learner consumes (a few thousand per second).
@@ -29,8 +34,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
 import sys
 import time
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -109,6 +116,58 @@ def reuse_ablation(config: NavConfig, args) -> int:
     return 0
 
 
+CHILD = """
+import json, sys
+from bench.env_throughput import NAVS, make_policy, measure
+from worlds.vector_env import NavigationVectorEnv
+nav, n, policy, seconds, seed = sys.argv[1:]
+config, n = NAVS[nav], int(n)
+env = NavigationVectorEnv(n, config, threads=1)
+print(json.dumps(measure(env, n, float(seconds), 10**9, int(seed), make_policy(config, policy))))
+"""
+"""one measurement of our env in the tree it runs in (cwd), as a JSON line"""
+
+
+def measure_in(tree: Path, nav: str, n: int, policy: str, seconds: float, seed: int) -> dict:
+    """:func:`measure` of ``tree``'s own code, in a subprocess started there."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    cmd = [sys.executable, "-c", CHILD, nav, str(n), policy, str(seconds), str(seed)]
+    done = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def compare_trees(args) -> int:
+    """Robot-steps per CPU second of our env (1 thread) in ``args.compare_tree`` ("before") and in this
+    tree ("after"), interleaved ``args.rounds`` times per robot count and policy."""
+    here, other = Path(__file__).resolve().parent.parent, Path(args.compare_tree).resolve()
+    for tree in (other, here):  # compile (numba caches) outside the timed runs
+        measure_in(tree, args.nav, 1, "random", 0.2, args.seed)
+    load_before, results = os.getloadavg(), []
+    for policy in args.policies:
+        for n in args.robots:
+            runs: dict[str, list[float]] = {"before": [], "after": []}
+            for _ in range(args.rounds):
+                for name, tree in (("before", other), ("after", here)):
+                    row = measure_in(tree, args.nav, n, policy, args.seconds, args.seed)
+                    runs[name].append(row["robot_steps_per_cpu_s"])
+            before, after = float(np.median(runs["before"])), float(np.median(runs["after"]))
+            met = after >= TARGET_LEARNING_STEPS_PER_CPU_S
+            results.append({"policy": policy, "robots": n, "before_cpu": runs["before"],
+                            "after_cpu": runs["after"], "median_before": before, "median_after": after,
+                            "speedup": after / before, "target_met": met})  # fmt: skip
+            print(f"{policy:6s} actions, {n:4d} robots: before {before:>9,.0f}, after {after:>9,.0f} "
+                  f"robot-steps per CPU s (median of {args.rounds}), x{after / before:.2f}")  # fmt: skip
+    print(json.dumps({
+        "bench": "env_throughput_compare", "nav": args.nav, "before_tree": str(other),
+        "after_tree": str(here),
+        "seconds": args.seconds, "rounds": args.rounds, "load_average_before": load_before,
+        "load_average_after": os.getloadavg(), "results": results,
+        "learning_target_steps_per_cpu_s": TARGET_LEARNING_STEPS_PER_CPU_S,
+        "learning_target_met_cpu": all(r["target_met"] for r in results),
+    }))  # fmt: skip
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -134,8 +193,17 @@ def main() -> int:
         "--reuse-ablation", type=int, default=0, metavar="ROUNDS",
         help="instead: our env (1 thread) with the perception's reuse off and on, interleaved ROUNDS times",
     )  # fmt: skip
+    parser.add_argument(
+        "--compare-tree", metavar="PATH",
+        help="instead: our env (1 thread) in the checkout PATH and in this tree, interleaved --rounds times",
+    )  # fmt: skip
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of --compare-tree")
+    parser.add_argument("--policies", nargs="+", choices=["random", "goal"], default=["random", "goal"],
+                        help="action policies of --compare-tree")  # fmt: skip
     args = parser.parse_args()
     config = NAVS[args.nav]
+    if args.compare_tree:
+        return compare_trees(args)
     if args.reuse_ablation:
         return reuse_ablation(config, args)
     load_before = os.getloadavg()[0]

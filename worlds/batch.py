@@ -175,51 +175,34 @@ class NavBatch:
                 self.reward, self.terminated, self.truncated, self._finals(),
             )  # fmt: skip
         if self.perception is not None:
-            self._perceive_step(actions, n_done if autoreset else 0)
+            self._perceive_step(actions, autoreset)
         return n_done
 
     # ----------------------------------------------------------------- observation beyond the kernel's
-    def _goal_xy(self, goal_cell: np.ndarray, map_index: np.ndarray) -> np.ndarray:
-        cell = self.bank.mcell[map_index]
-        return np.stack([(goal_cell[:, 1] + 0.5) * cell, (goal_cell[:, 0] + 0.5) * cell], axis=1)
+    def _perceived(self) -> tuple:
+        """The state :mod:`worlds.perceive` reads (after the kernel's step or reset)."""
+        return (self.x, self.y, self.theta, self.gx, self.gy, self.goal_cell, self.map_index, self.base_obs,
+                self.rays)  # fmt: skip
 
     def _perceive_fresh(self, indices: np.ndarray) -> None:
         """First frames of the episodes robots ``indices`` just started."""
-        k = len(indices)
-        out = np.zeros((k, self.obs_dim), np.float32)
-        self.perception.observe(
-            indices, np.ones(k, bool), np.full(k, -1), self.bank.kernel_maps(), self.map_index[indices],
-            self.pose()[indices], np.stack([self.gx, self.gy], axis=1)[indices], self.goal_cell[indices],
-            self.base_obs[indices], self.rays[indices], out, np.zeros(k),
-        )  # fmt: skip
-        self.obs[indices] = out
+        self.perception.observe_fresh(indices, self.bank.kernel_maps(), self._perceived(), self.obs)
 
-    def _perceive_step(self, actions: np.ndarray, n_reset: int) -> None:
+    def _perceive_step(self, actions: np.ndarray, autoreset: bool) -> None:
         """The frames after a step (adding the geodesic reward); for robots that ended and were reset,
         the terminal frame (into final_obs) from the ended episode's memory, then a fresh one."""
-        everyone = np.arange(self.n)
-        maps = self.bank.kernel_maps()
-        if not n_reset:
-            self.perception.observe(
-                everyone, np.zeros(self.n, bool), actions, maps, self.map_index, self.pose(),
-                np.stack([self.gx, self.gy], axis=1), self.goal_cell, self.base_obs, self.rays, self.obs,
-                self.reward,
-            )  # fmt: skip
-            return
-        d = self.done
-        col = d[:, None]
-        final_map = self.bank.emap[self.final_entry]
-        out = np.zeros_like(self.obs)
-        self.perception.observe(
-            everyone, np.zeros(self.n, bool), actions, maps, np.where(d, final_map, self.map_index),
-            np.where(col, self.final_pose, self.pose()),
-            np.where(col, self._goal_xy(self.final_goal, final_map), np.stack([self.gx, self.gy], axis=1)),
-            np.where(col, self.final_goal, self.goal_cell), np.where(col, self.base_final, self.base_obs),
-            np.where(col, self.final_rays, self.rays), out, self.reward,
+        finals = (
+            self.final_pose,
+            self.final_goal,
+            self.final_entry,
+            self.base_final,
+            self.final_rays,
+            self.done,
+        )
+        self.perception.observe_step(
+            actions, autoreset, self.bank.kernel_maps(), self.bank.emap, self._perceived(), finals, self.obs,
+            self.final_obs, self.reward,
         )  # fmt: skip
-        self.obs[~d] = out[~d]
-        self.final_obs[d] = out[d]
-        self._perceive_fresh(np.flatnonzero(d))
 
     def _step_threaded(self, actions: np.ndarray, autoreset: bool) -> int:
         """Step ``self.threads`` ranges of robots at once: the calling thread and a pool of

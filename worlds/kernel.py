@@ -42,7 +42,7 @@ from worlds.sensors import cast_from, ray_disc, ray_origin
 def _drop_stale_cache() -> None:
     here = Path(__file__).parent
     sources = ("kernel.py", "obstacles.py", "rng.py", "robot.py", "sensors.py")
-    sources += ("perception.py", "gridsearch.py", "fields.py")
+    sources += ("perception.py", "perceive.py", "own_map.py", "geodesic.py", "gridsearch.py", "fields.py")
     digest = hashlib.sha256(b"".join((here / name).read_bytes() for name in sources)).hexdigest()
     stamp = here / "__pycache__" / "kernel_sources.sha256"
     try:

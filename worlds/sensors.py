@@ -73,14 +73,11 @@ def cast_from(field, off, width, idx, c, r, px, py, dx, dy, limit) -> float:
             while next_r < t:
                 idx += step_r
                 next_r += delta_r
-        if next_c < next_r:
-            t = next_c
-            idx += step_c
-            next_c += delta_c
-        else:
-            t = next_r
-            idx += step_r
-            next_r += delta_r
+        on_c = next_c < next_r  # selects, not branches: which boundary comes next is a coin toss
+        t = next_c if on_c else next_r
+        idx += step_c if on_c else step_r
+        next_c = next_c + delta_c if on_c else next_c  # (not += 0.0, which would turn -0.0 into 0.0)
+        next_r = next_r if on_c else next_r + delta_r
         if t >= limit:
             return limit
         value = field[idx]

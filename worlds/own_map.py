@@ -1,0 +1,155 @@
+"""The robot's own map: a grid on the map's cells, per robot and episode, written only from the
+robot's own rays and poses (see :mod:`worlds.perception`), and the subgoal planned on it.
+
+The plan grid a subgoal search reads is *padded* (the layout of :mod:`worlds.gridsearch`): one
+flat uint8 row per robot, :data:`~worlds.fields.BLOCKED` on seen-blocked cells (own map) or
+blocked cells (known map) and on a ring around the map.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from worlds.fields import BLOCKED
+from worlds.gridsearch import GEN, search_run, search_start
+
+UNKNOWN, FREE, SEEN_BLOCKED = 0, 1, 2
+"""cell states of the robot's own map"""
+
+
+CHANGED, ON_PLAN = 1, 2
+"""flags of :func:`map_rays`: a cell became blocked or stopped being blocked; one of them lies where
+the last search (:func:`waypoint`) looked"""
+
+
+@njit(cache=True, inline="always")
+def _set(occ, plan, exam, exam_id, stride, r, c, state):
+    """Cell (r, c) of the own map becomes ``state``; the plan grid (if tracked: ``plan`` not empty)
+    follows. Returns :data:`CHANGED` | :data:`ON_PLAN` flags."""
+    old = occ[r, c]
+    occ[r, c] = state
+    if (old == SEEN_BLOCKED) == (state == SEEN_BLOCKED):
+        return 0
+    at = (r + 1) * stride + c + 1
+    if plan.shape[0] > 0:
+        plan[at] = BLOCKED if state == SEEN_BLOCKED else 0
+    if exam_id < 0:
+        return CHANGED | ON_PLAN
+    for row in (at - stride, at, at + stride):
+        if exam[row - 1] == exam_id or exam[row] == exam_id or exam[row + 1] == exam_id:
+            return CHANGED | ON_PLAN  # next to a cell the search expanded: it read this one
+    return CHANGED
+
+
+@njit(cache=True, _nrt=False)
+def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta, ray_c, ray_s, ranges,
+             max_range, per):  # fmt: skip
+    """Write one step's rays and pose into a robot's own map ``occ`` (and its padded plan grid
+    ``plan``, seen-blocked cells blocked, unknown and free ones free, when not empty): the cell
+    past the end of every ray that hit something is blocked, the cells that the middle ray of each
+    sector of ``per`` rays crosses before its end are free (rays of a sector cross nearly the same
+    cells; tracing one keeps the map's cost near the sensor's). Returns flags: :data:`CHANGED`
+    when a cell became blocked or stopped being blocked (unknown and free plan alike), with
+    :data:`ON_PLAN` when such a cell lies next to one the search ``exam_id`` expanded (``exam``
+    holds their stamps; ``exam_id < 0``: unknown, every change counts)."""
+    flags = 0
+    stride = width + 2
+    px, py = x / cell, y / cell
+    if px < 0.0 or py < 0.0 or px >= width or py >= height:
+        return 0
+    c0, r0 = int(px), int(py)
+    visits[r0, c0] += 1
+    flags |= _set(occ, plan, exam, exam_id, stride, r0, c0, FREE)
+    cos_t, sin_t = math.cos(theta), math.sin(theta)
+    for k in range(ray_c.shape[0]):
+        dx = cos_t * ray_c[k] - sin_t * ray_s[k]
+        dy = sin_t * ray_c[k] + cos_t * ray_s[k]
+        length = ranges[k] / cell
+        if ranges[k] < max_range:
+            hx, hy = px + (length + 1e-6) * dx, py + (length + 1e-6) * dy
+            if 0.0 <= hx < width and 0.0 <= hy < height:
+                flags |= _set(occ, plan, exam, exam_id, stride, int(hy), int(hx), SEEN_BLOCKED)
+        if k % per != per // 2:
+            continue
+        # exact traversal of the cells the ray crosses before its end (Amanatides & Woo)
+        c, r = c0, r0
+        step_c, step_r = (1 if dx > 0.0 else -1), (1 if dy > 0.0 else -1)
+        inv_dx = 1.0 / dx if dx != 0.0 else math.inf
+        inv_dy = 1.0 / dy if dy != 0.0 else math.inf
+        next_c = (c + (1.0 if dx > 0.0 else 0.0) - px) * inv_dx if dx != 0.0 else math.inf
+        next_r = (r + (1.0 if dy > 0.0 else 0.0) - py) * inv_dy if dy != 0.0 else math.inf
+        delta_c, delta_r = abs(inv_dx), abs(inv_dy)
+        while True:  # selects, not branches: which boundary comes next is a coin toss per cell
+            on_c = next_c < next_r
+            t = next_c if on_c else next_r
+            c += step_c if on_c else 0
+            r += 0 if on_c else step_r
+            next_c = next_c + delta_c if on_c else next_c  # (not += 0.0: -0.0 would become 0.0)
+            next_r = next_r if on_c else next_r + delta_r
+            if t >= length or c < 0 or r < 0 or c >= width or r >= height:
+                break
+            flags |= _set(occ, plan, exam, exam_id, stride, r, c, FREE)
+    return flags
+
+
+@njit(cache=True, _nrt=False)
+def plan_clear(plan, height, width):
+    """The padded plan grid of an empty own map: every cell free, the ring around it blocked."""
+    stride = width + 2
+    for k in range((height + 2) * stride):
+        plan[k] = BLOCKED
+    for r in range(height):
+        for c in range(width):
+            plan[(r + 1) * stride + c + 1] = 0
+
+
+@njit(cache=True, _nrt=False)
+def plan_from_field(field, base, plan, height, width):
+    """Copy the padded true map (the kernel's field of the map at ``base``) into ``plan``."""
+    for k in range((height + 2) * (width + 2)):
+        plan[k] = BLOCKED if field[base + k] == BLOCKED else 0
+
+
+@njit(cache=True, _nrt=False)
+def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam, exam_id):
+    """A* (8-connected, no corner cutting) on the padded grid ``plan`` from the robot's cell to the
+    goal cell (counted free); the centre of the cell ``along`` metres down the path, or the goal
+    itself when the path ends first, the robot is off the map or on a blocked cell, or no path
+    exists. ``work``: the search's work arrays (:func:`worlds.gridsearch.new_work`). The cells it
+    expanded get the stamp ``exam_id`` in ``exam`` (a search reads only their 3x3 neighbourhoods,
+    so changes elsewhere leave its result as it is). Returns (the waypoint's padded cell, -1 for the
+    goal itself; searched)."""
+    g, parent, seen, order, meta = work[0], work[1], work[3], work[7], work[8]
+    stride = width + 2
+    c, r = int(x / cell), int(y / cell)
+    if c < 0 or r < 0 or c >= width or r >= height:
+        return -1, False
+    start, goal = (r + 1) * stride + c + 1, (goal_r + 1) * stride + goal_c + 1
+    if plan[start] == BLOCKED:
+        return -1, False
+    was = plan[goal]
+    plan[goal] = 0
+    search_start(start, goal, stride, True, *work)
+    expanded = search_run(plan, 0, stride, goal, True, *work)
+    plan[goal] = was
+    for k in range(expanded):
+        exam[order[k]] = exam_id
+    if seen[goal] != meta[GEN]:
+        return -1, True
+    # parent links run goal -> start: the node at path length >= along is the last one walking back
+    # from the goal whose g is still >= along (g grows along the path from the start)
+    node = goal
+    while parent[node] >= 0 and g[parent[node]] * cell >= along:
+        node = parent[node]
+    return (-1 if node == goal else node), True
+
+
+@njit(cache=True, inline="always")
+def centre(node, width, cell, gx, gy):
+    """The point a :func:`waypoint` cell stands for: its centre, or the goal (gx, gy) for -1."""
+    if node < 0:
+        return gx, gy
+    stride = width + 2
+    return (node % stride - 1 + 0.5) * cell, (node // stride - 1 + 0.5) * cell
