@@ -44,7 +44,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import pickle
 import subprocess
 import sys
 import time
@@ -72,6 +71,7 @@ from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.nnql.transitions import transitions_to_tensordict
 from agents.planning.demonstrate import generate_demos
 from bench._common import machine_load
+from bench._nirl_options import VALIDATION_RUNS, cached, heldout_demos, parse_overrides
 from bench._nirl_report import FAMILIES, METHODS, SETS, report
 from bench.planning import expert_outcomes
 from worlds.config import LEARNING_NAV, NavConfig, observation_settings
@@ -89,25 +89,6 @@ SQIL = {"core": "sqil", "q_updates": 256}
 VALIDATION_SEED = 1
 NAVS = {"learning": LEARNING_NAV, "default": NavConfig()}
 RUNS = {"learning": "bench/nirl_runs_learning.jsonl", "default": "bench/nirl_runs.jsonl"}
-VALIDATION_RUNS = "runs/nirl_validation.jsonl"
-"""screening runs (``--split validation``): never mixed with the test seed's table"""
-
-
-def parse_overrides(parser: argparse.ArgumentParser, items: list[str]) -> dict:
-    """``KEY=VALUE`` strings -> NIRLConfig overrides (values parsed as JSON, else kept as strings)."""
-    fields = set(NIRLConfig.__dataclass_fields__)
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or key not in fields:
-            parser.error(f"--nirl {item!r}: expected KEY=VALUE with KEY a NIRLConfig field")
-        try:
-            out[key] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key] = value
-    return out
-
-
 def demo_sets(
     seed: int, noise: float, nav: NavConfig, larger: int = 0
 ) -> tuple[dict[str, list], list[np.ndarray]]:
@@ -123,25 +104,6 @@ def demo_sets(
         more, _ = generate_demos("mixed:16", larger - 20, seed=10_000 + seed + 20, config=nav)
         sets[str(larger)] = clean + more
     return sets, expert_labels
-
-
-def heldout_demos(seed: int, nav: NavConfig) -> list:
-    """20 clean expert episodes on maps no demonstration set uses (the reward off the demonstrations)."""
-    return generate_demos("mixed:16", 20, seed=30_000 + seed, config=nav)[0]
-
-
-def cached(directory: str | None, name: str, make, *args):
-    """``make(*args)``, pickled under ``directory`` (None: no cache) so repeated screening runs skip the
-    expert's planning; the demonstrations depend only on the name's seed, noise and observation."""
-    if not directory:
-        return make()
-    path = Path(directory) / f"{name}.pkl"
-    if path.exists():
-        return pickle.loads(path.read_bytes())
-    value = make(*args)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(pickle.dumps(value))
-    return value
 
 
 def outcomes_of(result, family: str) -> list[int]:
