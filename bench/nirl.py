@@ -89,6 +89,8 @@ SQIL = {"core": "sqil", "q_updates": 256}
 VALIDATION_SEED = 1
 NAVS = {"learning": LEARNING_NAV, "default": NavConfig()}
 RUNS = {"learning": "bench/nirl_runs_learning.jsonl", "default": "bench/nirl_runs.jsonl"}
+
+
 def demo_sets(
     seed: int, noise: float, nav: NavConfig, larger: int = 0
 ) -> tuple[dict[str, list], list[np.ndarray]]:
