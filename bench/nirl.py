@@ -58,6 +58,7 @@ from agents.imitation.config import ImitationConfig
 from agents.imitation.train import train_policy
 from agents.nirl.buffers import demo_buffer, sample
 from agents.nirl.config import NIRLConfig, NIRLRun
+from agents.nirl.diagnose import demo_figures
 from agents.nirl.learner import NIRLLearner
 from agents.nirl.losses import max_margin_loss
 from agents.nirl.max_margin import Q_KEYS
@@ -70,6 +71,7 @@ from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.nnql.transitions import transitions_to_tensordict
 from agents.planning.demonstrate import generate_demos
 from bench._common import machine_load
+from bench._nirl_options import VALIDATION_RUNS, cached, heldout_demos, parse_overrides
 from bench._nirl_report import FAMILIES, METHODS, SETS, report
 from bench.planning import expert_outcomes
 from worlds.config import LEARNING_NAV, NavConfig, observation_settings
@@ -79,9 +81,11 @@ from worlds.perception import observation_dim
 ISSUE8 = {
     "core": "max_margin", "gamma": 0.95, "target_tau": 0.005, "prior_temperature": 0.1,
     "relabel_threshold": 0.6, "demo_noise": 0.2, "refine_start": 0, "demo_fraction": 0.25,
-    "temperature_start": 0.3, "temperature_end": 0.02,
+    "temperature_start": 0.3, "temperature_end": 0.02, "q_updates": 256,
 }  # fmt: skip
 """NIRLConfig of the max-margin learner as issue 8 measured it (its defaults then)"""
+SQIL = {"core": "sqil", "q_updates": 256}
+"""SQIL as the tables measured it (256 Q updates per round, NIRL's default before issue 15 part 3)"""
 VALIDATION_SEED = 1
 NAVS = {"learning": LEARNING_NAV, "default": NavConfig()}
 RUNS = {"learning": "bench/nirl_runs_learning.jsonl", "default": "bench/nirl_runs.jsonl"}
@@ -116,6 +120,8 @@ def figures(result) -> dict:
             "success": m.success.value,
             "success_ci": [m.success.low, m.success.high],
             "collision_static": m.collision_static.value,
+            "collision_dynamic": m.collision_dynamic.value,
+            "timeout": m.timeout.value,
             "path_ratio": None if m.path_ratio is None else float(m.path_ratio),
             "solved": outcomes_of(result, family),
         }
@@ -194,7 +200,9 @@ def train_dqfd(demos, seed: int, env_steps: int, nav: NavConfig, margin: float =
     return q.policy(), rollout.steps
 
 
-def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, sets, nav) -> dict:
+def run_one(
+    method: str, set_name: str, seed: int, demos, expert_labels, args, sets, nav, heldout=None
+) -> dict:
     t0 = time.perf_counter()
     row: dict = {"method": method, "set": set_name, "seed": seed, "episodes": args.episodes}
     if demos is not None:
@@ -212,9 +220,10 @@ def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, s
     elif method in ("nirl", "sqil", "maxmargin"):
         curve_run = method == "nirl" and set_name == "20"
         rounds = max(args.iterations, args.curve_iterations) if curve_run else args.iterations
-        core = {"nirl": {"core": "iq"}, "sqil": {"core": "sqil"}, "maxmargin": ISSUE8}[method]
+        core = {"nirl": {"core": "iq"}, "sqil": SQIL, "maxmargin": ISSUE8}[method]
+        overrides = args.nirl_overrides if method == "nirl" else {}
         config = NIRLConfig(
-            **core, iterations=rounds, steps_per_iteration=args.steps_per_iteration, seed=seed
+            **(core | overrides), iterations=rounds, steps_per_iteration=args.steps_per_iteration, seed=seed
         )
         curve, tested = [], {}
 
@@ -226,10 +235,15 @@ def run_one(method: str, set_name: str, seed: int, demos, expert_labels, args, s
             if learner.iteration == args.iterations:
                 tested["policy"], tested["steps"] = learner.policy(), int(point["env_steps"])
                 tested["scale"] = {k: v for k, v in point.items() if k.startswith("nirl/")}
+                if heldout and method != "maxmargin":  # the learned reward off the demonstrations
+                    tested["diagnosis"] = {"train": demo_figures(learner, demos),
+                                           "heldout": demo_figures(learner, heldout)}  # fmt: skip
 
         run = NIRLRun(out="", eval_every=0, final_eval_episodes=0, progress=False)
         result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
         policy, row["env_steps"], row["reward_scale"] = tested["policy"], tested["steps"], tested["scale"]
+        if "diagnosis" in tested:
+            row["diagnosis"] = tested["diagnosis"]
         if curve_run:
             row["curve"] = curve
         if set_name == "20noisy" and method != "sqil":
@@ -301,21 +315,40 @@ def main() -> int:
     parser.add_argument("--nnql-eval-every", type=int, default=6_144, help="NNQL validation every N steps")
     parser.add_argument("--val-episodes", type=int, default=50, help="validation episodes of the curves")
     parser.add_argument("--noise", type=float, default=0.3, help="random-action probability of the noisy set")
+    parser.add_argument(
+        "--diagnose", action="store_true",
+        help="NIRL/SQIL: also measure the learned reward on 20 held-out expert episodes (other maps)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--demo-cache", default=None, metavar="DIR",
+        help="pickle the generated demonstrations in DIR and reuse them (screening)",
+    )  # fmt: skip
     parser.add_argument("--gridcheck", action="store_true", help="also run the grid-world reward recovery")
     parser.add_argument(
         "--nav", choices=list(NAVS), default="learning", help="observation: LEARNING_NAV or NavConfig()"
     )
     parser.add_argument("--runs", default=None, help="JSON lines file runs append to (default by --nav)")
+    parser.add_argument(
+        "--split", choices=("test", "validation"), default="test",
+        help="episodes the policies are tested on: test seed 0 (the table) or the validation seed "
+        f"{VALIDATION_SEED} (screening; runs then default to runs/nirl_validation.jsonl)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--nirl", action="append", default=[], metavar="KEY=VALUE",
+        help="override a NIRLConfig field of the nirl learner (repeatable; JSON values: 1024, true, 0.5)",
+    )  # fmt: skip
     parser.add_argument("--report", action="store_true", help="print the table of --runs and stop")
     args = parser.parse_args()
-    runs = Path(args.runs or RUNS[args.nav])
+    runs = Path(args.runs or (VALIDATION_RUNS if args.split == "validation" else RUNS[args.nav]))
+    args.nirl_overrides = parse_overrides(parser, args.nirl)
     if args.report:
         return report(runs)
     nav = NAVS[args.nav]
     # which code, settings and observation made each line
-    code = {"commit": code_version(), "argv": sys.argv[1:], "nav": args.nav,
-            "observation": observation_settings(nav)}  # fmt: skip
-    sets = [make_eval_set(f, args.episodes, seed=0) for f in FAMILIES]
+    code = {"commit": code_version(), "argv": sys.argv[1:], "nav": args.nav, "split": args.split,
+            "observation": observation_settings(nav), "nirl_overrides": args.nirl_overrides}  # fmt: skip
+    test_seed = VALIDATION_SEED if args.split == "validation" else 0
+    sets = [make_eval_set(f, args.episodes, seed=test_seed) for f in FAMILIES]
     methods = [m for m in args.methods.split(",") if m]
     unknown = sorted(set(methods) - set(METHODS))
     if unknown:
@@ -342,11 +375,18 @@ def main() -> int:
         learners = [m for m in methods if m != "expert"]
         needs_demos = any(m != "nnql" for m in learners)
         larger = max([int(s) for s in args.sets.split(",") if s.isdigit()] + [0])
-        demos, expert_labels = demo_sets(seed, args.noise, nav, larger) if needs_demos else ({}, [])
+        demos, expert_labels = ({}, [])
+        if needs_demos:
+            name = f"sets-{args.nav}-{seed}-{args.noise}-{larger}"
+            demos, expert_labels = cached(args.demo_cache, name, demo_sets, seed, args.noise, nav, larger)
+        heldout = None
+        if args.diagnose:
+            heldout = cached(args.demo_cache, f"heldout-{args.nav}-{seed}", heldout_demos, seed, nav)
         for method in learners:
             for set_name in ["-"] if method == "nnql" else [s for s in args.sets.split(",") if s]:
                 row = run_one(method, set_name, seed, None if method == "nnql" else demos[set_name],
-                              expert_labels, args, sets, nav) | code | {"load": machine_load()}  # fmt: skip
+                              expert_labels, args, sets, nav, heldout)  # fmt: skip
+                row |= code | {"load": machine_load()}
                 with open(runs, "a") as fh:
                     fh.write(json.dumps(row) + "\n")
                 short = {f: round(row["test"][f]["success"], 3) for f in FAMILIES}

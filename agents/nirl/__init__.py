@@ -41,6 +41,35 @@ reward. The reward network (``networks.RewardNetwork`` over state-action feature
 explicit, transferable model of IQ-Learn's reward: fitted by regression on the Q-function's
 implicit reward, logged, and drawn over maps (``reward_map``, `navlearn nirl reward`).
 
+Policy iteration on the fixed learned reward (issue 15, part 3; the defaults)
+---------------------------------------------------------------------------
+Diagnosis on the validation seed (bench/nirl.py --split validation --diagnose, bench/RESULTS.md):
+with 256 Q updates per 2,048 robot-steps policy evaluation was cut short (1,024: +8 points on 20
+clean demos); the learner's own crash steps earned an implicit reward of +79..+99 against about
+-0.3 per demonstrated step (the absorbing target -100 is far from where the Q of crash steps sits);
+and the reward does not transfer: on 20 held-out expert episodes (other maps) an expert step earns
+-0.67 against -0.07 on the training demonstrations and -0.31 on the learner's own steps, and the
+greedy policy agrees with the expert on 69% of held-out steps against 86% of trained ones.
+What NIRL now does, each part from the literature:
+
+* IQ-Learn as above for the first ``fix_reward_after`` = 5 rounds, 1,024 Q updates per round, its
+  chi-squared regulariser over expert and policy samples (the ``regularize`` option of Garg et al.'s
+  code ``iq_learn``), a Polyak target network;
+* then the learned reward is fixed and NNQL's policy iteration runs on it: soft Q-learning
+  (``losses.soft_td_loss``) on the same 50/50 batches, its reward (``fixed_reward = "progress"``,
+  ``agents.nirl.progress``) a unit cost per step shaped by a potential learned from the
+  demonstrations - the expert's value at unit step cost, regressed on what the robot perceives:
+  potential-based shaping (Ng, Harada & Russell 1999: the optimal policy is unchanged),
+  built from demonstrations (Brys et al., IJCAI 2015), a state-only term ``gamma Phi(s') - Phi(s)`` as
+  in AIRL (Fu, Luo & Levine 2018), with the collision's absorbing state (DAC, Kostrikov et al. 2019)
+  valued as never arriving. ``fixed_reward = "network"`` uses the reward network distilled from
+  IQ-Learn instead (measured: it collapsed on the noisy set, 0% validation success);
+* ``crash_clip`` (off by default): a squared hinge keeping crash steps' implicit reward at or below
+  the demonstrated steps' (it helped the noisy set, hurt the clean one; not adopted).
+
+The environment's reward is never read: the potential's targets are the demonstrations' own step
+counts to their end at the goal.
+
 Discount: gamma = 0.99, a 100-step horizon for demonstrated paths of about 31 steps (issue 15:
 with 0.95 a long path and a crash were valued alike). Logged beside it, per update:
 ``nirl/learned_reward`` (per demonstrated step), ``nirl/path_length`` and ``nirl/path_return``

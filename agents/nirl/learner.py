@@ -35,6 +35,7 @@ from agents.nirl.config import NIRLConfig
 from agents.nirl.losses import KEEP, Refinement, map_posterior, refine_steps, structured_margins
 from agents.nirl.max_margin import MaxMarginFit
 from agents.nirl.networks import RewardNetwork
+from agents.nirl.progress import ProgressPotential, steps_to_go
 from agents.nirl.soft_q import SoftQFit
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
@@ -103,6 +104,13 @@ class NIRLLearner:
             self.fit = MaxMarginFit(**common, margins=margins)
         else:
             self.fit = SoftQFit(**common, path_length=self._demo_path_length)
+            if config.fixed_reward == "progress":
+                self.fit.potential = ProgressPotential(
+                    obs_dim, config.reward_hidden_sizes, config.activation, config.gamma
+                ).to(self.device)
+                self.fit.potential_optimizer = torch.optim.Adam(
+                    self.fit.potential.parameters(), lr=config.reward_lr
+                )
         self.prior_network: torch.nn.Module | None = None
         self.demo_episodes = 0
         self.demo_path_steps = 0
@@ -146,6 +154,8 @@ class NIRLLearner:
             td.set("episode", torch.full((n,), self.demo_episodes, dtype=torch.int64))
             noise = meta.get("noise") if isinstance(meta, Mapping) else None
             td.set("noise", torch.full((n,), self.config.demo_noise if noise is None else float(noise)))
+            reached = bool(np.asarray(fields[2])[-1]) if len(fields[2]) else False  # ended by termination
+            td.set("to_go", torch.as_tensor(steps_to_go(n, reached)))
             self.demos.extend(td)
             self.demo_episodes += 1
             self.demo_path_steps += td.batch_size[0]
@@ -242,6 +252,7 @@ class NIRLLearner:
             self.reward_steps += 1
         else:
             metrics = self.fit.q_step(offline=True)
+            metrics.update(self.fit.potential_step())
         self.warm_updates += 1
         self.metrics.update(metrics)
         return metrics
@@ -264,10 +275,12 @@ class NIRLLearner:
                 metrics.update(self.reward_step())
         for _ in range(cfg.q_updates):
             metrics.update(self._q_update())
-        if cfg.core != "max_margin":
+        if cfg.core != "max_margin" and not self._reward_frozen():
             for _ in range(cfg.reward_updates):
                 metrics.update(self.reward_step())
+                metrics.update(self.fit.potential_step())
         self.iteration += 1
+        self._fix_reward_when_due()
         metrics["charts/iteration"] = float(self.iteration)
         self.metrics.update(metrics)
         return metrics
@@ -280,16 +293,31 @@ class NIRLLearner:
         if self.warm_updates < cfg.warmstart_updates:
             return self._warm_step()
         metrics: dict[str, float] = {}
-        self.reward_credit += cfg.reward_updates / max(cfg.q_updates, 1)
+        if not self._reward_frozen():
+            self.reward_credit += cfg.reward_updates / max(cfg.q_updates, 1)
         while self.reward_credit >= 1.0:
             metrics.update(self.reward_step())
+            if isinstance(self.fit, SoftQFit):
+                metrics.update(self.fit.potential_step())
             self.reward_credit -= 1.0
         metrics.update(self._q_update())
         if cfg.q_updates and self.q.updates % cfg.q_updates == 0:
             self.iteration += 1
+            self._fix_reward_when_due()
         metrics["charts/iteration"] = float(self.iteration)
         self.metrics.update(metrics)
         return metrics
+
+    def _reward_frozen(self) -> bool:
+        return isinstance(self.fit, SoftQFit) and self.fit.reward_fixed
+
+    def _fix_reward_when_due(self) -> None:
+        """After ``fix_reward_after`` iterations (iq core), freeze the reward network: from then on
+        the Q-network does NNQL-style policy iteration (soft Q-learning) on the learned reward."""
+        after = self.config.fix_reward_after
+        if self.config.core == "iq" and after and self.iteration >= after and not self._reward_frozen():
+            self.fit.reward_fixed = True
+            self.reward.requires_grad_(False)
 
     def ready(self) -> bool:
         """Updates need demonstrations (experience is optional: demos alone train it)."""

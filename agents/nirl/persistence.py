@@ -47,7 +47,9 @@ def save_policy_files(learner: Any, path: str | Path, **metadata: Any) -> Path:
 
 
 def nirl_state(learner: Any) -> dict[str, Any]:
-    """Reward network, its optimiser, the frozen prior and NIRL's counters (the Q side is NNQLLearner's)."""
+    """Reward network, its optimiser, the frozen prior, the progress potential (if any), whether the
+    reward is fixed, and NIRL's counters (the Q side is NNQLLearner's)."""
+    potential = getattr(learner.fit, "potential", None)
     return {
         "format": FORMAT_VERSION,
         "config": learner.config.to_dict(),
@@ -55,6 +57,8 @@ def nirl_state(learner: Any) -> dict[str, Any]:
         "reward": learner.reward.state_dict(),
         "reward_optimizer": learner.reward_optimizer.state_dict(),
         "prior_network": None if learner.prior_network is None else learner.prior_network.state_dict(),
+        "potential": None if potential is None else potential.state_dict(),
+        "reward_fixed": bool(getattr(learner.fit, "reward_fixed", False)),
         "counters": {
             "iteration": learner.iteration,
             "reward_steps": learner.reward_steps,
@@ -90,6 +94,12 @@ def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
     if state.get("prior_network") is not None:
         learner.prior_network = copy.deepcopy(learner.q.network).requires_grad_(False)
         learner.prior_network.load_state_dict(state["prior_network"])
+    potential = getattr(learner.fit, "potential", None)
+    if potential is not None and state.get("potential") is not None:
+        potential.load_state_dict(state["potential"])
+    if state.get("reward_fixed"):
+        learner.fit.reward_fixed = True
+        learner.reward.requires_grad_(False)
     counters = state["counters"]
     learner.iteration = int(counters["iteration"])
     learner.reward_steps = int(counters["reward_steps"])

@@ -22,6 +22,7 @@ from agents.nirl.losses import (
     RELABEL,
     REWEIGHT,
     crash_absorbing_value,
+    crash_clip_loss,
     implicit_reward,
     iq_loss,
     soft_td_loss,
@@ -29,8 +30,33 @@ from agents.nirl.losses import (
     sqil_rewards,
 )
 from agents.nirl.networks import goal_reached
+from agents.nirl.progress import ProgressPotential, potential_loss, shaped_progress_reward
 
 BATCH_KEYS = ("observation", "action", ("next", "observation"), ("next", "terminated"))
+
+
+def absorbing_next(
+    cfg, next_value: torch.Tensor, terminated: torch.Tensor, at_goal: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Next-state values and terminations with the absorbing end states of ``cfg`` folded in.
+
+    iq: a collision leads to an absorbing state (Kostrikov et al. 2019, DAC) told apart from the
+    goal by the observation, valued at IQ-Learn's optimum there (losses.crash_absorbing_value); it
+    no longer counts as a termination (its value is bootstrapped). sqil: the goal where
+    demonstrations end is an expert absorbing state (reward 1 forever, 1 / (1 - gamma)); a collision
+    ends with reward 0 (without it, ending at the goal is worth less than wandering on at reward 1)."""
+    terminated = terminated.reshape(-1).bool()
+    if not cfg.crash_absorbing:
+        return next_value, terminated
+    if cfg.core == "iq":
+        crashed = terminated & ~at_goal
+        next_value = torch.where(crashed, crash_absorbing_value(cfg.chi2_alpha, cfg.gamma), next_value)
+        return next_value, terminated & at_goal
+    if cfg.core == "sqil":
+        forever = torch.full_like(next_value, 1.0 / (1.0 - cfg.gamma))
+        next_value = torch.where(terminated & at_goal, forever, next_value)
+        return next_value, terminated & ~at_goal
+    return next_value, terminated
 
 
 @dataclass(eq=False)
@@ -43,6 +69,12 @@ class SoftQFit(FitParts):
 
     path_length: Callable[[], float]
     """mean steps of a demonstrated path (logged beside the learned reward's scale)"""
+    potential: ProgressPotential | None = None
+    """the progress potential (``NIRLConfig.fixed_reward = "progress"``), None otherwise"""
+    potential_optimizer: torch.optim.Optimizer | None = None
+    reward_fixed: bool = False
+    """iq: the reward network is frozen and the Q-network learns by soft Q-learning on it
+    (``NIRLConfig.fix_reward_after``); the reward fit stops"""
 
     def mixed_batch(self, offline: bool) -> tuple[TensorDict, torch.Tensor]:
         """Demonstration steps and own experience, ``demo_fraction`` of the batch demonstrated
@@ -87,21 +119,20 @@ class SoftQFit(FitParts):
         next_value = soft_value(self.target_q(next_obs), cfg.alpha)
         metrics: dict[str, float] = {}
         at_goal = goal_reached(next_obs, self.reward.n_beams, self.goal_tolerance, self.max_range)
-        if cfg.core == "iq" and cfg.crash_absorbing:
-            # a collision leads to an absorbing state (Kostrikov et al. 2019, DAC) told apart from the
-            # goal by the observation; its value is IQ-Learn's optimum there (losses.crash_absorbing_value)
-            crashed = terminated.bool() & ~at_goal
-            next_value = torch.where(crashed, crash_absorbing_value(cfg.chi2_alpha, cfg.gamma), next_value)
-            terminated = terminated.bool() & at_goal
-        if cfg.core == "sqil" and cfg.crash_absorbing:
-            # DAC's absorbing states for SQIL: the goal where demonstrations end is an expert absorbing
-            # state (reward 1 forever, 1 / (1 - gamma)); a collision ends with reward 0. Without it, ending
-            # at the goal is worth less than wandering on at reward 1, and the policy avoids the goal
-            reached = terminated.bool() & at_goal
-            forever = torch.full_like(next_value, 1.0 / (1.0 - cfg.gamma))
-            next_value = torch.where(reached, forever, next_value)
-            terminated = terminated.bool() & ~at_goal
-        if cfg.core == "iq":
+        next_value, terminated = absorbing_next(cfg, next_value, terminated, at_goal)
+        if cfg.core == "iq" and self.reward_fixed:
+            # NNQL policy iteration on the learned reward, now frozen: soft Q-learning with r = R(s, a)
+            # of the reward network (the absorbing crash state keeps its value)
+            if self.potential is not None:  # the progress reward (agents.nirl.progress): ends folded in
+                raw_end = batch[("next", "terminated")].reshape(-1).bool()
+                reward = shaped_progress_reward(self.potential, obs, next_obs, raw_end, at_goal, cfg.gamma)
+                terminated = raw_end
+            else:
+                with torch.no_grad():
+                    reward = self.reward(obs).gather(1, labels[:, None]).squeeze(1)
+            loss = soft_td_loss(q_taken, reward, next_value, terminated, cfg.gamma)
+            metrics["losses/td_loss"] = float(loss.detach())
+        elif cfg.core == "iq":
             terms = iq_loss(
                 q_taken, soft_value(q_all, cfg.alpha), next_value, terminated, is_expert, cfg.gamma,
                 cfg.chi2_alpha, weights,
@@ -113,6 +144,11 @@ class SoftQFit(FitParts):
                 "losses/iq_value": float(terms.value_term),
                 "losses/iq_chi2": float(terms.chi2_term),
             })  # fmt: skip
+            if cfg.crash_clip > 0:
+                crashed = ~is_expert & batch[("next", "terminated")].reshape(-1).bool() & ~at_goal
+                clip = crash_clip_loss(q_taken, next_value, crashed, terms.reward[is_expert], cfg.gamma)
+                loss = loss + cfg.crash_clip * clip / (4.0 * cfg.chi2_alpha)
+                metrics["losses/crash_clip"] = float(clip.detach())
         else:  # sqil
             loss = soft_td_loss(q_taken, sqil_rewards(is_expert), next_value, terminated, cfg.gamma)
             reward = implicit_reward(q_taken.detach(), next_value, terminated, cfg.gamma)
@@ -155,7 +191,22 @@ class SoftQFit(FitParts):
             crashed = own & terminated & ~at_goal
             if crashed.any():
                 out["nirl/collision_value"] = float(q_taken[crashed].mean())
+                out["nirl/crash_reward"] = float(reward[crashed].mean())
         return out
+
+    def potential_step(self) -> dict[str, float]:
+        """One regression step of the progress potential on demonstrated steps (agents.nirl.progress)."""
+        if self.potential is None or self.potential_optimizer is None:
+            return {}
+        demos = sample(self.demos, self.config.batch_size, self.q.device)
+        to_go = demos.get("to_go", None)
+        if to_go is None:
+            return {}
+        loss = potential_loss(self.potential, demos["observation"], to_go, self.config.gamma)
+        if loss is None:
+            return {}
+        norm = self.clip_step(loss, self.potential.parameters(), self.potential_optimizer)
+        return {"losses/potential_fit": float(loss.detach()), "losses/potential_grad_norm": norm}
 
     def reward_step(self) -> dict[str, float]:
         """One reward-network update: regression of ``R(s, a)`` on the Q-function's implicit reward
@@ -167,6 +218,9 @@ class SoftQFit(FitParts):
             q_taken = self.q.network(obs).gather(1, actions[:, None]).squeeze(1)
             next_value = soft_value(self.target_q(batch[("next", "observation")]), cfg.alpha)
             terminated = batch[("next", "terminated")].reshape(-1)
+            next_obs = batch[("next", "observation")]
+            at_goal = goal_reached(next_obs, self.reward.n_beams, self.goal_tolerance, self.max_range)
+            next_value, terminated = absorbing_next(cfg, next_value, terminated, at_goal)
             target = implicit_reward(q_taken, next_value, terminated, cfg.gamma)
         predicted = self.reward(obs).gather(1, actions[:, None]).squeeze(1)
         loss = torch.nn.functional.mse_loss(predicted, target)
