@@ -3,7 +3,7 @@
 All three learn ``worlds.config.LEARNING_NAV`` (24 sector minima, goal, subgoal from the robot's
 own map, geodesic progress reward) on the training maps ("mixed:16") with the same training
 episodes (``--train-discs``: 0..N moving discs per episode, default ``navlearn train --local``'s
-0..4; 0 for static maps only) for the same number of robot-steps:
+0..6 (0..4 in the recorded runs); 0 for static maps only) for the same number of robot-steps:
 
     nnql  ``navlearn train --local``'s code (``train_local``, 16 robots, default ``NNQLConfig``,
           keep-best on 4 validation evaluations of 100 episodes, seed 1 - inside its wall time)

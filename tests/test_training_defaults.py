@@ -1,4 +1,4 @@
-"""The shipped policy's recipe is the default of every trainer: a dueling head and 0..4 moving discs
+"""The shipped policy's recipe is the default of every trainer: a dueling head and 0..6 moving discs
 per training episode (`navlearn train --local`, the actors and learner of `navlearn up`)."""
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from worlds.perception import observation_dim
 
 
 def test_every_trainer_defaults_to_the_disc_mix_and_the_dueling_head():
-    assert TRAINING_DISCS == 4  # the dynamic test set's crowd
-    assert LocalTrainConfig().moving_discs == ActorConfig().moving_discs == UpConfig().moving_discs == 4
+    assert TRAINING_DISCS == 6  # the dynamic test set's crowd of 4, and denser ones
+    assert LocalTrainConfig().moving_discs == ActorConfig().moving_discs == UpConfig().moving_discs == 6
     assert NNQLConfig().dueling
     assert isinstance(build_q_network(NNQLConfig(), 30, 5), DuelingQNetwork)
 

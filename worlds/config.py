@@ -341,10 +341,11 @@ from the robot's own map, trained with the geodesic progress reward - the winner
 success of the observation ablation (``bench/perception.py``, variant "D+geo"; bench/RESULTS.md)"""
 
 
-TRAINING_DISCS = 4
+TRAINING_DISCS = 6
 """moving discs per training episode by default (``navlearn train --local``, the actors of ``navlearn
-up``): 0..4, uniform per episode, so training sees static maps and the dynamic test set's crowds of 4
-(the shipped policy's recipe; bench/RESULTS.md, "Issue 14, learner")"""
+up``): 0..6, uniform per episode, so training sees static maps, the dynamic test set's crowds of 4
+and denser ones - the shipped policy's recipe, chosen on validation over 0..4 (bench/RESULTS.md,
+"Issue 14: NNQL with moving discs")"""
 
 
 def with_moving_discs(nav: NavConfig, count: int) -> NavConfig:

@@ -110,7 +110,7 @@ def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None, dyna
 
 def training_nav(run: LocalTrainConfig, nav: NavConfig | None = None) -> NavConfig:
     """The task trained on: ``nav`` (default :data:`worlds.config.LEARNING_NAV`) with the disc mix of
-    ``run.moving_discs`` (default 0..4), a given ``nav`` included (`train --local` passes its observation
+    ``run.moving_discs`` (default 0..6), a given ``nav`` included (`train --local` passes its observation
     flags' nav); a caller that wants ``nav`` as it is sets ``moving_discs=0``."""
     return with_moving_discs(nav or LEARNING_NAV, run.moving_discs)
 
