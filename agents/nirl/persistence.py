@@ -20,16 +20,25 @@ from agents.replay_files import load_replay, save_replay
 
 MODEL_NAME = "nirl"
 REWARD_FILE = "reward.safetensors"
+POTENTIAL_FILE = "potential.safetensors"
+"""the progress potential's weights (``NIRLConfig.fixed_reward = "progress"``), beside the reward's"""
 STATE_FILE = "nirl.pt"
 
 
 def save_policy_files(learner: Any, path: str | Path, **metadata: Any) -> Path:
     """The Q-network in the shared policy format (``agents.mlp``: model "nirl",
-    kind "q_network", loadable by ``navlearn evaluate``) plus ``reward.safetensors``."""
+    kind "q_network", loadable by ``navlearn evaluate``) plus ``reward.safetensors`` and, with a
+    progress potential, ``potential.safetensors`` (``navlearn nirl reward`` draws both)."""
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
-    save_file(learner.reward_weights(), str(path / (REWARD_FILE + ".tmp")))
-    os.replace(path / (REWARD_FILE + ".tmp"), path / REWARD_FILE)
+    files = {REWARD_FILE: learner.reward_weights()}
+    potential = getattr(learner.fit, "potential", None)
+    if potential is not None:
+        files[POTENTIAL_FILE] = {k: t.detach().cpu().numpy() for k, t in potential.mlp.state_dict().items()}
+        metadata.setdefault("potential_architecture", potential.architecture)
+    for name, weights in files.items():
+        save_file(weights, str(path / (name + ".tmp")))
+        os.replace(path / (name + ".tmp"), path / name)
     metadata.setdefault("nirl_config", learner.config.to_dict())
     if learner.q.observation is not None:
         metadata.setdefault("observation", learner.q.observation)

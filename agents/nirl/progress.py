@@ -48,11 +48,19 @@ class ProgressPotential(nn.Module):
 
     def __init__(self, obs_dim: int, hidden_sizes, activation: str, gamma: float):
         super().__init__()
+        self.architecture = {"obs_dim": int(obs_dim), "hidden_sizes": [int(h) for h in hidden_sizes],
+                             "activation": activation, "gamma": float(gamma)}  # fmt: skip
         self.mlp = MLP(
             in_features=obs_dim, out_features=1, num_cells=list(hidden_sizes),
             activation_class=ACTIVATIONS[activation],
         )  # fmt: skip
         self.scale = 1.0 / (1.0 - gamma)  # the net outputs values in units of 1 / (1 - gamma)
+
+    @classmethod
+    def from_architecture(cls, architecture: dict) -> ProgressPotential:
+        """The potential :attr:`architecture` describes (weights not loaded)."""
+        return cls(architecture["obs_dim"], architecture["hidden_sizes"], architecture["activation"],
+                   architecture["gamma"])  # fmt: skip
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         return self.scale * self.mlp(obs).squeeze(-1)

@@ -6,7 +6,10 @@ spaced headings; its observation is built as the world builds it (exact ranges f
 saved with a NIRL run (``reward.safetensors``) scores every action there. The cell's value is the
 reward of the best action, averaged over headings. Beside it: the true cost-to-go, the geodesic
 (8-connected grid) distance to the goal. If the learned reward is a reward for this task, it rises
-as the geodesic cost falls; ``spearman`` measures that over the free cells.
+as the geodesic cost falls; ``spearman`` measures that over the free cells. A run with a progress
+potential (``potential.safetensors``, ``NIRLConfig.fixed_reward = "progress"``: the potential that
+shapes the reward NIRL's policy learns on once the reward is fixed) gets a third panel, the
+potential per cell (mean over headings), and its own rank correlation with minus the geodesic cost.
 """
 
 from __future__ import annotations
@@ -20,7 +23,8 @@ import numpy as np
 import torch
 
 from agents.nirl.networks import RewardNetwork
-from agents.nirl.persistence import REWARD_FILE
+from agents.nirl.persistence import POTENTIAL_FILE, REWARD_FILE
+from agents.nirl.progress import ProgressPotential
 from agents.planning import distance_field
 from worlds.config import LEGACY_OBSERVATION, NavConfig, observation_differences, with_observation
 from worlds.maps import Task
@@ -38,19 +42,19 @@ class RewardMap:
     """(H, W) geodesic distance to the goal in metres"""
     spearman: float
     """rank correlation of learned reward and minus the geodesic cost over reachable free cells"""
+    potential: np.ndarray | None = None
+    """(H, W) the progress potential, mean over headings (runs that have one)"""
+    potential_spearman: float = float("nan")
+    """rank correlation of the potential and minus the geodesic cost over reachable free cells"""
 
 
-def load_reward_network(run: str | Path) -> RewardNetwork:
-    """The reward network of a NIRL run or policy directory (config.json + reward.safetensors)."""
-    from safetensors.torch import load_file
-
-    run = Path(run)
+def saved_config(run: Path) -> dict:
+    """config.json of a NIRL run directory in the plain observation (the one this map can draw)."""
     config, weights = run / "config.json", run / REWARD_FILE
     if not weights.is_file() or not config.is_file():
         raise ValueError(f"{run}: no {REWARD_FILE} and config.json (is --run a NIRL run directory?)")
     saved = json.loads(config.read_text())
-    architecture = saved.get("reward_architecture")
-    if architecture is None:
+    if saved.get("reward_architecture") is None:
         raise ValueError(f"{config}: no reward_architecture (not written by NIRL)")
     plain = with_observation(NavConfig(), LEGACY_OBSERVATION)
     wrong = observation_differences(saved.get("observation") or LEGACY_OBSERVATION, plain, "plain")
@@ -60,9 +64,30 @@ def load_reward_network(run: str | Path) -> RewardNetwork:
             "observation (8 beams + goal, `nirl train --observation plain`) only, since an own-map "
             "subgoal depends on the path the robot drove to each cell"
         )
-    network = RewardNetwork.from_architecture(architecture)
-    network.mlp.load_state_dict(load_file(str(weights)))
+    return saved
+
+
+def load_reward_network(run: str | Path) -> RewardNetwork:
+    """The reward network of a NIRL run or policy directory (config.json + reward.safetensors)."""
+    from safetensors.torch import load_file
+
+    run = Path(run)
+    network = RewardNetwork.from_architecture(saved_config(run)["reward_architecture"])
+    network.mlp.load_state_dict(load_file(str(run / REWARD_FILE)))
     return network.eval()
+
+
+def load_potential(run: str | Path) -> ProgressPotential | None:
+    """The progress potential saved with a NIRL run (potential.safetensors), None if it has none."""
+    from safetensors.torch import load_file
+
+    run = Path(run)
+    architecture = saved_config(run).get("potential_architecture")
+    if architecture is None or not (run / POTENTIAL_FILE).is_file():
+        return None
+    potential = ProgressPotential.from_architecture(architecture)
+    potential.mlp.load_state_dict(load_file(str(run / POTENTIAL_FILE)))
+    return potential.eval()
 
 
 def observe_at(task: Task, nav: NavConfig, x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -94,40 +119,55 @@ def observations(task: Task, nav: NavConfig, headings: int) -> tuple[np.ndarray,
 
 
 def reward_map(
-    network: RewardNetwork, task: Task, nav: NavConfig | None = None, headings: int = 8
+    network: RewardNetwork,
+    task: Task,
+    nav: NavConfig | None = None,
+    headings: int = 8,
+    potential: ProgressPotential | None = None,
 ) -> RewardMap:
-    """The learned reward and the geodesic cost of ``task`` (see the module docstring)."""
-    from scipy.stats import spearmanr
-
+    """The learned reward (and potential) and the geodesic cost of ``task`` (module docstring)."""
     nav = nav or NavConfig()
     obs, cells = observations(task, nav, headings)
-    with torch.no_grad():
-        best = network(torch.as_tensor(obs)).max(dim=1).values.numpy()
-    per_cell = best.reshape(len(cells), headings).mean(axis=1)
     geodesic = distance_field(task.grid, task.goal, 8)
-    learned = np.full(task.grid.shape, np.nan)
-    learned[cells[:, 0], cells[:, 1]] = per_cell
-    reachable = np.isfinite(geodesic) & np.isfinite(learned)
-    learned[~reachable] = np.nan
-    geodesic = np.where(np.isfinite(geodesic), geodesic, np.nan)
-    rho = (
-        spearmanr(learned[reachable], -geodesic[reachable]).statistic if reachable.sum() > 2 else float("nan")
-    )
-    return RewardMap(task, learned, geodesic, float(rho))
+    reachable = np.isfinite(geodesic)
+    with torch.no_grad():
+        obs_t = torch.as_tensor(obs)
+        learned, rho = _per_cell(network(obs_t).max(dim=1).values.numpy(), cells, headings, geodesic)
+        if potential is not None:
+            phi, phi_rho = _per_cell(potential(obs_t).numpy(), cells, headings, geodesic)
+    geodesic = np.where(reachable, geodesic, np.nan)
+    if potential is None:
+        return RewardMap(task, learned, geodesic, rho)
+    return RewardMap(task, learned, geodesic, rho, potential=phi, potential_spearman=phi_rho)
+
+
+def _per_cell(values: np.ndarray, cells: np.ndarray, headings: int, geodesic: np.ndarray):
+    """(H, W) mean over headings at the reachable free cells (NaN elsewhere), and its rank
+    correlation with minus the geodesic cost."""
+    from scipy.stats import spearmanr
+
+    field = np.full(geodesic.shape, np.nan)
+    field[cells[:, 0], cells[:, 1]] = values.reshape(len(cells), headings).mean(axis=1)
+    reachable = np.isfinite(geodesic) & np.isfinite(field)
+    field[~reachable] = np.nan
+    if reachable.sum() <= 2:
+        return field, float("nan")
+    return field, float(spearmanr(field[reachable], -geodesic[reachable]).statistic)
 
 
 def plot_reward_map(result: RewardMap, out: str | Path, title: str = "") -> Path:
-    """PNG: the learned reward (left) beside the geodesic cost to the goal (right)."""
+    """PNG: the learned reward (left), the progress potential if the run has one, and the geodesic
+    cost to the goal (right)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6))
-    panels = (
-        (result.learned, "learned reward (best action, mean over headings)", "viridis"),
-        (result.geodesic, "true geodesic cost to the goal (m)", "viridis_r"),
-    )
+    panels = [(result.learned, "learned reward (best action, mean over headings)", "viridis")]
+    if result.potential is not None:
+        panels.append((result.potential, "progress potential (shapes the fixed reward)", "viridis"))
+    panels.append((result.geodesic, "true geodesic cost to the goal (m)", "viridis_r"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.5 * len(panels), 4.6))
     for ax, (field, name, cmap) in zip(axes, panels, strict=True):
         image = ax.imshow(field, cmap=cmap, origin="upper")
         ax.imshow(
@@ -137,7 +177,8 @@ def plot_reward_map(result: RewardMap, out: str | Path, title: str = "") -> Path
         ax.set(title=name, xticks=[], yticks=[])
         fig.colorbar(image, ax=ax, shrink=0.8)
     axes[0].legend(loc="lower right", fontsize=8)
-    fig.suptitle(f"{title}  Spearman(learned, -geodesic) = {result.spearman:.2f}")
+    extra = "" if result.potential is None else f", potential {result.potential_spearman:.2f}"
+    fig.suptitle(f"{title}  Spearman(learned, -geodesic) = {result.spearman:.2f}{extra}")
     fig.tight_layout()
     out = Path(out)
     fig.savefig(out, dpi=110)

@@ -66,7 +66,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="draw a run's learned reward over a map beside the true geodesic cost",
         description="Put the robot at every free cell of a task from --map (8 headings each), score every "
         "action with RUN/reward.safetensors and draw the best action's reward beside the geodesic distance "
-        "to the goal; prints their Spearman rank correlation over the reachable cells.",
+        "to the goal, and, for runs with a progress potential (RUN/potential.safetensors, NIRL's default: "
+        "it shapes the reward the policy learns on once the reward is fixed), the potential too; prints "
+        "their Spearman rank correlations with minus the geodesic cost over the reachable cells.",
     )
     reward.add_argument("--run", required=True, help="NIRL run directory (reward.safetensors + config.json)")
     reward.add_argument("--map", required=True, help="map spec (FAMILY:N or a map file) of the task to draw")
@@ -139,20 +141,22 @@ def run_reward(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from agents.nirl.reward_map import load_reward_network, plot_reward_map, reward_map
+    from agents.nirl.reward_map import load_potential, load_reward_network, plot_reward_map, reward_map
     from worlds.tasks import parse_map_spec
 
     try:
-        network = load_reward_network(args.run)
+        network, potential = load_reward_network(args.run), load_potential(args.run)
         task = parse_map_spec(args.map)(np.random.default_rng(args.seed))
         if args.headings < 1:
             raise ValueError("--headings must be positive")
     except ValueError as exc:
         print(f"navlearn nirl reward: {exc}", file=sys.stderr)
         return 2
-    result = reward_map(network, task, headings=args.headings)
+    result = reward_map(network, task, headings=args.headings, potential=potential)
     out = plot_reward_map(result, args.out, title=f"{args.run} on {task.map_id or args.map}")
+    shaped = "" if potential is None else f", (progress potential, ...) = {result.potential_spearman:.3f}"
     print(
-        f"Spearman(learned reward, -geodesic cost) = {result.spearman:.3f} over the reachable cells -> {out}"
+        f"Spearman(learned reward, -geodesic cost) = {result.spearman:.3f}{shaped} over the reachable "
+        f"cells -> {out}"
     )
     return 0
