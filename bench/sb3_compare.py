@@ -41,7 +41,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.evaluation.compare import mcnemar_exact
 from agents.evaluation.runner import evaluate, make_eval_set
-from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from bench.perception import pooled, scored
@@ -71,7 +70,12 @@ def train_nnql(steps: int, seed: int, discs: int, out: Path):
         eval_every=steps // 4, eval_episodes=100, final_eval_episodes=0, progress=False,
     )  # fmt: skip
     trained = train_local(run)
-    return NNQLPolicy.load(out).greedy(), {"robot_steps": trained.env_steps, "updates": trained.updates}
+    info = {
+        "robot_steps": trained.env_steps,
+        "updates": trained.updates,
+        "dueling": trained.learner.config.dueling,
+    }
+    return NNQLPolicy.load(out).greedy(), info
 
 
 def train_sb3(algo: str, steps: int, seed: int, discs: int, out: Path):
@@ -98,7 +102,6 @@ def run_one(algo: str, seed: int, args, sets: dict) -> dict:
     wall0, cpu0 = time.perf_counter(), time.process_time()
     if algo == "nnql":
         policy, info = train_nnql(args.steps, seed, args.train_discs, out)
-        info["dueling"] = NNQLConfig().dueling
     else:
         policy, info = train_sb3(algo, args.steps, seed, args.train_discs, out)
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0

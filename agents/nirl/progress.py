@@ -9,8 +9,8 @@ perceives (goal distance and bearing, the subgoal from its own map, free space),
 true map. Issue 15's diagnosis (bench/nirl.py --diagnose): IQ-Learn's implicit reward does not
 transfer - held-out expert steps earn less (-0.67) than the learner's own (-0.31).
 
-How it is used (``NIRLConfig.fixed_reward`` = ``progress`` or ``both``): once the reward is fixed
-(``fix_reward_after``), NNQL-style soft Q-learning on the learned reward adds the potential-based
+How it is used (``NIRLConfig.fixed_reward = "progress"``, the default): once the reward is fixed
+(``fix_reward_after``), NNQL-style soft Q-learning learns on the potential-based
 shaping ``F(s, s') = gamma Phi(s') - Phi(s)`` (Ng, Harada & Russell, ICML 1999: it leaves the
 optimal policy unchanged) on top of a unit step cost, with ``Phi = 0`` at the goal and the
 never-arriving value ``-1 / (1 - gamma)`` in the collision's absorbing state. Shaping rewards built
