@@ -26,7 +26,13 @@ from agents.nirl.networks import RewardNetwork
 from agents.nirl.persistence import POTENTIAL_FILE, REWARD_FILE
 from agents.nirl.progress import ProgressPotential
 from agents.planning import distance_field
-from worlds.config import LEGACY_OBSERVATION, NavConfig, observation_differences, with_observation
+from worlds.config import (
+    LEGACY_OBSERVATION,
+    NavConfig,
+    observation_differences,
+    saved_observation,
+    with_observation,
+)
 from worlds.maps import Task
 from worlds.sensors import cast_rays
 
@@ -57,7 +63,7 @@ def saved_config(run: Path) -> dict:
     if saved.get("reward_architecture") is None:
         raise ValueError(f"{config}: no reward_architecture (not written by NIRL)")
     plain = with_observation(NavConfig(), LEGACY_OBSERVATION)
-    wrong = observation_differences(saved.get("observation") or LEGACY_OBSERVATION, plain, "plain")
+    wrong = observation_differences(saved_observation(saved.get("observation")), plain, "plain")
     if wrong:
         raise ValueError(
             f"{config}: this run observes {', '.join(wrong)}; the map is drawn for runs in the plain "

@@ -23,7 +23,7 @@ import numpy as np
 
 from agents.mlp import activate, mlp_forward, mlp_layers
 from agents.nnql.policy import NNQLPolicy, load_policy_dir
-from worlds.config import LEGACY_OBSERVATION
+from worlds.config import saved_observation
 
 LSTM_PREFIX = "lstm.lstm."
 """weight names of the LSTM inside the torch module (TorchRL's LSTMModule wraps an nn.LSTM as .lstm)"""
@@ -158,5 +158,5 @@ class RecurrentNNQLPolicy(NNQLPolicy):
         if not is_recurrent(config["architecture"]):
             raise ValueError(f"{path}: a feed-forward Q-network, not a recurrent one (no lstm_size)")
         kwargs.setdefault("version", config.get("version", 0))
-        kwargs.setdefault("observation", config.get("observation") or LEGACY_OBSERVATION)
+        kwargs.setdefault("observation", saved_observation(config.get("observation")))
         return cls(weights, config["architecture"], **kwargs)
