@@ -44,10 +44,10 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import binomtest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from agents.evaluation.compare import mcnemar_exact
 from agents.evaluation.metrics import wilson_interval
 from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
@@ -104,8 +104,7 @@ SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dy
 def mcnemar(a: np.ndarray, b: np.ndarray) -> dict:
     """McNemar's exact test on paired successes: discordant counts and the two-sided p-value."""
     only_a, only_b = int((a & ~b).sum()), int((~a & b).sum())
-    p = binomtest(only_a, only_a + only_b, 0.5).pvalue if only_a + only_b else 1.0
-    return {"only_first": only_a, "only_second": only_b, "p": float(p)}
+    return {"only_first": only_a, "only_second": only_b, "p": mcnemar_exact(only_a, only_b)}
 
 
 def successes(result: EvalResult, family: str) -> np.ndarray:
