@@ -10,13 +10,15 @@ parts of a step and of a reset, each timed on realistic batches, per CPU second 
 * **reset**: every robot reset at once, many times: the kernel's reset and the first frame, the
   latter also without the geodesic reward and without the subgoal.
 * **searches alone**: numba loops over work recorded from a rollout, caches warm: the 96 rays of a
-  pose, the own-map A* (:func:`worlds.own_map.waypoint`) of a search, the geodesic Dijkstra of a
-  reset settled out to the start (:mod:`worlds.geodesic`).
+  pose (one by one, each ray's direction and reciprocals computed at the head of its traversal as
+  :func:`worlds.sensors.cast_from` does, or side by side as the kernel casts them: every direction,
+  then every reciprocal, then the traversals), the own-map A* (:func:`worlds.own_map.waypoint`) of
+  a search, the geodesic Dijkstra of a reset settled out to the start (:mod:`worlds.geodesic`).
 
 The machine is shared, so every figure is the minimum over ``--chunks`` chunks (of 100 env steps,
 or one pass over the recorded work): the least disturbed one. Figures in microseconds.
 
-    python -m bench.world_parts --robots 256 --policy random   # human lines, then one JSON object
+    python -m bench.world_parts --robots 256 --policies random   # human lines, then one JSON object
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from worlds.config import LEARNING_NAV, NavConfig
 from worlds.geodesic import field_distance, move_masks, new_fields, start_field
 from worlds.gridsearch import new_work
 from worlds.own_map import waypoint
-from worlds.sensors import cast_from, ray_origin
+from worlds.sensors import cast_along, cast_from, ray_origin, reciprocal
 from worlds.vector_env import NavigationVectorEnv
 
 
@@ -148,6 +150,27 @@ def _rays(field, moff, mh, mw, mcell, poses, maps, beam_c, beam_s, max_range, ou
 
 
 @njit(cache=False)
+def _rays_side_by_side(field, moff, mh, mw, mcell, poses, maps, beam_c, beam_s, max_range, out, work):
+    """:func:`_rays` the kernel's way: every direction, then every reciprocal, then the traversals."""
+    ray_dx, ray_dy, inv_dx, inv_dy = work
+    for i in range(poses.shape[0]):
+        m = maps[i]
+        off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
+        c, s = math.cos(poses[i, 2]), math.sin(poses[i, 2])
+        idx, col, row, px, py = ray_origin(field, off, height, width, cell, poses[i, 0], poses[i, 1])
+        for k in range(beam_c.shape[0]):
+            ray_dx[k], ray_dy[k] = c * beam_c[k] - s * beam_s[k], s * beam_c[k] + c * beam_s[k]
+        for k in range(beam_c.shape[0]):
+            inv_dx[k], inv_dy[k] = reciprocal(ray_dx[k]), reciprocal(ray_dy[k])
+        for k in range(beam_c.shape[0]):
+            r = 0.0
+            if idx >= 0:
+                r = cast_along(field, off, width, idx, col, row, px, py, ray_dx[k], ray_dy[k], inv_dx[k],
+                               inv_dy[k], max_range / cell)  # fmt: skip
+            out[i, k] = r
+
+
+@njit(cache=False)
 def _searches(plans, height, width, cell, xs, ys, goals, along, work, exam, out):
     for k in range(plans.shape[0]):
         out[k] = waypoint(
@@ -204,6 +227,8 @@ def searches_alone(config: NavConfig, n: int, chunks: int, seed: int) -> dict:
     moves, geo, dist = move_masks(field, moff, mh, mw), new_fields(1, plans.shape[1]), np.empty(len(rs))
     h, w, cell, along = int(mh[0]), int(mw[0]), float(mcell[0]), config.observation.subgoal_distance
     ray_args = (field, moff, mh, mw, mcell, poses, maps, b.beam_c, b.beam_s, config.sensors.max_range, rays)
+    side_rays = np.empty_like(rays)
+    side_args = (*ray_args[:-1], side_rays, tuple(np.empty(len(b.beam_c)) for _ in range(4)))
     search_args = (plans, h, w, cell, at[:, 0], at[:, 1], goals, along, work, exam, found)
     settle_args = (
         moves,
@@ -220,7 +245,9 @@ def searches_alone(config: NavConfig, n: int, chunks: int, seed: int) -> dict:
     )
     return {
         "rays_per_pose": len(b.beam_c),
-        "us_per_pose_rays": _best(_rays, ray_args, chunks, len(poses)),
+        "us_per_pose_rays_one_by_one": _best(_rays, ray_args, chunks, len(poses)),
+        "us_per_pose_rays_side_by_side": _best(_rays_side_by_side, side_args, chunks, len(poses)),
+        "rays_identical": rays.tobytes() == side_rays.tobytes(),
         "searches_recorded": len(at),
         "us_per_search": _best(_searches, search_args, chunks, len(at)),
         "resets_recorded": len(rs),
@@ -251,7 +278,9 @@ def main() -> int:
     print("per reset (us): " + ", ".join(f"{k} {v:.2f}" for k, v in resets.items()))
     alone = searches_alone(config, args.robots, args.chunks, args.seed)
     print(
-        f"alone, caches warm: {alone['rays_per_pose']} rays {alone['us_per_pose_rays']:.2f} us per pose, "
+        f"alone, caches warm: {alone['rays_per_pose']} rays {alone['us_per_pose_rays_one_by_one']:.2f} us "
+        f"per pose one by one, {alone['us_per_pose_rays_side_by_side']:.2f} side by side (identical: "
+        f"{alone['rays_identical']}), "
         f"own-map A* {alone['us_per_search']:.2f} us per search ({alone['searches_recorded']} recorded), "
         f"geodesic Dijkstra to the start {alone['us_per_reset_settle']:.2f} us per reset "
         f"({alone['resets_recorded']})"
