@@ -49,3 +49,29 @@ def cached(directory: str | None, name: str, make, *args):
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(pickle.dumps(value))
     return value
+
+
+def add_policy_options(parser: argparse.ArgumentParser) -> None:
+    """Options of NIRL's NNQL phase (``--nirl policy_steps=N``, agents.nirl.policy_iteration)."""
+    parser.add_argument("--policy-eval-every", type=int, default=25_000,
+                        help="NIRL with policy_steps: robot-steps between keep-best validations")  # fmt: skip
+    parser.add_argument("--policy-eval-dynamic", type=int, default=100,
+                        help="... and validation episodes with 4 moving discs beside")  # fmt: skip
+
+
+def policy_run(args: argparse.Namespace) -> dict:
+    """NIRLRun fields of the NNQL phase from the bench's options."""
+    return {"policy_eval_every": args.policy_eval_every, "eval_episodes": args.val_episodes,
+            "policy_eval_dynamic_episodes": args.policy_eval_dynamic}  # fmt: skip
+
+
+def policy_phase(result, curve: list | None) -> dict:
+    """The NNQL phase of a NIRL run in the bench's terms: its kept policy, robot-steps (IQ-Learn's
+    rounds included), the validation points along it appended to ``curve`` (when given) at NIRL's
+    robot-steps, and what keep-best chose."""
+    phase = result.policy_result
+    if curve is not None:
+        curve.extend((p["env_steps"], p["eval_success"], p.get("eval_dynamic_success"))
+                     for p in result.curve if p.get("phase") and "eval_success" in p)  # fmt: skip
+    return {"policy": result.policy(), "steps": int(result.env_steps), "iq_steps": int(result.iq_steps),
+            "selected_version": phase.selected_version, "policy_wall": round(phase.wall_time, 1)}  # fmt: skip

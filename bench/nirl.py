@@ -71,7 +71,15 @@ from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.nnql.transitions import transitions_to_tensordict
 from agents.planning.demonstrate import generate_demos
 from bench._common import machine_load
-from bench._nirl_options import VALIDATION_RUNS, cached, heldout_demos, parse_overrides
+from bench._nirl_options import (
+    VALIDATION_RUNS,
+    add_policy_options,
+    cached,
+    heldout_demos,
+    parse_overrides,
+    policy_phase,
+    policy_run,
+)
 from bench._nirl_report import FAMILIES, METHODS, SETS, report
 from bench.planning import expert_outcomes
 from worlds.config import LEARNING_NAV, NavConfig, observation_settings
@@ -239,9 +247,13 @@ def run_one(
                     tested["diagnosis"] = {"train": demo_figures(learner, demos),
                                            "heldout": demo_figures(learner, heldout)}  # fmt: skip
 
-        run = NIRLRun(out="", eval_every=0, final_eval_episodes=0, progress=False)
+        run = NIRLRun(out="", eval_every=0, final_eval_episodes=0, progress=False, **policy_run(args))
         result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
-        policy, row["env_steps"], row["reward_scale"] = tested["policy"], tested["steps"], tested["scale"]
+        if config.policy_steps:  # the NNQL phase's policy is NIRL's (agents.nirl.policy_iteration)
+            tested |= policy_phase(result, curve if curve_run else None)
+            row["iq_steps"], row["selected_version"] = tested["iq_steps"], tested["selected_version"]
+        policy, row["env_steps"] = tested["policy"], tested["steps"]
+        row["reward_scale"] = tested.get("scale", {})
         if "diagnosis" in tested:
             row["diagnosis"] = tested["diagnosis"]
         if curve_run:
@@ -337,6 +349,7 @@ def main() -> int:
         "--nirl", action="append", default=[], metavar="KEY=VALUE",
         help="override a NIRLConfig field of the nirl learner (repeatable; JSON values: 1024, true, 0.5)",
     )  # fmt: skip
+    add_policy_options(parser)
     parser.add_argument("--report", action="store_true", help="print the table of --runs and stop")
     args = parser.parse_args()
     runs = Path(args.runs or (VALIDATION_RUNS if args.split == "validation" else RUNS[args.nav]))
