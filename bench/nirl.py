@@ -79,6 +79,7 @@ from bench._nirl_options import (
     parse_overrides,
     policy_phase,
     policy_run,
+    rates,
 )
 from bench._nirl_report import FAMILIES, METHODS, SETS, report
 from bench.planning import expert_outcomes
@@ -247,11 +248,12 @@ def run_one(
                     tested["diagnosis"] = {"train": demo_figures(learner, demos),
                                            "heldout": demo_figures(learner, heldout)}  # fmt: skip
 
-        run = NIRLRun(out="", eval_every=0, final_eval_episodes=0, progress=False, **policy_run(args))
+        run = NIRLRun(eval_every=0, final_eval_episodes=0, progress=False, **policy_run(args, set_name, seed))
         result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
         if config.policy_steps:  # the NNQL phase's policy is NIRL's (agents.nirl.policy_iteration)
-            tested |= policy_phase(result, curve if curve_run else None)
-            row["iq_steps"], row["selected_version"] = tested["iq_steps"], tested["selected_version"]
+            labels = expert_labels if "noisy" in set_name else None
+            tested |= policy_phase(result, curve if curve_run else None, labels)
+            row |= {k: v for k, v in tested.items() if k not in ("policy", "steps", "scale", "diagnosis")}
         policy, row["env_steps"] = tested["policy"], tested["steps"]
         row["reward_scale"] = tested.get("scale", {})
         if "diagnosis" in tested:
@@ -281,17 +283,7 @@ def run_one(
 
 def refinement_rates(learner: NIRLLearner, expert_labels: list[np.ndarray]) -> dict:
     steps, refined = learner.refine_all()
-    expert = torch.as_tensor(np.concatenate(expert_labels)[: len(steps)])
-    recorded = steps["action"]
-    wrong = recorded != expert
-    labels = refined.labels
-    return {
-        "injected_steps": int(wrong.sum()),
-        "clean_steps": int((~wrong).sum()),
-        "injected_relabelled_to_expert": float((labels[wrong] == expert[wrong]).float().mean()),
-        "injected_changed": float((labels[wrong] != recorded[wrong]).float().mean()),
-        "clean_kept": float((labels[~wrong] == recorded[~wrong]).float().mean()),
-    }
+    return rates(steps["action"], refined.labels, np.concatenate(expert_labels)[: len(steps)])
 
 
 def code_version() -> str:

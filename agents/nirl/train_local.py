@@ -30,7 +30,10 @@ import numpy as np
 from agents.evaluation.runner import evaluate, make_eval_set
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.learner import NIRLLearner
+from agents.nirl.losses import Refinement
 from agents.nirl.policy_iteration import policy_iteration
+from agents.nirl.progress import ProgressPotential
+from agents.nirl.refine_progress import refine_after_policy_iteration
 from agents.nirl.weights import HISTORY_FILE, WeightHistory, plot_weight_changes
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
 from agents.nnql.train_local import TrainResult
@@ -57,6 +60,11 @@ class NIRLResult:
     """robot-steps of the IQ-Learn rounds (all of them when there is no NNQL phase)"""
     policy_result: TrainResult | None = None
     """NIRLConfig.policy_steps > 0: NNQL's local trainer on the fixed learned reward (its policy is NIRL's)"""
+    refinement: Refinement | None = None
+    """... and ``refine``: MAP refinement of the demonstrations under that policy's prior and the progress
+    evidence (agents.nirl.refine_progress), in the demonstration buffer's order"""
+    refined_potential: ProgressPotential | None = None
+    """the progress potential re-fitted on the refined demonstrations' steps to go"""
 
     def policy(self) -> Any:
         """NIRL's final policy: the NNQL phase's kept one, else the learner's Q-network (greedy)."""
@@ -142,6 +150,9 @@ def train_nirl(
         result.env_steps += result.policy_result.env_steps
         for point in result.policy_result.curve:
             result.curve.append(point | {"env_steps": point["env_steps"] + result.iq_steps, "phase": 1.0})
+        if config.refine:
+            q_values = result.policy_result.policy.q_values
+            result.refinement, result.refined_potential = refine_after_policy_iteration(learner, q_values)
     if run.final_eval_episodes > 0:
         report = evaluate_policy(result.policy(), run.final_eval_episodes, 0, nav)
         result.final_eval = report.to_dict(with_episodes=False)["metrics"]["unseen"]
