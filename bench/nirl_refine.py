@@ -8,7 +8,7 @@ Two uses:
   (seed 20000 + ``--demo-seed``, default 3; the bench's sets are seeds 0-2), with the prior of a
   saved NIRL run's NNQL phase (``RUN/policy_iteration``) and a progress potential fitted on that set's
   own steps to go, as NIRL fits it. Rule: the most injected actions relabelled to the expert's with
-  at least 99% of clean steps kept.
+  at least 99% of clean steps kept (if none keeps 99%: the one that keeps most).
 * ``--measure DIR ...``: the rates of saved NIRL runs of the bench (``bench/nirl.py`` writes them to
   ``runs/nirl_out/<split>-<set>-<seed>`` with ``--nirl policy_steps=N``) on their own noisy
   demonstrations (from ``--demo-cache``), with the given settings.
@@ -94,8 +94,11 @@ def tune(run: Path, demo_seed: int, cache: str | None) -> dict:
         refinement, _ = refine_after_policy_iteration(learner, policy.q_values, settings)
         rows.append({"temperature": t, "offset": o, "scale": s} | rates(recorded, refinement.labels, expert))
         print(json.dumps(rows[-1]), flush=True)
-    ok = [r for r in rows if r["clean_kept"] >= 0.99] or rows
-    best = max(ok, key=lambda r: (r["injected_relabelled_to_expert"], r["clean_kept"]))
+    ok = [r for r in rows if r["clean_kept"] >= 0.99]
+    if ok:
+        best = max(ok, key=lambda r: (r["injected_relabelled_to_expert"], r["clean_kept"]))
+    else:  # none keeps 99% of clean steps: the one that keeps most
+        best = max(rows, key=lambda r: (r["clean_kept"], r["injected_relabelled_to_expert"]))
     return {
         "tuned_on": f"noisy demo seed {demo_seed}",
         "prior_run": str(run),
