@@ -42,7 +42,11 @@ from agents.planning.demonstrate import generate_demos
 from bench._nirl_options import cached, rates
 from worlds.config import LEARNING_NAV
 
-GRID = {"temperature": (0.03, 0.1, 0.3), "offset": (-1.0, -0.5, -0.25), "scale": (0.0, 0.1, 0.25, 0.5)}
+GRID = {
+    "temperature": (0.0003, 0.001, 0.003, 0.01),
+    "offset": (-1.0, -0.5, -0.25),
+    "scale": (0.0, 0.1, 0.25, 0.5),
+}
 
 
 def noisy_set(seed: int, cache: str | None) -> tuple[list, np.ndarray]:

@@ -63,8 +63,8 @@ def test_fixed_reward_is_the_shaped_progress_reward_of_the_batch():
     assert at_goal.tolist() == [False, False, False, True, False, False]
     expected = shaped_progress_reward(reward.potential, obs, next_obs, torch.as_tensor(batch["terminated"]),
                                       at_goal, GAMMA)  # fmt: skip
-    assert got.dtype == np.float32 and np.allclose(got, expected.numpy())
-    assert got[2] < -50 < got[3]  # the collision's absorbing never-arriving value, the goal's zero potential
+    assert got.dtype == np.float32 and np.allclose(got, (1 - GAMMA) * expected.numpy())
+    assert got[2] < -0.5 < got[3]  # the collision's absorbing never-arriving value, the goal's zero potential
 
 
 def test_the_env_reward_never_reaches_nnqls_replay_when_the_learned_reward_is_given(nan_env_reward):

@@ -39,8 +39,9 @@ from agents.nirl.progress import ProgressPotential, potential_loss, shaped_progr
 class ProgressRefine:
     """Settings of the refinement (chosen on a noisy set no reported run uses, bench/nirl_refine.py)."""
 
-    temperature: float = 0.1
-    """prior softmax(Q / temperature) over the NNQL phase's Q-values (units of the unit step cost)"""
+    temperature: float = 0.001
+    """prior softmax(Q / temperature) over the NNQL phase's Q-values (its reward's units: a step
+    costs 0.01, policy_iteration.FixedReward)"""
     offset: float = -0.5
     """shaped progress reward at which a step is as likely clean as noise"""
     scale: float = 0.25
