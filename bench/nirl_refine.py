@@ -31,12 +31,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from safetensors.torch import load_file
 
 from agents.nirl.config import NIRLConfig
 from agents.nirl.learner import NIRLLearner
+from agents.nirl.persistence import POTENTIAL_FILE
 from agents.nirl.policy_iteration import POLICY_DIR
+from agents.nirl.progress import ProgressPotential
 from agents.nirl.refine_progress import ProgressRefine, fit_potential, refine_after_policy_iteration
-from agents.nirl.reward_map import load_potential
 from agents.nnql.policy import NNQLPolicy
 from agents.planning.demonstrate import generate_demos
 from bench._nirl_options import cached, rates
@@ -74,6 +76,14 @@ def learner_for(demos, seed: int, potential=None) -> NIRLLearner:
         steps = learner.demos.storage.get(torch.arange(len(learner.demos)))
         fit_potential(learner.fit.potential, steps["observation"], steps["to_go"], learner.config.gamma)
     return learner
+
+
+def load_potential(run: Path) -> ProgressPotential:
+    """The progress potential a NIRL run saved, any observation (reward_map's loader: plain runs only)."""
+    architecture = json.loads((run / "config.json").read_text())["potential_architecture"]
+    potential = ProgressPotential.from_architecture(architecture)
+    potential.mlp.load_state_dict(load_file(str(run / POTENTIAL_FILE)))
+    return potential.eval()
 
 
 def measure(run: Path, cache: str | None, settings: ProgressRefine) -> dict:
