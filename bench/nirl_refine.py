@@ -38,7 +38,7 @@ from agents.nirl.learner import NIRLLearner
 from agents.nirl.persistence import POTENTIAL_FILE
 from agents.nirl.policy_iteration import POLICY_DIR
 from agents.nirl.progress import ProgressPotential
-from agents.nirl.refine_progress import ProgressRefine, fit_potential, refine_after_policy_iteration
+from agents.nirl.refine_progress import ProgressRefine, fit_potential, refine_learner_demos
 from agents.nnql.policy import NNQLPolicy
 from agents.planning.demonstrate import generate_demos
 from bench._nirl_options import cached, rates
@@ -92,9 +92,8 @@ def measure(run: Path, cache: str | None, settings: ProgressRefine) -> dict:
     sets, labels = pickle.loads(path.read_bytes())
     learner = learner_for(sets["20noisy"], seed, load_potential(run))
     policy = NNQLPolicy.load(run / POLICY_DIR)
-    refinement, _ = refine_after_policy_iteration(learner, policy.q_values, settings)
-    recorded = learner.demos.storage.get(torch.arange(len(learner.demos)))["action"]
-    return {"run": str(run), "seed": seed} | rates(recorded, refinement.labels, np.concatenate(labels))
+    steps, refinement = refine_learner_demos(learner, policy.q_values, settings)
+    return {"run": str(run), "seed": seed} | rates(steps["action"], refinement.labels, np.concatenate(labels))
 
 
 def tune(run: Path, demo_seed: int, cache: str | None) -> dict:
@@ -105,7 +104,7 @@ def tune(run: Path, demo_seed: int, cache: str | None) -> dict:
     rows = []
     for t, o, s in itertools.product(*GRID.values()):
         settings = ProgressRefine(temperature=t, offset=o, scale=s)
-        refinement, _ = refine_after_policy_iteration(learner, policy.q_values, settings)
+        _, refinement = refine_learner_demos(learner, policy.q_values, settings)
         rows.append({"temperature": t, "offset": o, "scale": s} | rates(recorded, refinement.labels, expert))
         print(json.dumps(rows[-1]), flush=True)
     ok = [r for r in rows if r["clean_kept"] >= 0.99]
