@@ -35,6 +35,10 @@ class NavBatch:
         self.turns = np.asarray(config.robot.turns, dtype=np.float64)
         angles = config.sensors.ray_angles
         self.beam_c, self.beam_s = np.cos(angles), np.sin(angles)
+        # the kernel's rays per stepping thread: directions and work rows for their absolute
+        # directions and reciprocals (worlds.kernel._observe)
+        work = [tuple(np.zeros(len(angles)) for _ in range(4)) for _ in range(self.threads)]
+        self._beams = [(self.beam_c, self.beam_s, *rows) for rows in work]
         self.params = kernel.make_params(config)
         self.obs_dim = perception.observation_dim(config)
         base_dim = config.sensors.n_beams + 3
@@ -147,8 +151,7 @@ class NavBatch:
         drivable = np.ones(len(indices), dtype=np.bool_)
         kernel.reset_some(
             indices, forced, keep, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
-            self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.base_obs, self.rays,
-            drivable,
+            self.disc_arrays, self.params, self.turns, self._beams[0], self.base_obs, self.rays, drivable,
         )  # fmt: skip
         if self.perception is not None:
             self._perceive_fresh(indices)
@@ -171,7 +174,7 @@ class NavBatch:
         else:
             n_done = kernel.step_all(
                 actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
-                self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.base_obs, self.rays,
+                self.disc_arrays, self.params, self.turns, self._beams[0], self.base_obs, self.rays,
                 self.reward, self.terminated, self.truncated, self._finals(),
             )  # fmt: skip
         if self.perception is not None:
@@ -211,17 +214,20 @@ class NavBatch:
         of spinning, which matters on machines whose cores are busy with other processes."""
         if self._pool is None:
             self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="navlearn-env")
-        arrays = (
-            actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
-            self.disc_arrays, self.params, self.turns, self.beam_c, self.beam_s, self.base_obs, self.rays,
-            self.reward, self.terminated, self.truncated, self._finals(),
-        )  # fmt: skip
+
+        def arrays(k: int) -> tuple:  # thread k's arguments (its own ray work rows)
+            return (
+                actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
+                self.disc_arrays, self.params, self.turns, self._beams[k], self.base_obs, self.rays,
+                self.reward, self.terminated, self.truncated, self._finals(),
+            )  # fmt: skip
+
         bounds = [self.n * k // self.threads for k in range(self.threads + 1)]
         others = [
-            self._pool.submit(kernel.step_range, bounds[k], bounds[k + 1], *arrays)
+            self._pool.submit(kernel.step_range, bounds[k], bounds[k + 1], *arrays(k))
             for k in range(1, self.threads)
         ]
-        n_done = kernel.step_range(bounds[0], bounds[1], *arrays)
+        n_done = kernel.step_range(bounds[0], bounds[1], *arrays(0))
         return n_done + sum(f.result() for f in others)
 
     def close(self) -> None:

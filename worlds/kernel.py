@@ -36,7 +36,7 @@ from worlds.obstacles import move_disc, place_discs, swept_contact
 from worlds.outcomes import Outcome
 from worlds.rng import gauss, randint, uniform
 from worlds.robot import capsule_hits_grid
-from worlds.sensors import cast_from, ray_disc, ray_origin
+from worlds.sensors import cast_along, ray_disc, ray_origin, reciprocal
 
 
 def _drop_stale_cache() -> None:
@@ -101,29 +101,39 @@ def _wrap(angle: float) -> float:
 
 
 @njit(cache=True, inline="always")
-def _observe(i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
-             beam_s, obs, rays):  # fmt: skip
+def _observe(i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beams,
+             obs, rays):  # fmt: skip
     """Write robot ``i``'s observation: range readings / max_range (each the minimum of its sector's
-    rays, ``beam_c``/``beam_s`` holding every ray's direction sector by sector), squashed goal
-    distance, sin and cos of the goal bearing relative to the heading (``c``, ``s``: cosine and
-    sine of the heading, already known to the caller). The noise-free range of every ray goes to
-    ``rays[i]`` (metres) for the robot's own map (worlds.perception)."""
+    rays; ``beams = (beam_c, beam_s, dx, dy, inv_dx, inv_dy)``: every ray's direction relative to the
+    heading, sector by sector, and work rows of the ray count), squashed goal distance, sin and cos
+    of the goal bearing relative to the heading (``c``, ``s``: cosine and sine of the heading,
+    already known to the caller). The noise-free range of every ray goes to ``rays[i]`` (metres)
+    for the robot's own map (worlds.perception)."""
+    beam_c, beam_s, ray_dx, ray_dy, inv_dx, inv_dy = beams
     m = mp[i]
     off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
     max_range, noise, drop = params[P_MAXR], params[P_SNOISE], params[P_DROP]
     per = int(params[P_PER])
     xi, yi = x[i], y[i]
-    n_beams = beam_c.shape[0] // per
+    n_rays = beam_c.shape[0]
+    n_beams = n_rays // per
     idx, col, row, px, py = ray_origin(field, off, height, width, cell, xi, yi)
     limit = max_range / cell
+    # every ray's direction, then their reciprocals, each in a loop of its own (the divisions then
+    # run side by side instead of at the head of each ray's traversal: measured ~15% off the rays)
+    for k in range(n_rays):
+        ray_dx[k] = c * beam_c[k] - s * beam_s[k]
+        ray_dy[k] = s * beam_c[k] + c * beam_s[k]
+    for k in range(n_rays):
+        inv_dx[k], inv_dy[k] = reciprocal(ray_dx[k]), reciprocal(ray_dy[k])
     for b in range(n_beams):
         d = max_range
         for k in range(b * per, (b + 1) * per):
-            dx = c * beam_c[k] - s * beam_s[k]
-            dy = s * beam_c[k] + c * beam_s[k]
+            dx, dy = ray_dx[k], ray_dy[k]
             r = 0.0
             if idx >= 0:
-                r = min(cast_from(field, off, width, idx, col, row, px, py, dx, dy, limit) * cell, max_range)
+                r = cast_along(field, off, width, idx, col, row, px, py, dx, dy, inv_dx[k], inv_dy[k], limit)
+                r = min(r * cell, max_range)
             for j in range(ocount[i]):
                 r = min(r, ray_disc(xi, yi, dx, dy, ox[i, j], oy[i, j], orad[i, j]))
             rays[i, k] = r
@@ -233,7 +243,7 @@ def start_heading(field, off, height, width, cell, x, y, sampled, params, turns)
 @njit(cache=True, inline="always")
 def _reset(
     i, forced, keep_discs, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent, scell,
-    gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs, rays
+    gcell, plo, pn, moving, ocount, params, turns, beams, obs, rays
 ) -> bool:  # fmt: skip
     """Start a new episode for robot ``i``: entry ``forced`` (or a random pool entry when
     negative, with fresh random endpoints if the entry allows), a random initial heading made
@@ -288,24 +298,24 @@ def _reset(
         )
     _observe(
         i, field, moff, mh, mw, mcell, mp, x, y, math.cos(th[i]), math.sin(th[i]), gx, gy, rng, ox, oy, orad,
-        ocount, params, beam_c, beam_s, obs, rays,
+        ocount, params, beams, obs, rays,
     )  # fmt: skip
     return drivable
 
 
 @njit(cache=True, _nrt=False)
-def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs, rays,
+def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, beams, obs, rays,
              reward, terminated, truncated, finals):  # fmt: skip
     """Step every robot; with ``autoreset``, a finished robot's terminal observation and results
     go to ``finals`` and it starts its next episode in the same call. Returns the number done."""
     return step_range(
-        0, actions.shape[0], actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s,
+        0, actions.shape[0], actions, autoreset, maps, entries, robots, discs, params, turns, beams,
         obs, rays, reward, terminated, truncated, finals,
     )  # fmt: skip
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs,
+def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params, turns, beams, obs,
                rays, reward, terminated, truncated, finals):  # fmt: skip
     """The work of :func:`step_all` for robots ``lo .. hi - 1``. Releases the GIL: robots share
     nothing they write and each owns its random stream, so threads may step disjoint ranges at
@@ -322,8 +332,8 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
             moving, ocount[i], params, turns,
         )  # fmt: skip
         _observe(
-            i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beam_c,
-            beam_s, obs, rays
+            i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beams,
+            obs, rays
         )  # fmt: skip
         result = outcome[i]
         terminated[i] = result in (GOAL, HIT_STATIC, HIT_DYNAMIC)
@@ -344,13 +354,13 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
                 f_gcell[i, 0], f_gcell[i, 1] = gcell[i, 0], gcell[i, 1]
                 _reset(
                     i, -1, False, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent,
-                    scell, gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs, rays,
+                    scell, gcell, plo, pn, moving, ocount, params, turns, beams, obs, rays,
                 )  # fmt: skip
     return n_done
 
 
 @njit(cache=True, _nrt=False)
-def reset_some(indices, forced, keep_discs, maps, entries, robots, discs, params, turns, beam_c, beam_s, obs,
+def reset_some(indices, forced, keep_discs, maps, entries, robots, discs, params, turns, beams, obs,
                rays, drivable):  # fmt: skip
     """Start new episodes for robots ``indices`` (see :func:`_reset` for ``forced``/``keep_discs``);
     ``drivable[n]`` tells whether robot ``indices[n]`` got a start with a drivable heading."""
@@ -360,6 +370,6 @@ def reset_some(indices, forced, keep_discs, maps, entries, robots, discs, params
     for n in range(indices.shape[0]):
         drivable[n] = _reset(
             indices[n], forced[n], keep_discs[n], maps, entries, mp, x, y, th, gx, gy, rng, steps, plen,
-            pdist, outcome, ent, scell, gcell, plo, pn, moving, ocount, params, turns, beam_c, beam_s, obs,
+            pdist, outcome, ent, scell, gcell, plo, pn, moving, ocount, params, turns, beams, obs,
             rays,
         )  # fmt: skip

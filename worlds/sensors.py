@@ -41,15 +41,28 @@ def ray_origin(field, off, height, width, cell, x, y):
 
 
 @njit(cache=True, inline="always")
+def reciprocal(d: float) -> float:
+    """``1 / d`` of a direction component, inf for 0 (of either sign): the traversal's spacing of
+    boundary crossings. (No division by zero is ever evaluated, so no branch raises.)"""
+    q = 1.0 / (d if d != 0.0 else 1.0)
+    return q if d != 0.0 else math.inf
+
+
+@njit(cache=True, inline="always")
 def cast_from(field, off, width, idx, c, r, px, py, dx, dy, limit) -> float:
     """Distance in cells along the unit vector (dx, dy) from an origin found by :func:`ray_origin`
     to the first blocked cell (the blocked ring around the map stops every ray, so the traversal
     needs no bounds checks), at most ``limit``."""
+    return cast_along(field, off, width, idx, c, r, px, py, dx, dy, reciprocal(dx), reciprocal(dy), limit)
+
+
+@njit(cache=True, inline="always")
+def cast_along(field, off, width, idx, c, r, px, py, dx, dy, inv_dx, inv_dy, limit) -> float:
+    """:func:`cast_from` given the direction's :func:`reciprocal` components ``inv_dx``, ``inv_dy``
+    (a caller casting many rays computes them side by side)."""
     pw = width + 2
     # per axis: index step, distance between boundary crossings, parameter of the next crossing
     step_c, step_r = (1 if dx > 0.0 else -1), (pw if dy > 0.0 else -pw)
-    inv_dx = 1.0 / dx if dx != 0.0 else math.inf
-    inv_dy = 1.0 / dy if dy != 0.0 else math.inf
     delta_c, delta_r = abs(inv_dx), abs(inv_dy)
     side_c, side_r = (1.0 if dx > 0.0 else 0.0), (1.0 if dy > 0.0 else 0.0)
     next_c = (c + side_c - px) * inv_dx if dx != 0.0 else math.inf
