@@ -9,6 +9,9 @@ import json
 import pickle
 from pathlib import Path
 
+import numpy as np
+import torch
+
 from agents.nirl.config import NIRLConfig
 from agents.planning.demonstrate import generate_demos
 from worlds.config import NavConfig
@@ -49,3 +52,54 @@ def cached(directory: str | None, name: str, make, *args):
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(pickle.dumps(value))
     return value
+
+
+def add_policy_options(parser: argparse.ArgumentParser) -> None:
+    """Options of NIRL's NNQL phase (``--nirl policy_steps=N``, agents.nirl.policy_iteration)."""
+    parser.add_argument("--policy-eval-every", type=int, default=25_000,
+                        help="NIRL with policy_steps: robot-steps between keep-best validations")  # fmt: skip
+    parser.add_argument("--policy-eval-dynamic", type=int, default=100,
+                        help="... and validation episodes with 4 moving discs beside")  # fmt: skip
+
+
+POLICY_RUNS = "runs/nirl_out"
+"""where bench runs with ``policy_steps`` save NIRL's files: <split>-<set>-<seed> (bench/nirl_refine.py)"""
+
+
+def policy_run(args: argparse.Namespace, set_name: str, seed: int) -> dict:
+    """NIRLRun fields of the NNQL phase from the bench's options (no files without ``policy_steps``)."""
+    saved = f"{POLICY_RUNS}/{args.split}-{set_name}-{seed}" if args.nirl_overrides.get("policy_steps") else ""
+    return {"out": saved, "policy_eval_every": args.policy_eval_every, "eval_episodes": args.val_episodes,
+            "policy_eval_dynamic_episodes": args.policy_eval_dynamic}  # fmt: skip
+
+
+def policy_phase(result, curve: list | None, expert_labels: list | None) -> dict:
+    """The NNQL phase of a NIRL run in the bench's terms: its kept policy, robot-steps (IQ-Learn's
+    rounds included), the validation points along it appended to ``curve`` (when given) at NIRL's
+    robot-steps, what keep-best chose, and with the noisy set's ``expert_labels`` the rates of the
+    MAP refinement after it (agents.nirl.refine_progress)."""
+    phase = result.policy_result
+    extra = {}
+    if expert_labels is not None and result.refinement is not None:
+        steps = result.learner.demos.storage.get(torch.arange(len(result.learner.demos)))
+        extra["map_refinement_progress"] = rates(steps["action"], result.refinement.labels,
+                                                 np.concatenate(expert_labels))  # fmt: skip
+    if curve is not None:
+        curve.extend((p["env_steps"], p["eval_success"], p.get("eval_dynamic_success"))
+                     for p in result.curve if p.get("phase") and "eval_success" in p)  # fmt: skip
+    extra |= {"selected_version": phase.selected_version, "policy_wall": round(phase.wall_time, 1)}
+    extra |= {"iq_steps": int(result.iq_steps), "steps": int(result.env_steps)}
+    return {"policy": result.policy(), **extra}
+
+
+def rates(recorded, labels, expert) -> dict:
+    """Injected steps (recorded != expert) relabelled to the expert's action, and clean steps kept."""
+    recorded, labels, expert = (torch.as_tensor(np.asarray(x)).long() for x in (recorded, labels, expert))
+    wrong = recorded != expert
+    return {
+        "injected_steps": int(wrong.sum()),
+        "clean_steps": int((~wrong).sum()),
+        "injected_relabelled_to_expert": float((labels[wrong] == expert[wrong]).float().mean()),
+        "injected_changed": float((labels[wrong] != recorded[wrong]).float().mean()),
+        "clean_kept": float((labels[~wrong] == recorded[~wrong]).float().mean()),
+    }

@@ -28,7 +28,8 @@ def mcnemar(a: list[int], b: list[int]) -> tuple[int, int, float]:
 
 
 def first_reaching(curve, target: float):
-    return next((steps for steps, success in curve if success >= target - 1e-9), None)
+    """Robot-steps of the first curve point (steps, success[, dynamic success]) at ``target``, or None."""
+    return next((point[0] for point in curve if point[1] >= target - 1e-9), None)
 
 
 def median_steps(steps: list) -> float | None:
@@ -101,6 +102,8 @@ def report(path: Path) -> int:
                       f"p = {p:.2g} (n = {len(a)})")  # fmt: skip
     summary["nirl_vs_bc"] = comparisons
     refinement = [(r["method"], r["map_refinement"]) for r in rows if "map_refinement" in r]
+    refinement += [("nirl, after policy iteration", r["map_refinement_progress"])
+                   for r in rows if "map_refinement_progress" in r]  # fmt: skip
     if refinement:
         summary["map_refinement"] = refinement
         for method, item in refinement:

@@ -71,7 +71,16 @@ from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.nnql.transitions import transitions_to_tensordict
 from agents.planning.demonstrate import generate_demos
 from bench._common import machine_load
-from bench._nirl_options import VALIDATION_RUNS, cached, heldout_demos, parse_overrides
+from bench._nirl_options import (
+    VALIDATION_RUNS,
+    add_policy_options,
+    cached,
+    heldout_demos,
+    parse_overrides,
+    policy_phase,
+    policy_run,
+    rates,
+)
 from bench._nirl_report import FAMILIES, METHODS, SETS, report
 from bench.planning import expert_outcomes
 from worlds.config import LEARNING_NAV, NavConfig, observation_settings
@@ -239,9 +248,14 @@ def run_one(
                     tested["diagnosis"] = {"train": demo_figures(learner, demos),
                                            "heldout": demo_figures(learner, heldout)}  # fmt: skip
 
-        run = NIRLRun(out="", eval_every=0, final_eval_episodes=0, progress=False)
+        run = NIRLRun(eval_every=0, final_eval_episodes=0, progress=False, **policy_run(args, set_name, seed))
         result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
-        policy, row["env_steps"], row["reward_scale"] = tested["policy"], tested["steps"], tested["scale"]
+        if config.policy_steps:  # the NNQL phase's policy is NIRL's (agents.nirl.policy_iteration)
+            labels = expert_labels if "noisy" in set_name else None
+            tested |= policy_phase(result, curve if curve_run else None, labels)
+            row |= {k: v for k, v in tested.items() if k not in ("policy", "steps", "scale", "diagnosis")}
+        policy, row["env_steps"] = tested["policy"], tested["steps"]
+        row["reward_scale"] = tested.get("scale", {})
         if "diagnosis" in tested:
             row["diagnosis"] = tested["diagnosis"]
         if curve_run:
@@ -269,17 +283,7 @@ def run_one(
 
 def refinement_rates(learner: NIRLLearner, expert_labels: list[np.ndarray]) -> dict:
     steps, refined = learner.refine_all()
-    expert = torch.as_tensor(np.concatenate(expert_labels)[: len(steps)])
-    recorded = steps["action"]
-    wrong = recorded != expert
-    labels = refined.labels
-    return {
-        "injected_steps": int(wrong.sum()),
-        "clean_steps": int((~wrong).sum()),
-        "injected_relabelled_to_expert": float((labels[wrong] == expert[wrong]).float().mean()),
-        "injected_changed": float((labels[wrong] != recorded[wrong]).float().mean()),
-        "clean_kept": float((labels[~wrong] == recorded[~wrong]).float().mean()),
-    }
+    return rates(steps["action"], refined.labels, np.concatenate(expert_labels)[: len(steps)])
 
 
 def code_version() -> str:
@@ -337,6 +341,7 @@ def main() -> int:
         "--nirl", action="append", default=[], metavar="KEY=VALUE",
         help="override a NIRLConfig field of the nirl learner (repeatable; JSON values: 1024, true, 0.5)",
     )  # fmt: skip
+    add_policy_options(parser)
     parser.add_argument("--report", action="store_true", help="print the table of --runs and stop")
     args = parser.parse_args()
     runs = Path(args.runs or (VALIDATION_RUNS if args.split == "validation" else RUNS[args.nav]))

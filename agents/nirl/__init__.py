@@ -70,6 +70,20 @@ What NIRL now does, each part from the literature:
 The environment's reward is never read: the potential's targets are the demonstrations' own step
 counts to their end at the goal.
 
+Policy iteration at NNQL's speed (issue 15, part 4; ``policy_steps``, ``policy_iteration.py``)
+    With ``policy_steps > 0`` the soft Q-learning rounds after ``fix_reward_after`` are replaced by
+    NNQL's own local trainer (``agents.nnql.train_local``: 16 robots, NNQL's update-to-data ratio,
+    dueling head, the 0..6 moving-disc mix, keep-best on the validation seed) on the fixed reward;
+    ``policy_iteration.FixedReward`` computes it where the transitions are made (``train_local``'s
+    ``reward`` hook overwrites the env's reward before the replay sees it). Its policy is NIRL's
+    (``NIRLResult.policy()``; files in ``<out>/policy_iteration``).
+
+MAP refinement after policy iteration (``refine_progress.py``)
+    The same posterior over the intended action, with a prior that never fitted the noisy labels
+    (the NNQL phase's Q, which saw the demonstrations only through the potential) and evidence from
+    the recorded step's progress under the potential (a random action rarely makes the expert's
+    progress); relabelled steps are left out of the steps to go and the potential is re-fitted on them.
+
 Discount: gamma = 0.99, a 100-step horizon for demonstrated paths of about 31 steps (issue 15:
 with 0.95 a long path and a crash were valued alike). Logged beside it, per update:
 ``nirl/learned_reward`` (per demonstrated step), ``nirl/path_length`` and ``nirl/path_return``
@@ -96,7 +110,8 @@ checked for the learner, demo buffer) - learner (NIRLLearner) - soft_q (the iq a
 max_margin - persistence (policy files, learner state, checkpoints; format 1 files of the
 max-margin learner load into that core) -
 weights (history and plot) - gridcheck (reward recovery where the reward is known) - reward_map
-(`navlearn nirl reward`) - train_local (`navlearn nirl train`).
+(`navlearn nirl reward`) - train_local (`navlearn nirl train`) - policy_iteration (the NNQL phase) -
+refine_progress (MAP refinement after it).
 """
 
 from agents.nirl.config import NIRLConfig

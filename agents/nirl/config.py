@@ -59,6 +59,13 @@ class NIRLConfig:
     """iq, once the reward is fixed: the reward the Q-network learns on - network (the reward network
     distilled from IQ-Learn's implicit reward) or progress (a unit step cost shaped by a progress
     potential regressed on the demonstrations' steps to go, agents.nirl.progress)"""
+    policy_steps: int = 0
+    """iq with fixed_reward=progress: robot-steps of NNQL's own local trainer (many robots, its utd,
+    dueling head, moving-disc mix, keep-best) on the fixed learned reward once IQ-Learn's
+    ``fix_reward_after`` rounds are done, instead of NIRL's own soft Q-learning rounds
+    (agents.nirl.policy_iteration); 0: NIRL's rounds go on (``iterations``)"""
+    policy_utd: float = 0.0
+    """update-to-data ratio of that phase (0: NNQL's default)"""
     lr: float = 1e-3
     """Adam learning rate of the Q-network"""
     reward_lr: float = 1e-3
@@ -157,6 +164,13 @@ class NIRLConfig:
             raise ValueError("NIRLConfig: Boltzmann temperatures must be > 0")
         if min(self.iterations, self.steps_per_iteration, self.reward_updates, self.q_updates) < 0:
             raise ValueError("NIRLConfig: iteration counts must be >= 0")
+        if self.policy_steps < 0 or self.policy_utd < 0:
+            raise ValueError("NIRLConfig: need policy_steps >= 0 and policy_utd >= 0")
+        fixed = self.core == "iq" and self.fixed_reward == "progress" and self.fix_reward_after > 0
+        if self.policy_steps and not fixed:
+            raise ValueError(
+                "NIRLConfig.policy_steps: needs core iq, fixed_reward progress, fix_reward_after > 0"
+            )
 
     def nnql_config(self) -> NNQLConfig:
         """The NNQL configuration of the Q-learning machinery NIRL's policy evaluation reuses."""
@@ -227,3 +241,8 @@ class NIRLRun:
     """show a progress bar"""
     device: str = "cpu"
     """where the learner's networks, losses and sampled batches live: cpu, cuda (cuda:N) or auto"""
+    policy_eval_every: int = 25_000
+    """NIRLConfig.policy_steps > 0: robot-steps between validation evaluations of the NNQL phase (keep-best's
+    candidates; 0: none, the last weights are kept)"""
+    policy_eval_dynamic_episodes: int = 0
+    """... and episodes with 4 moving discs added to each of them (keep-best then scores both sets)"""

@@ -30,8 +30,13 @@ import numpy as np
 from agents.evaluation.runner import evaluate, make_eval_set
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.learner import NIRLLearner
+from agents.nirl.losses import Refinement
+from agents.nirl.policy_iteration import policy_iteration
+from agents.nirl.progress import ProgressPotential
+from agents.nirl.refine_progress import refine_after_policy_iteration
 from agents.nirl.weights import HISTORY_FILE, WeightHistory, plot_weight_changes
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
+from agents.nnql.train_local import TrainResult
 from worlds.config import LEARNING_NAV
 from worlds.vector_env import NavigationVectorEnv
 
@@ -51,11 +56,30 @@ class NIRLResult:
     curve: list[dict[str, float]] = field(default_factory=list)
     final_eval: dict[str, Any] | None = None
     final_table: str = ""
+    iq_steps: int = 0
+    """robot-steps of the IQ-Learn rounds (all of them when there is no NNQL phase)"""
+    policy_result: TrainResult | None = None
+    """NIRLConfig.policy_steps > 0: NNQL's local trainer on the fixed learned reward (its policy is NIRL's)"""
+    refinement: Refinement | None = None
+    """... and ``refine``: MAP refinement of the demonstrations under that policy's prior and the progress
+    evidence (agents.nirl.refine_progress), in the demonstration buffer's order"""
+    refined_potential: ProgressPotential | None = None
+    """the progress potential re-fitted on the refined demonstrations' steps to go"""
+
+    def policy(self) -> Any:
+        """NIRL's final policy: the NNQL phase's kept one, else the learner's Q-network (greedy)."""
+        if self.policy_result is not None:
+            return self.policy_result.policy.greedy()
+        return self.learner.policy()
 
 
 def evaluate_greedy(learner: NIRLLearner, episodes: int, seed: int, nav: Any = None) -> Any:
     """Greedy policy on the shared held-out "unseen" set -> agents.evaluation EvalResult."""
-    return evaluate(learner.policy(), make_eval_set("unseen", episodes, seed=seed), config=nav)
+    return evaluate_policy(learner.policy(), episodes, seed, nav)
+
+
+def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None) -> Any:
+    return evaluate(policy, make_eval_set("unseen", episodes, seed=seed), config=nav)
 
 
 def train_nirl(
@@ -67,7 +91,9 @@ def train_nirl(
 ) -> NIRLResult:
     """Warm-start on ``demos`` (``agents.demos.Demo`` list, recorded in ``nav``'s observation,
     default :data:`worlds.config.LEARNING_NAV`), then ``config.iterations`` rounds of neural policy
-    iteration (the learner on ``run.device``). ``on_iteration(point, learner)`` sees each curve point."""
+    iteration (the learner on ``run.device``); with ``config.policy_steps`` only the IQ-Learn rounds
+    (``fix_reward_after``), then NNQL's trainer on the fixed reward (agents.nirl.policy_iteration).
+    ``on_iteration(point, learner)`` sees each round's curve point."""
     nav = nav or LEARNING_NAV
     config = config or NIRLConfig()
     run = run or NIRLRun()
@@ -85,7 +111,8 @@ def train_nirl(
     recent: deque[EpisodeEnd] = deque(maxlen=200)
     bar = _progress_bar(run, config)
     writer = _tensorboard(run)
-    for it in range(config.iterations):
+    rounds = min(config.iterations, config.fix_reward_after) if config.policy_steps else config.iterations
+    for it in range(rounds):
         policy.set_weights(learner.get_weights(), learner.version)
         policy.temperature = config.temperature_at(it)
         collected = 0
@@ -98,7 +125,7 @@ def train_nirl(
         history.record(learner.iteration, reward=learner.reward_weights(), policy=learner.get_weights())
         point = _curve_point(learner, rollout.steps, time.perf_counter() - start, recent, metrics)
         point["temperature"] = policy.temperature
-        last = it + 1 == config.iterations
+        last = it + 1 == rounds and not config.policy_steps
         if run.eval_every and (it + 1) % run.eval_every == 0 and not (last and run.final_eval_episodes):
             report = evaluate_greedy(learner, run.eval_episodes, VALIDATION_SEED, nav)
             point["eval_success"] = report.metrics["unseen"].success.value
@@ -117,9 +144,17 @@ def train_nirl(
     if writer is not None:
         writer.close()
     env.close()
-    result.env_steps = rollout.steps
+    result.env_steps = result.iq_steps = rollout.steps
+    if config.policy_steps:
+        result.policy_result = policy_iteration(learner, config, run, nav)
+        result.env_steps += result.policy_result.env_steps
+        for point in result.policy_result.curve:
+            result.curve.append(point | {"env_steps": point["env_steps"] + result.iq_steps, "phase": 1.0})
+        if config.refine:
+            q_values = result.policy_result.policy.q_values
+            result.refinement, result.refined_potential = refine_after_policy_iteration(learner, q_values)
     if run.final_eval_episodes > 0:
-        report = evaluate_greedy(learner, run.final_eval_episodes, 0, nav)
+        report = evaluate_policy(result.policy(), run.final_eval_episodes, 0, nav)
         result.final_eval = report.to_dict(with_episodes=False)["metrics"]["unseen"]
         result.final_table = report.table()
         if result.curve:
@@ -188,6 +223,8 @@ def write_outputs(out: Path, result: NIRLResult, config: NIRLConfig, run: NIRLRu
         "demo_steps": len(result.learner.demos),
         "wall_time": result.wall_time,
         "final_eval": result.final_eval,
+        "iq_steps": result.iq_steps,
+        "policy_iteration": None if result.policy_result is None else result.policy_result.out,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     if len(result.history) >= 2:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -88,9 +89,11 @@ class TrainResult:
     out: str | None = None
     learner: NNQLLearner | RecurrentNNQLLearner | None = field(default=None, repr=False)
     """the trained learner (not serialised)"""
+    policy: NNQLPolicy | None = field(default=None, repr=False)
+    """the policy with the saved weights (keep_best's choice, else the last; not serialised)"""
 
     def to_dict(self) -> dict[str, Any]:
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "learner"}
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("learner", "policy")}
 
 
 VALIDATION_SEED = 1
@@ -115,13 +118,20 @@ def training_nav(run: LocalTrainConfig, nav: NavConfig | None = None) -> NavConf
     return with_moving_discs(nav or LEARNING_NAV, run.moving_discs)
 
 
+Reward = Callable[[dict[str, np.ndarray]], np.ndarray]
+"""a learned reward: a transition batch (``VectorRollout.step``'s fields) -> (N,) float32 rewards"""
+
+
 def train_local(
     run: LocalTrainConfig,
     nnql: NNQLConfig | None = None,
     nav: NavConfig | None = None,
+    reward: Reward | None = None,
 ) -> TrainResult:
     """Train NNQL for ``run.steps`` robot-steps in ``nav`` (default :data:`worlds.config.LEARNING_NAV`)
-    with ``run.moving_discs`` applied to it; writes the outputs to ``run.out`` if set."""
+    with ``run.moving_discs`` applied to it; writes the outputs to ``run.out`` if set. ``reward``
+    (NIRL's fixed learned reward, agents.nirl.policy_iteration) replaces the environment's reward in
+    every batch before it reaches the replay; the env's reward then only feeds the logged returns."""
     nnql = nnql or NNQLConfig(seed=run.seed)
     nav = training_nav(run, nav)
     env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
@@ -156,6 +166,8 @@ def train_local(
     start = last_postfix = time.perf_counter()
     while rollout.steps < run.steps:
         batch, ended = rollout.step()
+        if reward is not None:
+            batch["reward"] = reward(batch)
         recent.extend(ended)
         limiter.inserted(learner.add({**batch, "env_ids": env_ids}))
         due = limiter.updates_allowed(len(learner.replay))
@@ -195,6 +207,7 @@ def train_local(
         update_time=update_time,
         curve=curve,
         learner=learner,
+        policy=policy,
     )
     if best is not None:  # keep_best: the final weights compete with the periodic ones
         best = _validate(policy, run, nav, curve[-1], best)

@@ -14,6 +14,9 @@ reward. The environment's reward is never used. Writes to --out: the policy (mod
 config.json, loadable by `navlearn evaluate --policy DIR`), reward.safetensors, the weights of
 both networks at every iteration (weights_history.safetensors, plotted in weights.png),
 curve.jsonl and summary.json; prints the greedy evaluation on 100 held-out generated maps.
+With --policy-steps N the rounds stop once the reward is fixed (--fix-reward-after) and NNQL's own
+trainer runs N robot-steps on the fixed learned reward; its policy, NIRL's final one, is written to
+OUT/policy_iteration (`navlearn evaluate --policy OUT/policy_iteration`).
 """
 
 

@@ -1,0 +1,90 @@
+"""NIRL's policy iteration at NNQL's speed: NNQL's own local trainer on the fixed learned reward.
+
+Once IQ-Learn's rounds have fixed the reward (``NIRLConfig.fix_reward_after``), what is left is
+plain reinforcement learning on a known reward: the unit step cost shaped by the progress
+potential learned from the demonstrations (``agents.nirl.progress``), the collision's absorbing
+state valued as never arriving. NNQL's local trainer (``agents.nnql.train_local``: many robots, its
+update-to-data ratio, dueling head, the 0..6 moving-disc mix, keep-best on the validation seed)
+does that fastest, so NIRL hands it the reward (``NIRLConfig.policy_steps`` robot-steps) instead
+of running soft Q-learning inside its own slow rounds. ``FixedReward`` is the reward the
+transitions carry: computed where they are made, from the observations alone, with
+``progress.shaped_progress_reward`` (its one definition); the environment's reward is overwritten
+before anything stores it.
+
+The Q-learner discounts with NIRL's gamma: potential-based shaping leaves the optimal policy
+unchanged only under the discount it was built with (Ng, Harada & Russell, ICML 1999).
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from agents.nirl.networks import goal_reached
+from agents.nirl.progress import ProgressPotential, shaped_progress_reward
+from agents.nnql.config import NNQLConfig
+from agents.nnql.train_local import LocalTrainConfig, TrainResult, train_local
+
+POLICY_DIR = "policy_iteration"
+"""subdirectory of a NIRL run's output where the policy of this phase is written (NNQL's files)"""
+
+
+class FixedReward:
+    """The fixed learned reward of a transition batch: ``(1 - gamma) (-1 + gamma Phi(s') - Phi(s))``,
+    the goal's potential 0, a collision's ``-1 / (1 - gamma)`` (``progress.shaped_progress_reward``).
+
+    The factor ``1 - gamma`` (the same optimal policy) puts it in the units of NNQL's own rewards - a
+    step costs 0.01, a collision about 1 - which NNQL's Huber loss and Boltzmann temperatures (0.2 to
+    0.01) are tuned for: unscaled (a collision about -90) the first screening run reached 77% on
+    validation (bench/RESULTS.md, issue 15 part 4), its exploration all but greedy."""
+
+    def __init__(self, potential: ProgressPotential, gamma: float, n_beams: int, goal_tolerance: float,
+                 max_range: float):  # fmt: skip
+        self.potential = copy.deepcopy(potential).cpu().requires_grad_(False).eval()
+        self.gamma = float(gamma)
+        self.scale = 1.0 - self.gamma
+        self.n_beams, self.goal_tolerance = int(n_beams), float(goal_tolerance)
+        self.max_range = float(max_range)
+
+    @classmethod
+    def of(cls, learner: Any) -> FixedReward:
+        """The reward a NIRL learner holds once its reward is fixed (its progress potential)."""
+        potential = getattr(learner.fit, "potential", None)
+        if potential is None:
+            raise ValueError("policy iteration at NNQL's speed needs fixed_reward='progress' (a potential)")
+        return cls(potential, learner.config.gamma, learner.reward.n_beams, learner.goal_tolerance,
+                   learner.max_range)  # fmt: skip
+
+    def __call__(self, batch: dict[str, np.ndarray]) -> np.ndarray:
+        obs = torch.as_tensor(np.asarray(batch["obs"], dtype=np.float32))
+        next_obs = torch.as_tensor(np.asarray(batch["next_obs"], dtype=np.float32))
+        terminated = torch.as_tensor(np.asarray(batch["terminated"], dtype=bool))
+        at_goal = goal_reached(next_obs, self.n_beams, self.goal_tolerance, self.max_range)
+        reward = shaped_progress_reward(self.potential, obs, next_obs, terminated, at_goal, self.gamma)
+        return (self.scale * reward).numpy().astype(np.float32)
+
+
+def nnql_config(config: Any) -> NNQLConfig:
+    """NNQL's defaults (dueling head, utd, batch, exploration) with NIRL's gamma and seed, and
+    ``policy_utd`` when set."""
+    utd = {"utd_ratio": config.policy_utd} if config.policy_utd > 0 else {}
+    return NNQLConfig(gamma=config.gamma, seed=config.seed, **utd)
+
+
+def policy_iteration(learner: Any, config: Any, run: Any, nav: Any) -> TrainResult:
+    """``config.policy_steps`` robot-steps of NNQL's local trainer on ``learner``'s fixed reward
+    (``run.envs`` robots on ``run.maps``, NNQL's disc mix, keep-best on ``run.eval_episodes`` validation
+    episodes every ``run.policy_eval_every`` robot-steps, ``run.policy_eval_dynamic_episodes`` with 4
+    moving discs beside) -> TrainResult (its ``policy`` is the kept one)."""
+    out = str(Path(run.out) / POLICY_DIR) if run.out else ""
+    local = LocalTrainConfig(
+        steps=config.policy_steps, envs=run.envs, maps=run.maps, seed=config.seed, out=out,
+        eval_every=run.policy_eval_every, eval_episodes=run.eval_episodes,
+        eval_dynamic_episodes=run.policy_eval_dynamic_episodes, keep_best=run.policy_eval_every > 0,
+        final_eval_episodes=0, progress=run.progress, device=run.device,
+    )  # fmt: skip
+    return train_local(local, nnql_config(config), nav, reward=FixedReward.of(learner))
