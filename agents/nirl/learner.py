@@ -344,6 +344,12 @@ class NIRLLearner:
     def reward_weights(self) -> dict[str, np.ndarray]:
         return {name: t.detach().cpu().numpy().copy() for name, t in self.reward.mlp.state_dict().items()}
 
+    @property
+    def potential(self) -> ProgressPotential | None:
+        """The progress potential of the fixed reward (soft-Q core with ``fixed_reward = "progress"``),
+        else None."""
+        return self.fit.potential if isinstance(self.fit, SoftQFit) else None
+
     def policy(self, **kwargs: Any) -> NNQLPolicy:
         """The stochastic (Boltzmann) or greedy numpy policy of the current Q-network."""
         return self.q.policy(**kwargs)

@@ -32,7 +32,7 @@ def save_policy_files(learner: Any, path: str | Path, **metadata: Any) -> Path:
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     files = {REWARD_FILE: learner.reward_weights()}
-    potential = getattr(learner.fit, "potential", None)
+    potential = learner.potential
     if potential is not None:
         files[POTENTIAL_FILE] = {k: t.detach().cpu().numpy() for k, t in potential.mlp.state_dict().items()}
         metadata.setdefault("potential_architecture", potential.architecture)
@@ -58,7 +58,7 @@ def save_policy_files(learner: Any, path: str | Path, **metadata: Any) -> Path:
 def nirl_state(learner: Any) -> dict[str, Any]:
     """Reward network, its optimiser, the frozen prior, the progress potential (if any), whether the
     reward is fixed, and NIRL's counters (the Q side is NNQLLearner's)."""
-    potential = getattr(learner.fit, "potential", None)
+    potential = learner.potential
     return {
         "format": FORMAT_VERSION,
         "config": learner.config.to_dict(),
@@ -103,7 +103,7 @@ def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
     if state.get("prior_network") is not None:
         learner.prior_network = copy.deepcopy(learner.q.network).requires_grad_(False)
         learner.prior_network.load_state_dict(state["prior_network"])
-    potential = getattr(learner.fit, "potential", None)
+    potential = learner.potential
     if potential is not None and state.get("potential") is not None:
         potential.load_state_dict(state["potential"])
     if state.get("reward_fixed"):

@@ -19,15 +19,17 @@ from __future__ import annotations
 
 import copy
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
 
+from agents.nirl.config import NIRLConfig, NIRLRun
+from agents.nirl.learner import NIRLLearner
 from agents.nirl.networks import goal_reached
 from agents.nirl.progress import ProgressPotential, shaped_progress_reward
 from agents.nnql.config import NNQLConfig
 from agents.nnql.train_local import LocalTrainConfig, TrainResult, train_local
+from worlds.config import NavConfig
 
 POLICY_DIR = "policy_iteration"
 """subdirectory of a NIRL run's output where the policy of this phase is written (NNQL's files)"""
@@ -51,9 +53,9 @@ class FixedReward:
         self.max_range = float(max_range)
 
     @classmethod
-    def of(cls, learner: Any) -> FixedReward:
+    def of(cls, learner: NIRLLearner) -> FixedReward:
         """The reward a NIRL learner holds once its reward is fixed (its progress potential)."""
-        potential = getattr(learner.fit, "potential", None)
+        potential = learner.potential
         if potential is None:
             raise ValueError("policy iteration at NNQL's speed needs fixed_reward='progress' (a potential)")
         return cls(potential, learner.config.gamma, learner.reward.n_beams, learner.goal_tolerance,
@@ -68,14 +70,14 @@ class FixedReward:
         return (self.scale * reward).numpy().astype(np.float32)
 
 
-def nnql_config(config: Any) -> NNQLConfig:
+def nnql_config(config: NIRLConfig) -> NNQLConfig:
     """NNQL's defaults (dueling head, utd, batch, exploration) with NIRL's gamma and seed, and
     ``policy_utd`` when set."""
     utd = {"utd_ratio": config.policy_utd} if config.policy_utd > 0 else {}
     return NNQLConfig(gamma=config.gamma, seed=config.seed, **utd)
 
 
-def policy_iteration(learner: Any, config: Any, run: Any, nav: Any) -> TrainResult:
+def policy_iteration(learner: NIRLLearner, config: NIRLConfig, run: NIRLRun, nav: NavConfig) -> TrainResult:
     """``config.policy_steps`` robot-steps of NNQL's local trainer on ``learner``'s fixed reward
     (``run.envs`` robots on ``run.maps``, NNQL's disc mix, keep-best on ``run.eval_episodes`` validation
     episodes every ``run.policy_eval_every`` robot-steps, ``run.policy_eval_dynamic_episodes`` with 4
