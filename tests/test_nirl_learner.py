@@ -10,6 +10,7 @@ import torch
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.learner import NIRLLearner
 from agents.nirl.losses import KEEP
+from agents.nirl.persistence import load_nirl_state, nirl_state
 from worlds.config import NavConfig
 
 TINY_MAP = """\
@@ -252,3 +253,15 @@ def test_old_max_margin_state_loads_and_a_mismatched_core_is_refused(tmp_path):
         assert np.array_equal(restored.reward_weights()[name], value)
     with pytest.raises(ValueError, match="core='max_margin'"):
         NIRLLearner(NIRLConfig(**SMALL)).load_checkpoint(tmp_path / "ckpt")
+
+
+def test_a_fixed_reward_stays_fixed_through_a_checkpoint():
+    learner = NIRLLearner(NIRLConfig())
+    learner.fix_reward()
+    restored = NIRLLearner(NIRLConfig())
+    assert not restored.reward_fixed
+    load_nirl_state(restored, nirl_state(learner))
+    assert restored.reward_fixed
+    assert not any(p.requires_grad for p in restored.reward.parameters())
+    with pytest.raises(ValueError, match="max_margin"):
+        NIRLLearner(NIRLConfig(core="max_margin")).fix_reward()

@@ -275,7 +275,7 @@ class NIRLLearner:
                 metrics.update(self.reward_step())
         for _ in range(cfg.q_updates):
             metrics.update(self._q_update())
-        if cfg.core != "max_margin" and not self._reward_frozen():
+        if cfg.core != "max_margin" and not self.reward_fixed:
             for _ in range(cfg.reward_updates):
                 metrics.update(self.reward_step())
                 metrics.update(self.fit.potential_step())
@@ -293,7 +293,7 @@ class NIRLLearner:
         if self.warm_updates < cfg.warmstart_updates:
             return self._warm_step()
         metrics: dict[str, float] = {}
-        if not self._reward_frozen():
+        if not self.reward_fixed:
             self.reward_credit += cfg.reward_updates / max(cfg.q_updates, 1)
         while self.reward_credit >= 1.0:
             metrics.update(self.reward_step())
@@ -308,16 +308,24 @@ class NIRLLearner:
         self.metrics.update(metrics)
         return metrics
 
-    def _reward_frozen(self) -> bool:
+    @property
+    def reward_fixed(self) -> bool:
+        """Whether the learned reward is fixed (soft-Q core, :meth:`fix_reward`): only Q learns."""
         return isinstance(self.fit, SoftQFit) and self.fit.reward_fixed
 
+    def fix_reward(self) -> None:
+        """Freeze the reward network: from then on the Q-network does NNQL-style policy iteration
+        (soft Q-learning) on the learned reward (soft-Q cores only)."""
+        if not isinstance(self.fit, SoftQFit):
+            raise ValueError(f"NIRLConfig.core={self.config.core!r}: only the soft-Q cores fix their reward")
+        self.fit.reward_fixed = True
+        self.reward.requires_grad_(False)
+
     def _fix_reward_when_due(self) -> None:
-        """After ``fix_reward_after`` iterations (iq core), freeze the reward network: from then on
-        the Q-network does NNQL-style policy iteration (soft Q-learning) on the learned reward."""
+        """After ``fix_reward_after`` iterations (iq core), :meth:`fix_reward`."""
         after = self.config.fix_reward_after
-        if self.config.core == "iq" and after and self.iteration >= after and not self._reward_frozen():
-            self.fit.reward_fixed = True
-            self.reward.requires_grad_(False)
+        if self.config.core == "iq" and after and self.iteration >= after and not self.reward_fixed:
+            self.fix_reward()
 
     def ready(self) -> bool:
         """Updates need demonstrations (experience is optional: demos alone train it)."""

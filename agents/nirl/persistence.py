@@ -67,7 +67,7 @@ def nirl_state(learner: Any) -> dict[str, Any]:
         "reward_optimizer": learner.reward_optimizer.state_dict(),
         "prior_network": None if learner.prior_network is None else learner.prior_network.state_dict(),
         "potential": None if potential is None else potential.state_dict(),
-        "reward_fixed": bool(getattr(learner.fit, "reward_fixed", False)),
+        "reward_fixed": learner.reward_fixed,
         "counters": {
             "iteration": learner.iteration,
             "reward_steps": learner.reward_steps,
@@ -107,8 +107,7 @@ def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
     if potential is not None and state.get("potential") is not None:
         potential.load_state_dict(state["potential"])
     if state.get("reward_fixed"):
-        learner.fit.reward_fixed = True
-        learner.reward.requires_grad_(False)
+        learner.fix_reward()
     counters = state["counters"]
     learner.iteration = int(counters["iteration"])
     learner.reward_steps = int(counters["reward_steps"])
