@@ -31,11 +31,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from safetensors.torch import load_file
 
 from agents.nirl.config import NIRLConfig
 from agents.nirl.learner import NIRLLearner
-from agents.nirl.persistence import POTENTIAL_FILE
+from agents.nirl.persistence import load_potential
 from agents.nirl.policy_iteration import POLICY_DIR
 from agents.nirl.progress import ProgressPotential
 from agents.nirl.refine_progress import ProgressRefine, fit_potential, refine_learner_demos
@@ -78,19 +77,19 @@ def learner_for(demos, seed: int, potential=None) -> NIRLLearner:
     return learner
 
 
-def load_potential(run: Path) -> ProgressPotential:
-    """The progress potential a NIRL run saved, any observation (reward_map's loader: plain runs only)."""
-    architecture = json.loads((run / "config.json").read_text())["potential_architecture"]
-    potential = ProgressPotential.from_architecture(architecture)
-    potential.mlp.load_state_dict(load_file(str(run / POTENTIAL_FILE)))
-    return potential.eval()
+def saved_potential(run: Path) -> ProgressPotential:
+    """The progress potential a NIRL run saved (any observation; agents.nirl.persistence)."""
+    potential = load_potential(run)
+    if potential is None:
+        sys.exit(f"{run}: no progress potential (potential.safetensors) saved with this run")
+    return potential
 
 
 def measure(run: Path, cache: str | None, settings: ProgressRefine) -> dict:
     seed = int(re.search(r"-(\d+)$", run.name)[1])
     path = Path(cache) / f"sets-learning-{seed}-0.3-20.pkl"  # bench/nirl.py --demo-cache wrote it
     sets, labels = pickle.loads(path.read_bytes())
-    learner = learner_for(sets["20noisy"], seed, load_potential(run))
+    learner = learner_for(sets["20noisy"], seed, saved_potential(run))
     policy = NNQLPolicy.load(run / POLICY_DIR)
     steps, refinement = refine_learner_demos(learner, policy.q_values, settings)
     return {"run": str(run), "seed": seed} | rates(steps["action"], refinement.labels, np.concatenate(labels))

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import copy
+import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -11,10 +12,12 @@ from typing import Any
 
 import torch
 from safetensors.numpy import save_file
+from safetensors.torch import load_file
 
 from agents.mlp import save_policy
 from agents.nirl.config import FORMAT_VERSION
 from agents.nirl.networks import RewardNetwork
+from agents.nirl.progress import ProgressPotential
 from agents.nnql.persistence import replace_dir
 from agents.replay_files import load_replay, save_replay
 
@@ -53,6 +56,19 @@ def save_policy_files(learner: Any, path: str | Path, **metadata: Any) -> Path:
         iteration=learner.iteration,
         **metadata,
     )
+
+
+def load_potential(path: str | Path) -> ProgressPotential | None:
+    """The progress potential a policy directory holds (``potential.safetensors`` and its architecture
+    in config.json, as :func:`save_policy_files` writes them), None if it has none."""
+    path = Path(path)
+    config = path / "config.json"
+    architecture = json.loads(config.read_text()).get("potential_architecture") if config.is_file() else None
+    if architecture is None or not (path / POTENTIAL_FILE).is_file():
+        return None
+    potential = ProgressPotential.from_architecture(architecture)
+    potential.mlp.load_state_dict(load_file(str(path / POTENTIAL_FILE)))
+    return potential.eval()
 
 
 def nirl_state(learner: Any) -> dict[str, Any]:

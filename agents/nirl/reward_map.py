@@ -22,8 +22,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from agents.nirl import persistence
 from agents.nirl.networks import RewardNetwork
-from agents.nirl.persistence import POTENTIAL_FILE, REWARD_FILE
+from agents.nirl.persistence import REWARD_FILE
 from agents.nirl.progress import ProgressPotential
 from agents.planning import distance_field
 from worlds.config import (
@@ -84,16 +85,10 @@ def load_reward_network(run: str | Path) -> RewardNetwork:
 
 
 def load_potential(run: str | Path) -> ProgressPotential | None:
-    """The progress potential saved with a NIRL run (potential.safetensors), None if it has none."""
-    from safetensors.torch import load_file
-
-    run = Path(run)
-    architecture = saved_config(run).get("potential_architecture")
-    if architecture is None or not (run / POTENTIAL_FILE).is_file():
-        return None
-    potential = ProgressPotential.from_architecture(architecture)
-    potential.mlp.load_state_dict(load_file(str(run / POTENTIAL_FILE)))
-    return potential.eval()
+    """The progress potential saved with a NIRL run in the plain observation (the one this map can
+    draw: :func:`saved_config`'s checks), None if it has none."""
+    saved_config(Path(run))
+    return persistence.load_potential(run)
 
 
 def observe_at(task: Task, nav: NavConfig, x: np.ndarray, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
