@@ -252,13 +252,13 @@ def run_one(
         result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
         if config.policy_steps:  # the NNQL phase's policy is NIRL's (agents.nirl.policy_iteration)
             labels = expert_labels if "noisy" in set_name else None
-            tested |= policy_phase(result, curve if curve_run else None, labels)
+            tested |= policy_phase(result, curve, labels)  # every set's phase curve (keep-best's points)
             row |= {k: v for k, v in tested.items() if k not in ("policy", "steps", "scale", "diagnosis")}
         policy, row["env_steps"] = tested["policy"], tested["steps"]
         row["reward_scale"] = tested.get("scale", {})
         if "diagnosis" in tested:
             row["diagnosis"] = tested["diagnosis"]
-        if curve_run:
+        if curve:
             row["curve"] = curve
         if set_name == "20noisy" and method != "sqil":
             row["map_refinement"] = refinement_rates(result.learner, expert_labels)

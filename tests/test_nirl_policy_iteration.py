@@ -7,10 +7,11 @@ import torch
 
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.networks import goal_reached
-from agents.nirl.policy_iteration import FixedReward
+from agents.nirl.policy_iteration import FixedReward, nnql_config, warm_weights
 from agents.nirl.progress import ProgressPotential, shaped_progress_reward
 from agents.nirl.train_local import train_nirl
 from agents.nnql.config import NNQLConfig
+from agents.nnql.learner import NNQLLearner
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.planning.demonstrate import generate_demos
 from worlds.config import LEARNING_NAV
@@ -104,3 +105,58 @@ def test_policy_steps_needs_the_progress_reward_fixed_after_iq_rounds():
         NIRLConfig(policy_steps=1000, fix_reward_after=0)
     with pytest.raises(ValueError, match="policy_steps"):
         NIRLConfig(policy_steps=1000, fixed_reward="network")
+
+
+def test_warm_start_hands_nirls_q_to_nnqls_trainer_in_its_reward_units(nan_env_reward):
+    """policy_warm_start: NIRL's own rounds go on `policy_warm_start` rounds on the fixed reward, then
+    NNQL's (dueling) network starts from NIRL's Q times 1 - gamma - the same greedy policy - at the
+    constant policy_temperature, and learns on from there."""
+    demos, _ = generate_demos("mixed:16", 3, seed=0, config=LEARNING_NAV)
+    config = NIRLConfig(
+        iterations=9,
+        fix_reward_after=1,
+        policy_warm_start=2,
+        warmstart_updates=10,
+        q_updates=8,
+        reward_updates=4,
+        steps_per_iteration=64,
+        policy_steps=2400,
+        policy_utd=0.25,
+        policy_temperature=0.02,
+        seed=0,
+    )
+    assert config.own_rounds() == 3 and NIRLConfig(iterations=9).own_rounds() == 9
+    run = NIRLRun(envs=4, maps="mixed:16", out="", eval_every=0, final_eval_episodes=0, progress=False,
+                  policy_eval_every=0)  # fmt: skip
+    result = train_nirl(demos, config, run)
+    assert result.learner.iteration == 3 and result.learner.reward_fixed and result.iq_steps == 3 * 64
+    nnql = nnql_config(config)
+    assert nnql.dueling and nnql.temperature_start == nnql.temperature_end == 0.02
+    # what the phase started from: NNQL's dueling network holding NIRL's Q in the fixed reward's units
+    start = NNQLLearner(nnql, result.learner.obs_dim, result.learner.n_actions, observation=None)
+    start.set_weights(warm_weights(result.learner, config))
+    obs = np.asarray(stored(result.policy_result.learner)["obs"][:200], dtype=np.float32)
+    nirl_q = result.learner.q.q_values(obs)
+    assert np.allclose(start.q_values(obs), (1 - GAMMA) * nirl_q, rtol=1e-4, atol=1e-6)
+    assert (start.q_values(obs).argmax(1) == nirl_q.argmax(1)).all()
+    # ... and learned on from it: the phase's updates moved the weights
+    phase = result.policy_result.learner
+    assert phase.updates > 0 and not np.allclose(phase.q_values(obs), start.q_values(obs))
+
+
+def test_train_local_starts_from_the_initial_weights_it_is_given():
+    run = LocalTrainConfig(steps=32, envs=4, eval_every=0, final_eval_episodes=0, out="", progress=False,
+                           moving_discs=0)  # fmt: skip
+    nnql = NNQLConfig(learning_starts=10_000, gamma=GAMMA)  # no update within 32 robot-steps
+    donor = NNQLLearner(NNQLConfig(seed=7), observation_dim(LEARNING_NAV), LEARNING_NAV.robot.n_actions)
+    result = train_local(run, nnql, initial_weights=donor.get_weights())
+    obs = np.random.default_rng(0).random((50, observation_dim(LEARNING_NAV)), dtype=np.float32)
+    assert result.updates == 0
+    assert np.allclose(result.learner.q_values(obs), donor.q_values(obs), atol=1e-6)
+    assert np.allclose(result.policy.q_values(obs), donor.q_values(obs), atol=1e-5)
+
+
+@pytest.mark.parametrize(("field", "value"), [("policy_warm_start", -1), ("policy_temperature", 0.0)])
+def test_bad_warm_start_options_name_the_field(field, value):
+    with pytest.raises(ValueError, match=field):
+        NIRLConfig(**{field: value})

@@ -1,8 +1,13 @@
 """The progress potential and its shaped reward (agents/nirl/progress.py), the crash clip (losses)."""
 
+import dataclasses
+
 import numpy as np
+import pytest
 import torch
 
+from agents.nirl.config import NIRLConfig
+from agents.nirl.learner import NIRLLearner, goal_features_from
 from agents.nirl.losses import crash_clip_loss
 from agents.nirl.progress import (
     ProgressPotential,
@@ -11,6 +16,7 @@ from agents.nirl.progress import (
     steps_to_go,
     unit_cost_value,
 )
+from worlds.config import LEARNING_NAV, ObservationConfig
 
 GAMMA = 0.99
 
@@ -79,3 +85,29 @@ def test_crash_clip_penalises_only_crash_steps_above_the_demonstrated_reward():
     assert q.grad[0] > 0 and q.grad[1] == 0 and q.grad[2] == 0
     none = crash_clip_loss(q, next_value, torch.zeros(3, dtype=bool), expert_rewards, GAMMA)
     assert float(none) == 0.0
+
+
+def test_a_goal_potential_reads_only_the_features_after_the_range_readings():
+    learner = NIRLLearner(NIRLConfig(potential_inputs="goal"), LEARNING_NAV)
+    potential, n_beams = learner.potential, LEARNING_NAV.sensors.n_beams
+    obs = torch.rand(64, potential.architecture["obs_dim"])
+    other = obs.clone()
+    other[:, :n_beams] = torch.rand(64, n_beams)  # other range readings, the same goal and subgoal
+    assert torch.equal(potential(obs), potential(other))
+    other[:, n_beams] += 0.1  # another goal distance
+    assert not torch.allclose(potential(obs), potential(other))
+    rebuilt = ProgressPotential.from_architecture(potential.architecture)  # as persistence.load_potential
+    rebuilt.load_state_dict(potential.state_dict())
+    assert torch.equal(rebuilt(obs), potential(obs)) and rebuilt.first_input == n_beams
+    # a potential saved before first_input existed reads every feature
+    old = {
+        k: v for k, v in ProgressPotential(30, (8,), "relu", GAMMA).architecture.items() if k != "first_input"
+    }
+    assert ProgressPotential.from_architecture(old).first_input == 0
+    with pytest.raises(ValueError, match="potential_inputs"):
+        NIRLConfig(potential_inputs="ranges")
+    stacked = dataclasses.replace(
+        LEARNING_NAV, observation=ObservationConfig(subgoal="own_map", frame_stack=3)
+    )
+    with pytest.raises(ValueError, match="frame_stack=3"):
+        goal_features_from(stacked)

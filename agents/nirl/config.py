@@ -11,6 +11,7 @@ from agents.nnql.config import ACTIVATION_NAMES, NNQLConfig
 
 CORES = ("iq", "sqil", "max_margin")
 FIXED_REWARDS = ("network", "progress")
+POTENTIAL_INPUTS = ("observation", "goal")
 FORMAT_VERSION = 2
 """saved-state format: 1 = issue 8's max-margin learner (no ``core`` field, gamma 0.95), 2 = cores"""
 
@@ -59,6 +60,11 @@ class NIRLConfig:
     """iq, once the reward is fixed: the reward the Q-network learns on - network (the reward network
     distilled from IQ-Learn's implicit reward) or progress (a unit step cost shaped by a progress
     potential regressed on the demonstrations' steps to go, agents.nirl.progress)"""
+    potential_inputs: str = "observation"
+    """fixed_reward=progress: what the progress potential regresses on - observation (every feature) or
+    goal (the features after the range readings - in LEARNING_NAV the goal's and the subgoal's distance
+    and bearing; one frame, no patch: agents.nirl.learner checks - : on 40 held-out
+    expert episodes steps-to-go error 3.9 against 5.0 steps, bench/RESULTS.md issue 15 part 5)"""
     policy_steps: int = 0
     """iq with fixed_reward=progress: robot-steps of NNQL's own local trainer (many robots, its utd,
     dueling head, moving-disc mix, keep-best) on the fixed learned reward once IQ-Learn's
@@ -66,6 +72,14 @@ class NIRLConfig:
     (agents.nirl.policy_iteration); 0: NIRL's rounds go on (``iterations``)"""
     policy_utd: float = 0.0
     """update-to-data ratio of that phase (0: NNQL's default)"""
+    policy_warm_start: int = 0
+    """with policy_steps: rounds of NIRL's own soft Q-learning on the fixed reward (demonstrations in every
+    batch) after ``fix_reward_after``, whose Q-network then starts NNQL's trainer - its output scaled by
+    ``1 - gamma`` into the phase's reward units, exploring from ``policy_temperature``; 0: NNQL's trainer
+    starts from a fresh network at its own exploration schedule"""
+    policy_temperature: float = 0.01
+    """with policy_warm_start: the warm-started phase's Boltzmann temperature (constant; NNQL's
+    schedule ends at 0.01, its start of 0.2 would forget the demonstrated policy while Q settles)"""
     lr: float = 1e-3
     """Adam learning rate of the Q-network"""
     reward_lr: float = 1e-3
@@ -134,6 +148,10 @@ class NIRLConfig:
         self.reward_hidden_sizes = tuple(int(h) for h in self.reward_hidden_sizes)
         if self.core not in CORES:
             raise ValueError(f"NIRLConfig.core={self.core!r}: expected one of {CORES}")
+        if self.potential_inputs not in POTENTIAL_INPUTS:
+            raise ValueError(
+                f"NIRLConfig.potential_inputs={self.potential_inputs!r}: expected one of {POTENTIAL_INPUTS}"
+            )
         if self.fixed_reward not in FIXED_REWARDS:
             raise ValueError(f"NIRLConfig.fixed_reward={self.fixed_reward!r}: expected {FIXED_REWARDS}")
         if self.alpha <= 0 or self.chi2_alpha <= 0:
@@ -166,6 +184,10 @@ class NIRLConfig:
             raise ValueError("NIRLConfig: iteration counts must be >= 0")
         if self.policy_steps < 0 or self.policy_utd < 0:
             raise ValueError("NIRLConfig: need policy_steps >= 0 and policy_utd >= 0")
+        if self.policy_warm_start < 0:
+            raise ValueError(f"NIRLConfig.policy_warm_start={self.policy_warm_start}: expected >= 0 rounds")
+        if self.policy_temperature <= 0:
+            raise ValueError(f"NIRLConfig.policy_temperature={self.policy_temperature}: expected > 0")
         fixed = self.core == "iq" and self.fixed_reward == "progress" and self.fix_reward_after > 0
         if self.policy_steps and not fixed:
             raise ValueError(
@@ -193,6 +215,13 @@ class NIRLConfig:
             seed=self.seed,
             torch_threads=self.torch_threads,
         )
+
+    def own_rounds(self) -> int:
+        """NIRL's own rounds: ``iterations``, or with ``policy_steps`` those before NNQL's trainer takes
+        over (IQ-Learn's ``fix_reward_after``, then ``policy_warm_start`` on the fixed reward)."""
+        if not self.policy_steps:
+            return self.iterations
+        return min(self.iterations, self.fix_reward_after + self.policy_warm_start)
 
     def temperature_at(self, iteration: int) -> float:
         """Behaviour-policy temperature at ``iteration`` (geometric decay from start to end)."""

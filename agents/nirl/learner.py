@@ -105,8 +105,9 @@ class NIRLLearner:
         else:
             self.fit = SoftQFit(**common, path_length=self._demo_path_length)
             if config.fixed_reward == "progress":
+                first = goal_features_from(nav) if config.potential_inputs == "goal" else 0
                 self.fit.potential = ProgressPotential(
-                    obs_dim, config.reward_hidden_sizes, config.activation, config.gamma
+                    obs_dim, config.reward_hidden_sizes, config.activation, config.gamma, first
                 ).to(self.device)
                 self.fit.potential_optimizer = torch.optim.Adam(
                     self.fit.potential.parameters(), lr=config.reward_lr
@@ -381,3 +382,16 @@ class NIRLLearner:
     def load_checkpoint(self, path: str | Path) -> None:
         """Inverse of save_checkpoint, onto this learner's device whichever device saved it."""
         persistence.load_checkpoint(self, path)
+
+
+def goal_features_from(nav: NavConfig) -> int:
+    """Index of the first feature after the range readings of a one-frame, patch-free observation (the
+    progress potential's ``potential_inputs = "goal"``)."""
+    if nav.observation.frame_stack > 1 or nav.observation.patch_size > 0:
+        raise ValueError(
+            "NIRLConfig.potential_inputs='goal' reads the features after the range readings of one frame: "
+            f"observation.frame_stack={nav.observation.frame_stack}, "
+            f"patch_size={nav.observation.patch_size}; "
+            "use potential_inputs='observation'"
+        )
+    return nav.sensors.n_beams

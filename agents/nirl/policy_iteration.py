@@ -71,10 +71,28 @@ class FixedReward:
 
 
 def nnql_config(config: NIRLConfig) -> NNQLConfig:
-    """NNQL's defaults (dueling head, utd, batch, exploration) with NIRL's gamma and seed, and
-    ``policy_utd`` when set."""
-    utd = {"utd_ratio": config.policy_utd} if config.policy_utd > 0 else {}
-    return NNQLConfig(gamma=config.gamma, seed=config.seed, **utd)
+    """NNQL's defaults (dueling head, utd, batch, exploration) with NIRL's gamma and seed, ``policy_utd``
+    when set, and with ``policy_warm_start`` NIRL's Q-network's layers and a constant
+    ``policy_temperature``."""
+    options: dict = {"utd_ratio": config.policy_utd} if config.policy_utd > 0 else {}
+    if config.policy_warm_start:
+        options |= {
+            "hidden_sizes": config.hidden_sizes,
+            "activation": config.activation,
+            "temperature_start": config.policy_temperature,
+            "temperature_end": config.policy_temperature,
+        }
+    return NNQLConfig(gamma=config.gamma, seed=config.seed, **options)
+
+
+def warm_weights(learner: NIRLLearner, config: NIRLConfig) -> dict[str, np.ndarray]:
+    """NIRL's Q-network in NNQL's plain layout with its output layer times ``1 - gamma``: the same greedy
+    policy, its values in the units of :class:`FixedReward` (a step 0.01, not 1)."""
+    weights = {name: value.copy() for name, value in learner.get_weights().items()}
+    last = 2 * len(config.hidden_sizes)
+    for name in (f"{last}.weight", f"{last}.bias"):
+        weights[name] *= np.float32(1.0 - config.gamma)
+    return weights
 
 
 def policy_iteration(learner: NIRLLearner, config: NIRLConfig, run: NIRLRun, nav: NavConfig) -> TrainResult:
@@ -89,4 +107,7 @@ def policy_iteration(learner: NIRLLearner, config: NIRLConfig, run: NIRLRun, nav
         eval_dynamic_episodes=run.policy_eval_dynamic_episodes, keep_best=run.policy_eval_every > 0,
         final_eval_episodes=0, progress=run.progress, device=run.device,
     )  # fmt: skip
-    return train_local(local, nnql_config(config), nav, reward=FixedReward.of(learner))
+    initial = warm_weights(learner, config) if config.policy_warm_start else None
+    return train_local(
+        local, nnql_config(config), nav, reward=FixedReward.of(learner), initial_weights=initial
+    )

@@ -44,26 +44,39 @@ def unit_cost_value(to_go: torch.Tensor, gamma: float) -> torch.Tensor:
 
 
 class ProgressPotential(nn.Module):
-    """``Phi(s)``: the expert's unit-cost value regressed on the observation, (N,)."""
+    """``Phi(s)``: the expert's unit-cost value regressed on the observation's features from index
+    ``first_input`` on, (N,): all of them (0), or with ``first_input`` = the number of range readings
+    the goal's and the subgoal's distance and bearing only (``NIRLConfig.potential_inputs = "goal"``)."""
 
-    def __init__(self, obs_dim: int, hidden_sizes, activation: str, gamma: float):
+    def __init__(self, obs_dim: int, hidden_sizes, activation: str, gamma: float, first_input: int = 0):
         super().__init__()
-        self.architecture = {"obs_dim": int(obs_dim), "hidden_sizes": [int(h) for h in hidden_sizes],
-                             "activation": activation, "gamma": float(gamma)}  # fmt: skip
+        if not 0 <= first_input < obs_dim:
+            raise ValueError(
+                f"ProgressPotential: first_input={first_input} outside the {obs_dim} observation features"
+            )
+        self.architecture = {
+            "obs_dim": int(obs_dim),
+            "hidden_sizes": [int(h) for h in hidden_sizes],
+            "activation": activation,
+            "gamma": float(gamma),
+            "first_input": int(first_input),
+        }
+        self.first_input = int(first_input)
         self.mlp = MLP(
-            in_features=obs_dim, out_features=1, num_cells=list(hidden_sizes),
+            in_features=obs_dim - self.first_input, out_features=1, num_cells=list(hidden_sizes),
             activation_class=ACTIVATIONS[activation],
         )  # fmt: skip
         self.scale = 1.0 / (1.0 - gamma)  # the net outputs values in units of 1 / (1 - gamma)
 
     @classmethod
     def from_architecture(cls, architecture: dict) -> ProgressPotential:
-        """The potential :attr:`architecture` describes (weights not loaded)."""
+        """The potential :attr:`architecture` describes (weights not loaded; runs saved before
+        ``first_input`` existed read every feature)."""
         return cls(architecture["obs_dim"], architecture["hidden_sizes"], architecture["activation"],
-                   architecture["gamma"])  # fmt: skip
+                   architecture["gamma"], architecture.get("first_input", 0))  # fmt: skip
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return self.scale * self.mlp(obs).squeeze(-1)
+        return self.scale * self.mlp(obs[..., self.first_input :]).squeeze(-1)
 
 
 def potential_loss(potential: ProgressPotential, obs: torch.Tensor, to_go: torch.Tensor, gamma: float):

@@ -111,7 +111,7 @@ def train_nirl(
     recent: deque[EpisodeEnd] = deque(maxlen=200)
     bar = _progress_bar(run, config)
     writer = _tensorboard(run)
-    rounds = min(config.iterations, config.fix_reward_after) if config.policy_steps else config.iterations
+    rounds = config.own_rounds()
     for it in range(rounds):
         policy.set_weights(learner.get_weights(), learner.version)
         policy.temperature = config.temperature_at(it)

@@ -127,11 +127,14 @@ def train_local(
     nnql: NNQLConfig | None = None,
     nav: NavConfig | None = None,
     reward: Reward | None = None,
+    initial_weights: dict[str, np.ndarray] | None = None,
 ) -> TrainResult:
     """Train NNQL for ``run.steps`` robot-steps in ``nav`` (default :data:`worlds.config.LEARNING_NAV`)
     with ``run.moving_discs`` applied to it; writes the outputs to ``run.out`` if set. ``reward``
     (NIRL's fixed learned reward, agents.nirl.policy_iteration) replaces the environment's reward in
-    every batch before it reaches the replay; the env's reward then only feeds the logged returns."""
+    every batch before it reaches the replay; the env's reward then only feeds the logged returns.
+    ``initial_weights`` (plain layout, ``networks.export_weights``) start the Q-network and its target
+    instead of a fresh initialisation (NIRL's warm-started phase)."""
     nnql = nnql or NNQLConfig(seed=run.seed)
     nav = training_nav(run, nav)
     env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
@@ -142,6 +145,8 @@ def train_local(
         learner = RecurrentNNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
     else:
         learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
+    if initial_weights is not None:
+        learner.set_weights(initial_weights)
     policy = learner.policy(seed=run.seed)
     policy.explore_as(nnql, learner.version)
     if nnql.recurrent:
