@@ -17,7 +17,7 @@ from agents.evaluation.metrics import wilson_interval as wilson
 
 FAMILIES = ("unseen", "dynamic")
 SETS = ("5", "10", "20", "20noisy")
-METHODS = ("bc", "sqil", "dqfd", "nirl", "maxmargin", "nnql", "expert")
+METHODS = ("bc", "sqil", "dqfd", "nirl", "maxmargin", "nnql", "nnql_line", "expert")
 
 
 def mcnemar(a: list[int], b: list[int]) -> tuple[int, int, float]:

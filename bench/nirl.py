@@ -16,6 +16,9 @@ Learners, each per (demo set, seed):
 * ``nirl``  NIRL with its default core (IQ-Learn), ``--iterations`` x ``--steps-per-iteration``;
 * ``maxmargin`` the max-margin core with issue 8's settings (gamma 0.95 ...), the same budget;
 * ``nnql``  NNQL from scratch (``train --local`` defaults), ``--nnql-steps``: once per seed, no demos.
+* ``nnql_line`` the same on the straight-line progress reward (``RewardConfig()``: progress 0.1 per metre,
+            no geodesic term) - the reward a user without the map can write, where ``nnql``'s geodesic
+            progress reads the true map's shortest paths (a training signal NIRL does not have).
 
 Every policy is evaluated greedily on the same ``--episodes`` test episodes per family (seed 0:
 "unseen" static generated maps and "dynamic", the same with 4 moving discs): success with its
@@ -42,6 +45,7 @@ and prints the table (``bench/_nirl_report.py``), then one JSON object on the la
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import subprocess
@@ -83,7 +87,7 @@ from bench._nirl_options import (
 )
 from bench._nirl_report import FAMILIES, METHODS, SETS, report
 from bench.planning import expert_outcomes
-from worlds.config import LEARNING_NAV, NavConfig, observation_settings
+from worlds.config import LEARNING_NAV, NavConfig, RewardConfig, observation_settings
 from worlds.outcomes import Outcome
 from worlds.perception import observation_dim
 
@@ -97,6 +101,8 @@ SQIL = {"core": "sqil", "q_updates": 256}
 """SQIL as the tables measured it (256 Q updates per round, NIRL's default before issue 15 part 3)"""
 VALIDATION_SEED = 1
 NAVS = {"learning": LEARNING_NAV, "default": NavConfig()}
+NO_DEMOS = ("nnql", "nnql_line")
+"""learners that take no demonstrations (one run per seed)"""
 RUNS = {"learning": "bench/nirl_runs_learning.jsonl", "default": "bench/nirl_runs.jsonl"}
 
 
@@ -264,14 +270,15 @@ def run_one(
             row["map_refinement"] = refinement_rates(result.learner, expert_labels)
     elif method == "dqfd":
         policy, row["env_steps"] = train_dqfd(demos, seed, budget, nav)
-    else:  # nnql from scratch
+    else:  # nnql from scratch: the env's reward (nnql) or the straight-line progress reward (nnql_line)
+        reward_nav = nav if method == "nnql" else dataclasses.replace(nav, rewards=RewardConfig())
         result = train_local(
             LocalTrainConfig(steps=args.nnql_steps, eval_every=args.nnql_eval_every,
                              eval_episodes=args.val_episodes,
                              keep_best=False, final_eval_episodes=0, out="", seed=seed, progress=False,
                              moving_discs=0),
             NNQLConfig(seed=seed, dueling=False),  # the recorded runs' plain head, on static maps (nav)
-            nav=nav,
+            nav=reward_nav,
         )  # fmt: skip
         policy, row["env_steps"] = result.learner.policy(), result.env_steps
         row["curve"] = [(p["env_steps"], p["eval_success"]) for p in result.curve if "eval_success" in p]
@@ -378,7 +385,7 @@ def main() -> int:
             short = {f: round(row["test"][f]["success"], 3) for f in FAMILIES}
             print(f"expert: {short}", flush=True)
         learners = [m for m in methods if m != "expert"]
-        needs_demos = any(m != "nnql" for m in learners)
+        needs_demos = any(m not in NO_DEMOS for m in learners)
         larger = max([int(s) for s in args.sets.split(",") if s.isdigit()] + [0])
         demos, expert_labels = ({}, [])
         if needs_demos:
@@ -388,8 +395,8 @@ def main() -> int:
         if args.diagnose:
             heldout = cached(args.demo_cache, f"heldout-{args.nav}-{seed}", heldout_demos, seed, nav)
         for method in learners:
-            for set_name in ["-"] if method == "nnql" else [s for s in args.sets.split(",") if s]:
-                row = run_one(method, set_name, seed, None if method == "nnql" else demos[set_name],
+            for set_name in ["-"] if method in NO_DEMOS else [s for s in args.sets.split(",") if s]:
+                row = run_one(method, set_name, seed, None if method in NO_DEMOS else demos[set_name],
                               expert_labels, args, sets, nav, heldout)  # fmt: skip
                 row |= code | {"load": machine_load()}
                 with open(runs, "a") as fh:
