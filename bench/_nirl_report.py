@@ -117,21 +117,52 @@ def report(path: Path) -> int:
         if r["method"] == "nirl" and "reward_scale" in r
     ]
     summary["reward_scale"] = scales
-    curves = {m: [r["curve"] for r in rows if r["method"] == m and "curve" in r] for m in ("nirl", "nnql")}
+    scratch = ("nnql", "nnql_line")  # NNQL from scratch on the geodesic / the straight-line progress reward
+    curves = {
+        m: [r["curve"] for r in rows if r["method"] == m and r["set"] in ("20", "-") and "curve" in r]
+        for m in ("nirl", *scratch)
+    }
     summary["curves"] = curves
     learning = {}
     for target in (0.9, 0.8, 0.6, 0.5):
-        nirl_steps = [first_reaching(c, target) for c in curves["nirl"]]
-        nnql_steps = [first_reaching(c, target) for c in curves["nnql"]]
-        medians = {"nirl": median_steps(nirl_steps), "nnql": median_steps(nnql_steps)}
-        ratio = medians["nirl"] / medians["nnql"] if None not in medians.values() else None
-        learning[str(target)] = {"nirl": nirl_steps, "nnql": nnql_steps, "median": medians, "ratio": ratio}
-        shown = "undefined" if ratio is None else f"{ratio:.2f}"
+        steps = {m: [first_reaching(c, target) for c in curves[m]] for m in curves}
+        medians = {m: median_steps(v) for m, v in steps.items()}
+        entry = {**steps, "median": medians}
+        for m in scratch:  # NIRL's median over NNQL's
+            known = medians["nirl"] is not None and medians[m] is not None
+            entry["ratio" if m == "nnql" else f"ratio_{m}"] = medians["nirl"] / medians[m] if known else None
+        learning[str(target)] = entry
+        shown = {m: "undefined" if entry[k] is None else f"{entry[k]:.2f}"
+                 for m, k in zip(scratch, ("ratio", "ratio_nnql_line"), strict=True)}  # fmt: skip
         print(
-            f"robot-steps to {target:.0%} validation success: NIRL (20 demos) {nirl_steps}, "
-            f"NNQL {nnql_steps}; medians {medians['nirl']} / {medians['nnql']}, ratio {shown}"
+            f"robot-steps to {target:.0%} validation success: NIRL (20 demos) {steps['nirl']}, "
+            f"NNQL (geodesic reward) {steps['nnql']}, NNQL (straight-line reward) {steps['nnql_line']}; "
+            f"medians {medians['nirl']} / {medians['nnql']} / {medians['nnql_line']}, "
+            f"ratios {shown['nnql']} / {shown['nnql_line']}"
         )
     summary["steps_to_validation_success"] = learning
+    against = {}
+    for set_name in SETS:  # NIRL against NNQL from scratch on each reward, paired by seed
+        for method in scratch:
+            for family in FAMILIES:
+                a, b = [], []
+                for seed in range(10):
+                    x, y = latest.get(("nirl", set_name, seed)), latest.get((method, "-", seed))
+                    if x and y:
+                        a += x["test"][family]["solved"]
+                        b += y["test"][family]["solved"]
+                if a:
+                    only_nirl, only_nnql, p = mcnemar(a, b)
+                    entry = {"nirl": float(np.mean(a)), method: float(np.mean(b)), "p": p}
+                    against[f"{set_name}/{method}/{family}"] = entry | {
+                        "only_nirl": only_nirl,
+                        "only_nnql": only_nnql,
+                    }
+                    print(
+                        f"McNemar NIRL ({set_name} demos) vs {method}, {family}: {np.mean(a):.1%} vs "
+                        f"{np.mean(b):.1%}, {only_nirl} / {only_nnql}, p = {p:.2g} (n = {len(a)})"
+                    )
+    summary["nirl_vs_nnql"] = against
     grid = [r for r in rows if r["method"] == "gridcheck"]
     if grid:
         summary["gridcheck"] = grid
@@ -152,6 +183,7 @@ def report(path: Path) -> int:
         "mcnemar_p_noisy_unseen_lt_0.01": noisy.get("p"),
         "gridworld_agreement_ge_0.95": [g["agreement"] for g in grid],
         "steps_to_0.9_ratio_le_0.33": learning["0.9"]["ratio"],
+        "steps_to_0.8_ratio_vs_straight_line_nnql": learning["0.8"]["ratio_nnql_line"],
     }
     print(json.dumps(summary))
     return 0
