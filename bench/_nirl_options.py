@@ -55,7 +55,14 @@ def cached(directory: str | None, name: str, make, *args):
 
 
 def add_policy_options(parser: argparse.ArgumentParser) -> None:
-    """Options of NIRL's NNQL phase (``--nirl policy_steps=N``, agents.nirl.policy_iteration)."""
+    """Options of NIRL's NNQL phase (``--nirl policy_steps=N``, agents.nirl.policy_iteration) and of its
+    own rounds' experience (``--nirl-discs``)."""
+    parser.add_argument(
+        "--nirl-discs",
+        type=int,
+        default=0,
+        help="0..N moving discs per episode of NIRL's own rounds (NIRLRun.moving_discs)",
+    )
     parser.add_argument("--policy-eval-every", type=int, default=25_000,
                         help="NIRL with policy_steps: robot-steps between keep-best validations")  # fmt: skip
     parser.add_argument("--policy-eval-dynamic", type=int, default=100,
@@ -70,7 +77,8 @@ def policy_run(args: argparse.Namespace, set_name: str, seed: int) -> dict:
     """NIRLRun fields of the NNQL phase from the bench's options (no files without ``policy_steps``)."""
     saved = f"{POLICY_RUNS}/{args.split}-{set_name}-{seed}" if args.nirl_overrides.get("policy_steps") else ""
     return {"out": saved, "policy_eval_every": args.policy_eval_every, "eval_episodes": args.val_episodes,
-            "policy_eval_dynamic_episodes": args.policy_eval_dynamic}  # fmt: skip
+            "policy_eval_dynamic_episodes": args.policy_eval_dynamic,
+            "moving_discs": args.nirl_discs}  # fmt: skip
 
 
 def policy_phase(result, curve: list | None, expert_labels: list | None) -> dict:

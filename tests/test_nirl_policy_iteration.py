@@ -9,6 +9,7 @@ from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.networks import goal_reached
 from agents.nirl.policy_iteration import FixedReward, nnql_config, warm_weights
 from agents.nirl.progress import ProgressPotential, shaped_progress_reward
+from agents.nirl import train_local as nirl_train
 from agents.nirl.train_local import train_nirl
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
@@ -160,3 +161,22 @@ def test_train_local_starts_from_the_initial_weights_it_is_given():
 def test_bad_warm_start_options_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
         NIRLConfig(**{field: value})
+
+
+def test_nirls_own_rounds_collect_experience_with_the_moving_disc_mix_asked_for(monkeypatch):
+    made = []
+
+    class Recording(NavigationVectorEnv):
+        def __init__(self, *args, config=None, **kwargs):
+            made.append(config)
+            super().__init__(*args, config=config, **kwargs)
+
+    monkeypatch.setattr(nirl_train, "NavigationVectorEnv", Recording)
+    demos, _ = generate_demos("mixed:16", 2, seed=0, config=LEARNING_NAV)
+    config = NIRLConfig(
+        iterations=1, warmstart_updates=2, q_updates=2, reward_updates=1, steps_per_iteration=32
+    )
+    for discs in (0, 3):
+        run = NIRLRun(envs=4, out="", eval_every=0, final_eval_episodes=0, progress=False, moving_discs=discs)
+        train_nirl(demos, config, run)
+        assert made[-1].obstacles.count == discs and made[-1].obstacles.mix == (discs > 0)

@@ -256,6 +256,9 @@ class NIRLRun:
     """robots stepped together when collecting experience"""
     maps: str = "mixed:16"
     """map spec of the experience-collection maps (worlds.tasks.parse_map_spec)"""
+    moving_discs: int = 0
+    """NIRL's own rounds: each experience episode has 0..moving_discs moving discs (0: none; NNQL's
+    trainer in the policy_steps phase has its own 0..6 mix)"""
     out: str = "runs/nirl"
     """output directory: policy files, weights_history.safetensors, curve.jsonl, summary.json"""
     eval_every: int = 5

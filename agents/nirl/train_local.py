@@ -37,7 +37,7 @@ from agents.nirl.refine_progress import refine_after_policy_iteration
 from agents.nirl.weights import HISTORY_FILE, WeightHistory, plot_weight_changes
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
 from agents.nnql.train_local import TrainResult
-from worlds.config import LEARNING_NAV
+from worlds.config import LEARNING_NAV, with_moving_discs
 from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
@@ -104,7 +104,9 @@ def train_nirl(
     history = WeightHistory()
     history.record(0, reward=learner.reward_weights(), policy=learner.get_weights())
     result = NIRLResult(learner, history)
-    env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=config.seed)
+    env = NavigationVectorEnv(
+        run.envs, config=with_moving_discs(nav, run.moving_discs), maps=run.maps, seed=config.seed
+    )
     policy = learner.policy(mode="boltzmann", temperature=config.temperature_at(0), seed=config.seed)
     rollout = VectorRollout(env, policy)
     rollout.reset(seed=config.seed)
