@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 import torch
 
+from agents.nirl import train_local as nirl_train
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.networks import goal_reached
 from agents.nirl.policy_iteration import FixedReward, nnql_config, warm_weights
 from agents.nirl.progress import ProgressPotential, shaped_progress_reward
-from agents.nirl import train_local as nirl_train
 from agents.nirl.train_local import train_nirl
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
