@@ -64,7 +64,7 @@ class NIRLConfig:
     """fixed_reward=progress: what the progress potential regresses on - observation (every feature) or
     goal (the features after the range readings - in LEARNING_NAV the goal's and the subgoal's distance
     and bearing; one frame, no patch: agents.nirl.learner checks - : on 40 held-out
-    expert episodes steps-to-go error 3.9 against 5.0 steps, bench/RESULTS.md issue 15 part 5)"""
+    expert episodes steps-to-go error 3.9 against 5.0 steps, bench/nirl_potential.py)"""
     policy_steps: int = 0
     """iq with fixed_reward=progress: robot-steps of NNQL's own local trainer (many robots, its utd,
     dueling head, moving-disc mix, keep-best) on the fixed learned reward once IQ-Learn's
