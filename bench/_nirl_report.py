@@ -27,6 +27,18 @@ def mcnemar(a: list[int], b: list[int]) -> tuple[int, int, float]:
     return only_a, only_b, mcnemar_exact(only_a, only_b)
 
 
+def paired(latest: dict, first: tuple[str, str], second: tuple[str, str], family: str) -> tuple[list, list]:
+    """Per-episode outcomes of two (method, demo set) cells on the same episodes, the seeds both ran
+    concatenated: (first's, second's)."""
+    a, b = [], []
+    for seed in range(10):
+        x, y = latest.get((*first, seed)), latest.get((*second, seed))
+        if x and y:
+            a += x["test"][family]["solved"]
+            b += y["test"][family]["solved"]
+    return a, b
+
+
 def first_reaching(curve, target: float):
     """Robot-steps of the first curve point (steps, success[, dynamic success]) at ``target``, or None."""
     return next((point[0] for point in curve if point[1] >= target - 1e-9), None)
@@ -85,12 +97,7 @@ def report(path: Path) -> int:
     comparisons = {}
     for set_name in SETS:
         for family in FAMILIES:
-            a, b = [], []
-            for seed in range(10):
-                x, y = latest.get(("nirl", set_name, seed)), latest.get(("bc", set_name, seed))
-                if x and y:
-                    a += x["test"][family]["solved"]
-                    b += y["test"][family]["solved"]
+            a, b = paired(latest, ("nirl", set_name), ("bc", set_name), family)
             if a:
                 only_nirl, only_bc, p = mcnemar(a, b)
                 comparisons[f"{set_name}/{family}"] = {
@@ -145,12 +152,7 @@ def report(path: Path) -> int:
     for set_name in SETS:  # NIRL against NNQL from scratch on each reward, paired by seed
         for method in scratch:
             for family in FAMILIES:
-                a, b = [], []
-                for seed in range(10):
-                    x, y = latest.get(("nirl", set_name, seed)), latest.get((method, "-", seed))
-                    if x and y:
-                        a += x["test"][family]["solved"]
-                        b += y["test"][family]["solved"]
+                a, b = paired(latest, ("nirl", set_name), (method, "-"), family)
                 if a:
                     only_nirl, only_nnql, p = mcnemar(a, b)
                     entry = {"nirl": float(np.mean(a)), method: float(np.mean(b)), "p": p}
