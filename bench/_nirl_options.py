@@ -81,9 +81,9 @@ def policy_run(args: argparse.Namespace, set_name: str, seed: int) -> dict:
             "moving_discs": args.nirl_discs}  # fmt: skip
 
 
-def policy_phase(result, curve: list | None, expert_labels: list | None) -> dict:
+def policy_phase(result, curve: list, expert_labels: list | None) -> dict:
     """The NNQL phase of a NIRL run in the bench's terms: its kept policy, robot-steps (IQ-Learn's
-    rounds included), the validation points along it appended to ``curve`` (when given) at NIRL's
+    rounds included), the validation points along it appended to ``curve`` at NIRL's
     robot-steps, what keep-best chose, and with the noisy set's ``expert_labels`` the rates of the
     MAP refinement after it (agents.nirl.refine_progress)."""
     phase = result.policy_result
@@ -92,9 +92,8 @@ def policy_phase(result, curve: list | None, expert_labels: list | None) -> dict
         steps = result.learner.demos.storage.get(torch.arange(len(result.learner.demos)))
         extra["map_refinement_progress"] = rates(steps["action"], result.refinement.labels,
                                                  np.concatenate(expert_labels))  # fmt: skip
-    if curve is not None:
-        curve.extend((p["env_steps"], p["eval_success"], p.get("eval_dynamic_success"))
-                     for p in result.curve if p.get("phase") and "eval_success" in p)  # fmt: skip
+    curve.extend((p["env_steps"], p["eval_success"], p.get("eval_dynamic_success"))
+                 for p in result.curve if p.get("phase") and "eval_success" in p)  # fmt: skip
     extra |= {"selected_version": phase.selected_version, "policy_wall": round(phase.wall_time, 1)}
     extra |= {"iq_steps": int(result.iq_steps), "steps": int(result.env_steps)}
     return {"policy": result.policy(), **extra}
