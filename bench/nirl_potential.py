@@ -1,11 +1,12 @@
 """How well NIRL's progress potential predicts an unseen expert's steps to go (issue 15, part 5).
 
-The potential (``agents.nirl.progress``) is fitted as NIRL fits it - Adam, 750 steps of 128 states,
-the same MLP - on the 20 clean demonstrations of bench/nirl.py's seed (the expert on ``mixed:16``,
-demo seed 10000 + seed), in LEARNING_NAV, with several inputs and regularisers; each is scored on
-40 held-out expert episodes (seed 30001 + seed, other maps): root-mean-square error of the steps to
-go (the fitted discounted value inverted) and its correlation with them, mean of ``--fits`` fitting
-seeds. CPU seconds; prints a table, then one JSON object on the last line.
+The potential (``agents.nirl.progress``) is fitted as NIRL fits it - Adam (AdamW's decoupled decay
+in the weight-decay rows), 750 steps of 128 states, the same MLP - on the 20 clean demonstrations of
+bench/nirl.py's seed (the expert on ``mixed:16``, demo seed 10000 + seed), in LEARNING_NAV, with
+several inputs and regularisers; each is scored on 40 held-out expert episodes (seed 30001 + seed,
+other maps): root-mean-square error of the steps to go (the fitted discounted value inverted) and its
+correlation with them, mean of ``--fits`` fitting seeds. CPU seconds; prints a table, then one JSON
+object on the last line.
 
     python -m bench.nirl_potential            # seed 0, 3 fits
 """
@@ -18,7 +19,10 @@ import json
 import numpy as np
 import torch
 
-from agents.nirl.progress import ProgressPotential, potential_loss, steps_to_go
+from agents.nirl.config import NIRLConfig
+from agents.nirl.learner import NIRLLearner
+from agents.nirl.progress import ProgressPotential
+from agents.nirl.refine_progress import fit_potential
 from agents.planning.demonstrate import generate_demos
 from worlds.config import LEARNING_NAV
 
@@ -26,26 +30,21 @@ GAMMA = 0.99
 
 
 def states(demos) -> tuple[torch.Tensor, torch.Tensor]:
-    """Observations of the demonstrated steps and the expert's steps to go from each (0: unknown)."""
-    obs = [np.asarray(d.observations[: len(d.actions)], np.float32) for d in demos]
-    to_go = [steps_to_go(len(d.actions), bool(getattr(d, "success", True))) for d in demos]
-    return torch.as_tensor(np.concatenate(obs)), torch.as_tensor(np.concatenate(to_go))
+    """Observations of the demonstrated steps and the expert's steps to go from each (0: unknown), as
+    NIRL's learner stores them (``NIRLLearner.add_demos``)."""
+    learner = NIRLLearner(NIRLConfig(), LEARNING_NAV)
+    learner.add_demos(demos)
+    steps = learner.demos.storage.get(torch.arange(len(learner.demos)))
+    return steps["observation"], steps["to_go"]
 
 
 def fit(
     obs, to_go, seed: int, hidden=(64, 64), weight_decay=0.0, steps=750, first_input=0
 ) -> ProgressPotential:
+    """A potential fitted as NIRL fits it (``refine_progress.fit_potential``: Adam, batches of 128)."""
     torch.manual_seed(seed)
     potential = ProgressPotential(obs.shape[1], hidden, "relu", GAMMA, first_input)
-    optimizer = torch.optim.AdamW(potential.parameters(), lr=1e-3, weight_decay=weight_decay)
-    known = torch.nonzero(to_go > 0).squeeze(1)
-    generator = torch.Generator().manual_seed(seed)
-    for _ in range(steps):
-        pick = known[torch.randint(0, len(known), (128,), generator=generator)]
-        loss = potential_loss(potential, obs[pick], to_go[pick], GAMMA)
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
+    fit_potential(potential, obs, to_go, GAMMA, updates=steps, seed=seed, weight_decay=weight_decay)
     return potential
 
 

@@ -126,10 +126,12 @@ def fit_potential(
     lr: float = 1e-3,
     batch_size: int = 128,
     seed: int = 0,
+    weight_decay: float = 0.0,
 ) -> float:
-    """Regress ``potential`` on (obs, to_go) for ``updates`` minibatch steps; returns the last loss."""
+    """Regress ``potential`` on (obs, to_go) for ``updates`` minibatch steps (Adam; decoupled
+    ``weight_decay``, AdamW's, when > 0); returns the last loss."""
     generator = torch.Generator().manual_seed(seed)
-    optimizer = torch.optim.Adam(potential.parameters(), lr=lr)
+    optimizer = torch.optim.AdamW(potential.parameters(), lr=lr, weight_decay=weight_decay)
     loss = torch.tensor(float("nan"))
     for _ in range(updates):
         idx = torch.randint(len(obs), (min(batch_size, len(obs)),), generator=generator)
