@@ -28,6 +28,7 @@ from agents.nirl.learner import NIRLLearner
 from agents.nirl.networks import goal_reached
 from agents.nirl.progress import ProgressPotential, shaped_progress_reward
 from agents.nnql.config import NNQLConfig
+from agents.nnql.networks import output_layer
 from agents.nnql.train_local import LocalTrainConfig, TrainResult, train_local
 from worlds.config import NavConfig
 
@@ -89,7 +90,7 @@ def warm_weights(learner: NIRLLearner, config: NIRLConfig) -> dict[str, np.ndarr
     """NIRL's Q-network in NNQL's plain layout with its output layer times ``1 - gamma``: the same greedy
     policy, its values in the units of :class:`FixedReward` (a step 0.01, not 1)."""
     weights = {name: value.copy() for name, value in learner.get_weights().items()}
-    last = 2 * len(config.hidden_sizes)
+    last = output_layer(config.hidden_sizes)
     for name in (f"{last}.weight", f"{last}.bias"):
         weights[name] *= np.float32(1.0 - config.gamma)
     return weights

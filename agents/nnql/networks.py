@@ -102,6 +102,12 @@ class DuelingQNetwork(DuelingMlpDQNet):
         }
 
 
+def output_layer(hidden_sizes) -> int:
+    """Index of the output layer in the plain MLP layout (``"<index>.weight"``): each hidden layer is a
+    linear module followed by its activation."""
+    return 2 * len(hidden_sizes)
+
+
 def export_weights(network: nn.Module) -> dict[str, np.ndarray]:
     """The network's weights in the plain MLP layout (``"<index>.weight"``), float32 arrays.
 
@@ -114,7 +120,7 @@ def export_weights(network: nn.Module) -> dict[str, np.ndarray]:
     weights = {
         name.removeprefix("features."): value for name, value in state.items() if name.startswith("features.")
     }
-    last = 2 * len(network.architecture["hidden_sizes"])
+    last = output_layer(network.architecture["hidden_sizes"])
     w_a, b_a = state["advantage.0.weight"], state["advantage.0.bias"]
     w_v, b_v = state["value.0.weight"], state["value.0.bias"]
     weights[f"{last}.weight"] = (w_a - w_a.mean(axis=0, keepdims=True) + w_v).astype(np.float32)
@@ -128,7 +134,7 @@ def import_weights(network: nn.Module, weights: dict[str, Any]) -> None:
     device = next(network.parameters()).device
     state = {name: torch.as_tensor(np.asarray(value), device=device) for name, value in weights.items()}
     if isinstance(network, DuelingQNetwork):
-        last = 2 * len(network.architecture["hidden_sizes"])
+        last = output_layer(network.architecture["hidden_sizes"])
         w, b = state.pop(f"{last}.weight"), state.pop(f"{last}.bias")
         state = {f"features.{name}": value for name, value in state.items()}
         state["advantage.0.weight"], state["advantage.0.bias"] = w, b
