@@ -265,3 +265,20 @@ def test_a_fixed_reward_stays_fixed_through_a_checkpoint():
     assert not any(p.requires_grad for p in restored.reward.parameters())
     with pytest.raises(ValueError, match="max_margin"):
         NIRLLearner(NIRLConfig(core="max_margin")).fix_reward()
+
+
+def test_a_potential_saved_on_other_inputs_is_refused_naming_the_setting():
+    """The potential's inputs are part of its shape: a state whose potential read every feature (or was
+    saved before ``potential_inputs`` existed, when it always did) is refused by the default learner
+    (goal features) with the setting that loads it, and loads with that setting."""
+    saved = NIRLLearner(NIRLConfig(potential_inputs="observation"))
+    state = nirl_state(saved)
+    with pytest.raises(ValueError, match="potential_inputs='observation'"):
+        load_nirl_state(NIRLLearner(NIRLConfig()), state)
+    del state["config"]["potential_inputs"]
+    with pytest.raises(ValueError, match="--potential-inputs observation"):
+        load_nirl_state(NIRLLearner(NIRLConfig()), state)
+    restored = NIRLLearner(NIRLConfig(potential_inputs="observation"))
+    load_nirl_state(restored, state)
+    for name, value in saved.potential.state_dict().items():
+        assert torch.equal(restored.potential.state_dict()[name], value)

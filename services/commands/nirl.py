@@ -18,8 +18,9 @@ With --policy-steps N the rounds stop once the reward is fixed (--fix-reward-aft
 trainer runs N robot-steps on the fixed learned reward; its policy, NIRL's final one, is written to
 OUT/policy_iteration (`navlearn evaluate --policy OUT/policy_iteration`); --policy-warm-start K
 runs K more of NIRL's rounds on the fixed reward first and starts NNQL's network from that policy.
---potential-inputs goal fits the progress potential on the goal and subgoal features only (it
-generalises better from 20 paths); --moving-discs N adds 0..N moving discs to the rounds' episodes.
+The progress potential is fitted on the goal and subgoal features only (--potential-inputs goal,
+the default: it generalises better from 20 paths; observation: every feature); --moving-discs N
+adds 0..N moving discs to the rounds' episodes.
 """
 
 
