@@ -121,13 +121,14 @@ def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
         learner.prior_network.load_state_dict(state["prior_network"])
     potential = learner.potential
     if potential is not None and state.get("potential") is not None:
-        saved_inputs = state["config"].get("potential_inputs", "observation")  # every feature before it existed
+        # a state saved before the option existed: its potential read every feature
+        saved_inputs = state["config"].get("potential_inputs", "observation")
         if saved_inputs != learner.config.potential_inputs:
             raise ValueError(
                 f"NIRL state's progress potential reads potential_inputs={saved_inputs!r}; this learner's "
                 f"reads {learner.config.potential_inputs!r}: load it with "
-                f"NIRLConfig(potential_inputs={saved_inputs!r}) (--potential-inputs {saved_inputs}) or start a "
-                "fresh run"
+                f"NIRLConfig(potential_inputs={saved_inputs!r}) (--potential-inputs {saved_inputs}) "
+                "or start a fresh run"
             )
         potential.load_state_dict(state["potential"])
     if state.get("reward_fixed"):
