@@ -54,6 +54,11 @@ def cached(directory: str | None, name: str, make, *args):
     return value
 
 
+POLICY_RUNS = "runs/nirl_out"
+"""where bench runs with ``policy_steps`` or ``--save-runs`` save NIRL's files: <split>-<set>-<seed>
+(bench/nirl_refine.py)"""
+
+
 def add_policy_options(parser: argparse.ArgumentParser) -> None:
     """Options of NIRL's NNQL phase (``--nirl policy_steps=N``, agents.nirl.policy_iteration) and of its
     own rounds' experience (``--nirl-discs``)."""
@@ -67,15 +72,17 @@ def add_policy_options(parser: argparse.ArgumentParser) -> None:
                         help="NIRL with policy_steps: robot-steps between keep-best validations")  # fmt: skip
     parser.add_argument("--policy-eval-dynamic", type=int, default=100,
                         help="... and validation episodes with 4 moving discs beside")  # fmt: skip
-
-
-POLICY_RUNS = "runs/nirl_out"
-"""where bench runs with ``policy_steps`` save NIRL's files: <split>-<set>-<seed> (bench/nirl_refine.py)"""
+    parser.add_argument("--save-runs", action="store_true",
+                        help=f"save every NIRL run's files (policy, reward, potential) to {POLICY_RUNS}/"
+                        "<split>-<set>-<seed>, as runs with policy_steps always do (bench/nirl_refine.py "
+                        "reads them)")  # fmt: skip
 
 
 def policy_run(args: argparse.Namespace, set_name: str, seed: int) -> dict:
-    """NIRLRun fields of the NNQL phase from the bench's options (no files without ``policy_steps``)."""
-    saved = f"{POLICY_RUNS}/{args.split}-{set_name}-{seed}" if args.nirl_overrides.get("policy_steps") else ""
+    """NIRLRun fields of the NNQL phase from the bench's options (no files without ``policy_steps`` or
+    ``--save-runs``)."""
+    save = args.save_runs or args.nirl_overrides.get("policy_steps")
+    saved = f"{POLICY_RUNS}/{args.split}-{set_name}-{seed}" if save else ""
     return {"out": saved, "policy_eval_every": args.policy_eval_every, "eval_episodes": args.val_episodes,
             "policy_eval_dynamic_episodes": args.policy_eval_dynamic,
             "moving_discs": args.nirl_discs}  # fmt: skip

@@ -6,12 +6,13 @@ Two uses:
 
 * ``--tune RUN``: choose the refinement's settings on a noisy demonstration set no reported run uses
   (seed 20000 + ``--demo-seed``, default 3; the bench's sets are seeds 0-2), with the prior of a
-  saved NIRL run's NNQL phase (``RUN/policy_iteration``) and a progress potential fitted on that set's
-  own steps to go, as NIRL fits it. Rule: the most injected actions relabelled to the expert's with
-  at least 99% of clean steps kept (if none keeps 99%: the one that keeps most).
+  saved NIRL run (its NNQL phase's, ``RUN/policy_iteration``, or with none its own rounds', ``RUN``)
+  and a progress potential fitted on that set's own steps to go, as NIRL fits it. Rule: the most
+  injected actions relabelled to the expert's with at least 99% of clean steps kept (if none keeps
+  99%: the one that keeps most).
 * ``--measure DIR ...``: the rates of saved NIRL runs of the bench (``bench/nirl.py`` writes them to
-  ``runs/nirl_out/<split>-<set>-<seed>`` with ``--nirl policy_steps=N``) on their own noisy
-  demonstrations (from ``--demo-cache``), with the given settings.
+  ``runs/nirl_out/<split>-<set>-<seed>`` with ``--nirl policy_steps=N`` or ``--save-runs``) on their
+  own noisy demonstrations (from ``--demo-cache``), with the given settings.
 
 Prints one JSON object on its last line.
 
@@ -27,11 +28,13 @@ import json
 import pickle
 import re
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from agents.evaluation.policies import load_policy
 from agents.nirl.config import NIRLConfig
 from agents.nirl.learner import NIRLLearner
 from agents.nirl.persistence import load_potential
@@ -67,7 +70,8 @@ def noisy_set(seed: int, cache: str | None) -> tuple[list, np.ndarray]:
 def learner_for(demos, seed: int, potential=None) -> NIRLLearner:
     """A NIRL learner holding ``demos`` and the potential (a saved one, or fitted by the refinement's own
     regression when None: ``fit_potential`` on the recorded steps to go)."""
-    learner = NIRLLearner(NIRLConfig(seed=seed), LEARNING_NAV)
+    inputs = "goal" if potential is None or potential.first_input else "observation"
+    learner = NIRLLearner(NIRLConfig(seed=seed, potential_inputs=inputs), LEARNING_NAV)
     learner.add_demos(demos)
     if potential is not None:
         learner.fit.potential.load_state_dict(potential.state_dict())
@@ -85,25 +89,37 @@ def saved_potential(run: Path) -> ProgressPotential:
     return potential
 
 
+def prior_policy(run: Path) -> Callable[[np.ndarray], np.ndarray]:
+    """The prior's Q-values of a saved run, in the NNQL phase's reward units (a step 0.01): its NNQL
+    phase's policy (``RUN/policy_iteration``) when it had one, else the policy of NIRL's own rounds
+    (``RUN``, saved with ``--save-runs``; a step costs 1 there, so its Q-values times ``1 - gamma``, as
+    ``policy_iteration.warm_weights`` converts them)."""
+    if (run / POLICY_DIR).is_dir():
+        return NNQLPolicy.load(run / POLICY_DIR).q_values
+    gamma = NIRLConfig.from_dict(json.loads((run / "config.json").read_text())["nirl_config"]).gamma
+    policy = load_policy(run)  # model "nirl", kind "q_network": its outputs are the Q-values
+    return lambda obs: policy.outputs(obs) * (1.0 - gamma)
+
+
 def measure(run: Path, cache: str | None, settings: ProgressRefine) -> dict:
     seed = int(re.search(r"-(\d+)$", run.name)[1])
     path = Path(cache) / f"sets-learning-{seed}-0.3-20.pkl"  # bench/nirl.py --demo-cache wrote it
     sets, labels = pickle.loads(path.read_bytes())
     learner = learner_for(sets["20noisy"], seed, saved_potential(run))
-    policy = NNQLPolicy.load(run / POLICY_DIR)
-    steps, refinement = refine_learner_demos(learner, policy.q_values, settings)
+    q_values = prior_policy(run)
+    steps, refinement = refine_learner_demos(learner, q_values, settings)
     return {"run": str(run), "seed": seed} | rates(steps["action"], refinement.labels, np.concatenate(labels))
 
 
 def tune(run: Path, demo_seed: int, cache: str | None) -> dict:
     demos, expert = noisy_set(demo_seed, cache)
     learner = learner_for(demos, demo_seed)
-    policy = NNQLPolicy.load(run / POLICY_DIR)
+    q_values = prior_policy(run)
     recorded = learner.demos.storage.get(torch.arange(len(learner.demos)))["action"]
     rows = []
     for t, o, s in itertools.product(*GRID.values()):
         settings = ProgressRefine(temperature=t, offset=o, scale=s)
-        _, refinement = refine_learner_demos(learner, policy.q_values, settings)
+        _, refinement = refine_learner_demos(learner, q_values, settings)
         rows.append({"temperature": t, "offset": o, "scale": s} | rates(recorded, refinement.labels, expert))
         print(json.dumps(rows[-1]), flush=True)
     ok = [r for r in rows if r["clean_kept"] >= 0.99]
