@@ -50,6 +50,7 @@ GRID = {
     "temperature": (0.0003, 0.001, 0.003, 0.01),
     "offset": (-1.0, -0.5, -0.25),
     "scale": (0.0, 0.1, 0.25, 0.5),
+    "threshold": (0.5, 0.7, 0.9),
 }
 
 
@@ -108,19 +109,42 @@ def measure(run: Path, cache: str | None, settings: ProgressRefine) -> dict:
     learner = learner_for(sets["20noisy"], seed, saved_potential(run))
     q_values = prior_policy(run)
     steps, refinement = refine_learner_demos(learner, q_values, settings)
-    return {"run": str(run), "seed": seed} | rates(steps["action"], refinement.labels, np.concatenate(labels))
+    expert = np.concatenate(labels)
+    return ({"run": str(run), "seed": seed} | rates(steps["action"], refinement.labels, expert)
+            | {"prior": separation(q_values, steps, expert)})  # fmt: skip
+
+
+def separation(q_values: Callable[[np.ndarray], np.ndarray], steps, expert: np.ndarray) -> dict:
+    """How well the prior alone tells injected steps from clean ones, whatever the settings: the
+    probability that an injected step's Q-gap (best Q minus the recorded action's, the NNQL phase's
+    units) exceeds a clean step's (the ROC area; 0.5: no better than chance), and how often the
+    prior's greedy action is the expert's on clean and on injected steps."""
+    q = np.asarray(q_values(steps["observation"].numpy()))
+    recorded = steps["action"].long().reshape(-1).numpy()
+    expert = np.asarray(expert)[: len(recorded)]
+    gap = q.max(axis=1) - q[np.arange(len(q)), recorded]
+    injected = recorded != expert
+    a, b = gap[injected], gap[~injected]
+    auc = float((a[:, None] > b[None, :]).mean() + 0.5 * (a[:, None] == b[None, :]).mean())
+    greedy = q.argmax(axis=1)
+    return {
+        "gap_auc": auc,
+        "greedy_is_expert_clean": float((greedy[~injected] == expert[~injected]).mean()),
+        "greedy_is_expert_injected": float((greedy[injected] == expert[injected]).mean()),
+    }
 
 
 def tune(run: Path, demo_seed: int, cache: str | None) -> dict:
     demos, expert = noisy_set(demo_seed, cache)
     learner = learner_for(demos, demo_seed)
     q_values = prior_policy(run)
-    recorded = learner.demos.storage.get(torch.arange(len(learner.demos)))["action"]
+    steps = learner.demos.storage.get(torch.arange(len(learner.demos)))
+    recorded = steps["action"]
     rows = []
-    for t, o, s in itertools.product(*GRID.values()):
-        settings = ProgressRefine(temperature=t, offset=o, scale=s)
+    for values in itertools.product(*GRID.values()):
+        settings = ProgressRefine(**dict(zip(GRID, values, strict=True)))
         _, refinement = refine_learner_demos(learner, q_values, settings)
-        rows.append({"temperature": t, "offset": o, "scale": s} | rates(recorded, refinement.labels, expert))
+        rows.append(dict(zip(GRID, values, strict=True)) | rates(recorded, refinement.labels, expert))
         print(json.dumps(rows[-1]), flush=True)
     ok = [r for r in rows if r["clean_kept"] >= 0.99]
     if ok:
@@ -130,6 +154,7 @@ def tune(run: Path, demo_seed: int, cache: str | None) -> dict:
     return {
         "tuned_on": f"noisy demo seed {demo_seed}",
         "prior_run": str(run),
+        "prior": separation(q_values, steps, expert),
         "best": best,
         "grid": len(rows),
     }
