@@ -6,14 +6,18 @@ import argparse
 
 TRAIN_DESCRIPTION = """\
 Neural inverse reinforcement learning (thesis ch. 5) in one process. Loads the demonstrations
-(a Minari dataset from `navlearn demos generate` or the file demonstrator), warm-starts the
-reward network and the Q-network policy from them, then runs --iterations rounds of neural
-policy iteration: collect experience with the stochastic policy on --maps, MAP-refine the
-demonstrations, fit the reward by model-free maximum margin planning, Q-learn under the learned
-reward. The environment's reward is never used. Writes to --out: the policy (model.safetensors +
-config.json, loadable by `navlearn evaluate --policy DIR`), reward.safetensors, the weights of
-both networks at every iteration (weights_history.safetensors, plotted in weights.png),
-curve.jsonl and summary.json; prints the greedy evaluation on 100 held-out generated maps.
+(a Minari dataset from `navlearn demos generate` or the file demonstrator), warm-starts the soft
+Q-function on them, then runs --iterations rounds of neural policy iteration: collect experience
+with the Boltzmann policy on --maps, MAP-refine the demonstrations, learn the reward by inverse
+soft-Q learning (IQ-Learn; --core max_margin or sqil for the alternatives) for --fix-reward-after
+rounds, then fix it - a unit step cost shaped by a progress potential regressed on the
+demonstrations' steps to go - and soft-Q-learn on it for the remaining rounds (demonstrations and
+own experience in every batch). The environment's reward is never used. Writes to --out: the
+policy (model.safetensors + config.json, loadable by `navlearn evaluate --policy DIR`),
+reward.safetensors and potential.safetensors, the weights of both networks at every iteration
+(weights_history.safetensors, plotted in weights.png), curve.jsonl and summary.json; prints the
+greedy evaluation on 100 held-out generated maps. 100 rounds (204,800 robot-steps) reach about 93%
+from 20 expert demonstrations on unseen maps (README, "NIRL and the demonstrator").
 With --policy-steps N the rounds stop once the reward is fixed (--fix-reward-after) and NNQL's own
 trainer runs N robot-steps on the fixed learned reward; its policy, NIRL's final one, is written to
 OUT/policy_iteration (`navlearn evaluate --policy OUT/policy_iteration`); --policy-warm-start K
