@@ -97,8 +97,8 @@ def prior_policy(run: Path) -> Callable[[np.ndarray], np.ndarray]:
     ``policy_iteration.warm_weights`` converts them)."""
     if (run / POLICY_DIR).is_dir():
         return NNQLPolicy.load(run / POLICY_DIR).q_values
-    gamma = NIRLConfig.from_dict(json.loads((run / "config.json").read_text())["nirl_config"]).gamma
     policy = load_policy(run)  # model "nirl", kind "q_network": its outputs are the Q-values
+    gamma = NIRLConfig.from_dict(policy.config["nirl_config"]).gamma
     return lambda obs: policy.outputs(obs) * (1.0 - gamma)
 
 

@@ -276,6 +276,7 @@ def test_a_potential_saved_on_other_inputs_is_refused_naming_the_setting():
     with pytest.raises(ValueError, match="potential_inputs='observation'"):
         load_nirl_state(NIRLLearner(NIRLConfig()), state)
     del state["config"]["potential_inputs"]
+    assert NIRLConfig.from_dict(state["config"]).potential_inputs == "observation"
     with pytest.raises(ValueError, match="--potential-inputs observation"):
         load_nirl_state(NIRLLearner(NIRLConfig()), state)
     restored = NIRLLearner(NIRLConfig(potential_inputs="observation"))

@@ -238,15 +238,19 @@ class NIRLConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> NIRLConfig:
-        """Inverse of to_dict; unknown keys are an error so typos do not pass silently. A config saved
-        before cores existed (format 1, no ``core``) was the max-margin learner's, and reads as one."""
+        """Inverse of to_dict; unknown keys are an error so typos do not pass silently. A field a saved
+        config lacks reads as what it meant then (:data:`SAVED_WITHOUT`), not as today's default."""
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names)
         if unknown:
             raise ValueError(f"NIRLConfig: unknown field(s) {unknown}")
-        data = dict(data)
-        data.setdefault("core", "max_margin")
-        return cls(**data)
+        return cls(**(SAVED_WITHOUT | dict(data)))
+
+
+SAVED_WITHOUT = {"core": "max_margin", "potential_inputs": "observation"}
+"""what a saved NIRL config (a checkpoint's, a policy's config.json) without the field meant: saved
+before cores existed (format 1), it was the max-margin learner's; before ``potential_inputs`` existed,
+the potential read every feature"""
 
 
 @dataclass

@@ -15,7 +15,7 @@ from safetensors.numpy import save_file
 from safetensors.torch import load_file
 
 from agents.mlp import save_policy
-from agents.nirl.config import FORMAT_VERSION
+from agents.nirl.config import FORMAT_VERSION, SAVED_WITHOUT
 from agents.nirl.networks import RewardNetwork
 from agents.nirl.progress import ProgressPotential
 from agents.nnql.persistence import replace_dir
@@ -100,7 +100,8 @@ def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
     learner's: it loads into a learner with ``core="max_margin"`` and is refused, with the fix
     named, by the others."""
     version = int(state.get("format", 1))
-    saved_core = state["config"].get("core", "max_margin")
+    saved_config = SAVED_WITHOUT | state["config"]
+    saved_core = saved_config["core"]
     core = learner.config.core
     if version > FORMAT_VERSION:
         raise ValueError(f"NIRL state format {version} is newer than this version reads ({FORMAT_VERSION})")
@@ -121,8 +122,7 @@ def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
         learner.prior_network.load_state_dict(state["prior_network"])
     potential = learner.potential
     if potential is not None and state.get("potential") is not None:
-        # a state saved before the option existed: its potential read every feature
-        saved_inputs = state["config"].get("potential_inputs", "observation")
+        saved_inputs = saved_config["potential_inputs"]
         if saved_inputs != learner.config.potential_inputs:
             raise ValueError(
                 f"NIRL state's progress potential reads potential_inputs={saved_inputs!r}; this learner's "
