@@ -233,7 +233,7 @@ def run_one(
         row["bc_epochs"], row["bc_best_epoch"] = len(trained.history), trained.best_epoch
         row["bc_steps_per_epoch"] = math.ceil(trained.train_steps / config.batch_size)
     elif method in ("nirl", "sqil", "maxmargin"):
-        curve_run = method == "nirl" and set_name == "20"
+        curve_run = method == "nirl" and (set_name == "20" or args.keep_best)  # keep-best validates anyway
         rounds = max(args.iterations, args.curve_iterations) if curve_run else args.iterations
         core = {"nirl": {"core": "iq"}, "sqil": SQIL, "maxmargin": ISSUE8}[method]
         overrides = args.nirl_overrides if method == "nirl" else {}
@@ -244,9 +244,10 @@ def run_one(
 
         def on_iteration(point, learner, curve=curve, tested=tested):
             if curve_run and learner.iteration % args.curve_every == 0:
-                curve.append(
-                    (point["env_steps"], validation_success(learner.policy(), args.val_episodes, nav))
-                )
+                success = point.get("eval_success")  # keep-best's validation is the curve's
+                if success is None:
+                    success = validation_success(learner.policy(), args.val_episodes, nav)
+                curve.append((point["env_steps"], success))
             if learner.iteration == args.iterations:
                 tested["policy"], tested["steps"] = learner.policy(), int(point["env_steps"])
                 tested["scale"] = {k: v for k, v in point.items() if k.startswith("nirl/")}
@@ -254,8 +255,13 @@ def run_one(
                     tested["diagnosis"] = {"train": demo_figures(learner, demos),
                                            "heldout": demo_figures(learner, heldout)}  # fmt: skip
 
-        run = NIRLRun(eval_every=0, final_eval_episodes=0, progress=False, **policy_run(args, set_name, seed))
+        keep = {"keep_best": method == "nirl" and args.keep_best}  # NIRL's own rounds keep their best
+        keep["eval_every"] = args.curve_every if keep["keep_best"] else 0
+        run = NIRLRun(final_eval_episodes=0, progress=False, **keep, **policy_run(args, set_name, seed))
         result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
+        if result.selected_iteration is not None:  # the kept round's policy is the one tested
+            tested["policy"], tested["steps"] = result.policy(), int(result.env_steps)
+            row["keep_best"], row["selected_iteration"] = True, result.selected_iteration
         if config.policy_steps:  # the NNQL phase's policy is NIRL's (agents.nirl.policy_iteration)
             labels = expert_labels if "noisy" in set_name else None
             tested |= policy_phase(result, curve, labels)  # every set's phase curve (keep-best's points)
@@ -274,13 +280,15 @@ def run_one(
         reward_nav = nav if method == "nnql" else dataclasses.replace(nav, rewards=RewardConfig())
         result = train_local(
             LocalTrainConfig(steps=args.nnql_steps, eval_every=args.nnql_eval_every,
-                             eval_episodes=args.val_episodes,
-                             keep_best=False, final_eval_episodes=0, out="", seed=seed, progress=False,
-                             moving_discs=0),
+                             eval_episodes=args.val_episodes, keep_best=args.keep_best,
+                             final_eval_episodes=0, out="", seed=seed, progress=False, moving_discs=0),
             NNQLConfig(seed=seed, dueling=False),  # the recorded runs' plain head, on static maps (nav)
             nav=reward_nav,
         )  # fmt: skip
-        policy, row["env_steps"] = result.learner.policy(), result.env_steps
+        kept = result.policy.greedy() if args.keep_best else result.learner.policy()  # the kept weights
+        policy, row["env_steps"] = kept, result.env_steps
+        if args.keep_best:
+            row["keep_best"], row["selected_version"] = True, result.selected_version
         row["curve"] = [(p["env_steps"], p["eval_success"]) for p in result.curve if "eval_success" in p]
     row["train_seconds"] = round(time.perf_counter() - t0, 1)
     row["test"] = figures(evaluate(policy, sets, nav))
@@ -349,10 +357,18 @@ def main() -> int:
         help="override a NIRLConfig field of the nirl learner (repeatable; JSON values: 1024, true, 0.5)",
     )  # fmt: skip
     add_policy_options(parser)
+    parser.add_argument(
+        "--keep-best", action="store_true",
+        help="nirl and nnql/nnql_line test the weights that scored best on their validations (every "
+        "--curve-every rounds / --nnql-eval-every robot-steps, --val-episodes each, the last included) "
+        "instead of the last; with --curve-iterations <= --iterations",
+    )  # fmt: skip
     parser.add_argument("--report", action="store_true", help="print the table of --runs and stop")
     args = parser.parse_args()
     runs = Path(args.runs or (VALIDATION_RUNS if args.split == "validation" else RUNS[args.nav]))
     args.nirl_overrides = parse_overrides(parser, args.nirl)
+    if args.keep_best and args.curve_iterations > args.iterations:
+        parser.error("--keep-best keeps the best of the rounds tested: --curve-iterations <= --iterations")
     if args.report:
         return report(runs)
     nav = NAVS[args.nav]

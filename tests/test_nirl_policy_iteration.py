@@ -1,12 +1,17 @@
 """NIRL's NNQL phase (agents/nirl/policy_iteration.py): the fixed learned reward is the one the
 replay holds, the environment's reward never reaches it, and `train_nirl` hands over to NNQL's trainer."""
 
+import json
+
 import numpy as np
 import pytest
 import torch
+from safetensors.numpy import load_file
 
 from agents.nirl import train_local as nirl_train
 from agents.nirl.config import NIRLConfig, NIRLRun
+from agents.nirl.learner import NIRLLearner
+from agents.nirl.losses import KEEP, RELABEL, Refinement
 from agents.nirl.networks import goal_reached
 from agents.nirl.policy_iteration import FixedReward, nnql_config, warm_weights
 from agents.nirl.progress import ProgressPotential, shaped_progress_reward
@@ -180,3 +185,60 @@ def test_nirls_own_rounds_collect_experience_with_the_moving_disc_mix_asked_for(
         run = NIRLRun(envs=4, out="", eval_every=0, final_eval_episodes=0, progress=False, moving_discs=discs)
         train_nirl(demos, config, run)
         assert made[-1].obstacles.count == discs and made[-1].obstacles.mix == (discs > 0)
+
+
+def test_relabelled_demonstrations_train_the_fixed_reward_phase_on_the_action_that_was_taken():
+    """TD learns what happened: a demonstrated step's next state is the recorded action's, so MAP
+    refinement's relabel (every step here) must not change the fixed-reward phase's update."""
+    demos, _ = generate_demos("mixed:16", 2, seed=0, config=LEARNING_NAV)
+    config = NIRLConfig(hidden_sizes=(16,), batch_size=16, demo_fraction=0.5)
+    learners = []
+    for relabel in (False, True):
+        torch.manual_seed(0)
+        learner = NIRLLearner(config, LEARNING_NAV)
+        learner.add_demos(demos)
+        learner.fix_reward()
+        learners.append((learner, relabel))
+    batch, is_expert = learners[0][0].fit.mixed_batch(offline=True)
+    losses = []
+    for learner, relabel in learners:
+        fit = learner.fit
+
+        def refine(obs, actions, noise, relabel=relabel):
+            labels = (actions + 1) % 5 if relabel else actions
+            decisions = torch.full_like(actions, RELABEL if relabel else KEEP)
+            return Refinement(labels, torch.ones(len(actions)), decisions)
+
+        fit.refine = refine
+        fit.mixed_batch = lambda offline, batch=batch, is_expert=is_expert: (batch.clone(), is_expert)
+        losses.append(fit.q_step()["losses/td_loss"])
+    assert losses[0] == losses[1]
+    for name, value in learners[0][0].get_weights().items():
+        assert np.array_equal(learners[1][0].get_weights()[name], value), name
+
+
+def test_keep_best_keeps_the_own_round_that_validated_best(tmp_path):
+    demos, _ = generate_demos("mixed:16", 2, seed=0, config=LEARNING_NAV)
+    config = NIRLConfig(
+        hidden_sizes=(16,), iterations=4, warmstart_updates=2, q_updates=8, reward_updates=1,
+        steps_per_iteration=32, fix_reward_after=1,
+    )  # fmt: skip
+    run = NIRLRun(envs=4, out=str(tmp_path / "kept"), eval_every=1, eval_episodes=6, final_eval_episodes=0,
+                  progress=False)  # fmt: skip
+    result = train_nirl(demos, config, run)
+    scores = [(p["eval_success"], p["eval_spl"], p["iteration"]) for p in result.curve]
+    assert len(scores) == 4  # every round validated, the last one included
+    best = int(max(scores)[2])
+    assert result.selected_iteration == best
+    kept = result.history.snapshots
+    at = result.history.iterations.index(best)
+    saved = load_file(str(tmp_path / "kept" / "model.safetensors"))
+    for name, value in result.learner.get_weights().items():
+        assert np.array_equal(value, kept[f"policy/{name}"][at]) and np.array_equal(saved[name], value)
+    summary = json.loads((tmp_path / "kept" / "summary.json").read_text())
+    assert summary["selected_iteration"] == best
+    last = train_nirl(demos, config, NIRLRun(envs=4, out="", eval_every=1, eval_episodes=6, keep_best=False,
+                                             final_eval_episodes=0, progress=False))  # fmt: skip
+    assert last.selected_iteration is None
+    for name, value in last.learner.get_weights().items():
+        assert np.array_equal(value, last.history.snapshots[f"policy/{name}"][-1])

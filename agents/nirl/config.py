@@ -270,6 +270,10 @@ class NIRLRun:
     """iterations between greedy evaluations on held-out maps (0: only the final one)"""
     eval_episodes: int = 50
     """episodes of each periodic evaluation ("unseen" family, validation seed)"""
+    keep_best: bool = True
+    """NIRL's own rounds: the policy is the Q-network that scored best on the periodic evaluations (the
+    last round's included; ties go to the later), not the last one - NNQL's keep_best. No periodic
+    evaluations (eval_every 0): the last. The policy_steps phase keeps its own best (policy_eval_every)"""
     final_eval_episodes: int = 100
     """episodes of the final evaluation ("unseen" family, seed 0: the reported set)"""
     tensorboard: str = ""

@@ -122,7 +122,10 @@ class SoftQFit(FitParts):
         next_value, terminated = absorbing_next(cfg, next_value, terminated, at_goal)
         if cfg.core == "iq" and self.reward_fixed:
             # NNQL policy iteration on the learned reward, now frozen: soft Q-learning with r = R(s, a)
-            # of the reward network (the absorbing crash state keeps its value)
+            # of the reward network (the absorbing crash state keeps its value). TD learns what happened:
+            # the recorded action led to next_obs, whatever MAP refinement relabelled it to
+            labels = batch["action"].long().reshape(-1)
+            q_taken = q_all.gather(1, labels[:, None]).squeeze(1)
             if self.potential is not None:  # the progress reward (agents.nirl.progress): ends folded in
                 raw_end = batch[("next", "terminated")].reshape(-1).bool()
                 reward = shaped_progress_reward(self.potential, obs, next_obs, raw_end, at_goal, cfg.gamma)

@@ -36,7 +36,7 @@ from agents.nirl.progress import ProgressPotential
 from agents.nirl.refine_progress import refine_after_policy_iteration
 from agents.nirl.weights import HISTORY_FILE, WeightHistory, plot_weight_changes
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
-from agents.nnql.train_local import TrainResult
+from agents.nnql.train_local import Candidate, TrainResult
 from worlds.config import LEARNING_NAV, with_moving_discs
 from worlds.vector_env import NavigationVectorEnv
 
@@ -65,6 +65,8 @@ class NIRLResult:
     evidence (agents.nirl.refine_progress), in the demonstration buffer's order"""
     refined_potential: ProgressPotential | None = None
     """the progress potential re-fitted on the refined demonstrations' steps to go"""
+    selected_iteration: int | None = None
+    """NIRLRun.keep_best: the own round whose Q-network the learner now holds (the best validated)"""
 
     def policy(self) -> Any:
         """NIRL's final policy: the NNQL phase's kept one, else the learner's Q-network (greedy)."""
@@ -114,6 +116,8 @@ def train_nirl(
     bar = _progress_bar(run, config)
     writer = _tensorboard(run)
     rounds = config.own_rounds()
+    keep_best = run.keep_best and run.eval_every > 0 and not config.policy_steps
+    best: Candidate | None = None
     for it in range(rounds):
         policy.set_weights(learner.get_weights(), learner.version)
         policy.temperature = config.temperature_at(it)
@@ -128,9 +132,12 @@ def train_nirl(
         point = _curve_point(learner, rollout.steps, time.perf_counter() - start, recent, metrics)
         point["temperature"] = policy.temperature
         last = it + 1 == rounds and not config.policy_steps
-        if run.eval_every and (it + 1) % run.eval_every == 0 and not (last and run.final_eval_episodes):
-            report = evaluate_greedy(learner, run.eval_episodes, VALIDATION_SEED, nav)
-            point["eval_success"] = report.metrics["unseen"].success.value
+        if keep_best and ((it + 1) % run.eval_every == 0 or last):  # the last round competes too
+            kept, best = best, _validate(learner, run, nav, point, best)
+            if best is not kept:
+                result.selected_iteration = learner.iteration
+        elif run.eval_every and (it + 1) % run.eval_every == 0 and not (last and run.final_eval_episodes):
+            _validate(learner, run, nav, point, None)
         result.curve.append(point)
         if writer is not None:
             for name, value in point.items():
@@ -147,6 +154,8 @@ def train_nirl(
         writer.close()
     env.close()
     result.env_steps = result.iq_steps = rollout.steps
+    if best is not None:  # keep_best: the learner (and so the saved policy) holds the best validated Q
+        learner.q.set_weights(best.weights)
     if config.policy_steps:
         result.policy_result = policy_iteration(learner, config, run, nav)
         result.env_steps += result.policy_result.env_steps
@@ -159,12 +168,23 @@ def train_nirl(
         report = evaluate_policy(result.policy(), run.final_eval_episodes, 0, nav)
         result.final_eval = report.to_dict(with_episodes=False)["metrics"]["unseen"]
         result.final_table = report.table()
-        if result.curve:
+        if result.curve and "eval_success" not in result.curve[-1]:
             result.curve[-1]["eval_success"] = report.metrics["unseen"].success.value
     result.wall_time = time.perf_counter() - start
     if run.out:
         write_outputs(Path(run.out), result, config, run)
     return result
+
+
+def _validate(learner: NIRLLearner, run: NIRLRun, nav: Any, point: dict, best: Candidate | None):
+    """Evaluate the greedy Q-network on the validation set, note it on ``point``, return the better of
+    it and ``best`` (score: success, then SPL; ties go to the later, as NNQL's keep_best)."""
+    metrics = evaluate_greedy(learner, run.eval_episodes, VALIDATION_SEED, nav).metrics["unseen"]
+    point["eval_success"], point["eval_spl"] = metrics.success.value, metrics.spl
+    score = (metrics.success.value, metrics.spl)
+    if best is None or score >= best.score:
+        return Candidate(score, learner.version, learner.get_weights())
+    return best
 
 
 def _curve_point(learner, env_steps, wall, recent, metrics) -> dict[str, float]:
@@ -210,7 +230,8 @@ def _postfix(point: dict[str, float]) -> str:
 def write_outputs(out: Path, result: NIRLResult, config: NIRLConfig, run: NIRLRun) -> Path:
     """Policy files, weight history, learning curve and summary in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    result.learner.save_policy(out, env_steps=result.env_steps, maps=run.maps)
+    kept = {} if result.selected_iteration is None else {"selected_iteration": result.selected_iteration}
+    result.learner.save_policy(out, env_steps=result.env_steps, maps=run.maps, **kept)
     result.history.save(out / HISTORY_FILE)
     with open(out / "curve.jsonl", "w") as fh:
         for point in result.curve:
@@ -226,6 +247,7 @@ def write_outputs(out: Path, result: NIRLResult, config: NIRLConfig, run: NIRLRu
         "wall_time": result.wall_time,
         "final_eval": result.final_eval,
         "iq_steps": result.iq_steps,
+        "selected_iteration": result.selected_iteration,
         "policy_iteration": None if result.policy_result is None else result.policy_result.out,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
