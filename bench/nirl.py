@@ -282,7 +282,7 @@ def run_one(
             LocalTrainConfig(steps=args.nnql_steps, eval_every=args.nnql_eval_every,
                              eval_episodes=args.val_episodes, keep_best=args.keep_best,
                              final_eval_episodes=0, out="", seed=seed, progress=False, moving_discs=0),
-            NNQLConfig(seed=seed, dueling=False),  # the recorded runs' plain head, on static maps (nav)
+            NNQLConfig(seed=seed, dueling=args.nnql_dueling),  # static maps (nav)
             nav=reward_nav,
         )  # fmt: skip
         kept = result.policy.greedy() if args.keep_best else result.learner.policy()  # the kept weights
@@ -332,6 +332,9 @@ def main() -> int:
     parser.add_argument("--curve-every", type=int, default=3, help="NIRL rounds between validations")
     parser.add_argument("--nnql-steps", type=int, default=61_440, help="NNQL robot-steps from scratch")
     parser.add_argument("--nnql-eval-every", type=int, default=6_144, help="NNQL validation every N steps")
+    parser.add_argument("--nnql-dueling", action="store_true",
+                        help="NNQL from scratch with its default dueling head (the recorded rows before "
+                        "issue 15 part 7: the plain head)")  # fmt: skip
     parser.add_argument("--val-episodes", type=int, default=50, help="validation episodes of the curves")
     parser.add_argument("--noise", type=float, default=0.3, help="random-action probability of the noisy set")
     parser.add_argument(

@@ -234,7 +234,9 @@ def test_keep_best_keeps_the_own_round_that_validated_best(tmp_path):
     at = result.history.iterations.index(best)
     saved = load_file(str(tmp_path / "kept" / "model.safetensors"))
     for name, value in result.learner.get_weights().items():
-        assert np.array_equal(value, kept[f"policy/{name}"][at]) and np.array_equal(saved[name], value)
+        # a dueling head's exported weights are folded into one layer: a round trip moves the last bit
+        assert np.allclose(value, kept[f"policy/{name}"][at], atol=1e-6)
+        assert np.array_equal(saved[name], value)
     summary = json.loads((tmp_path / "kept" / "summary.json").read_text())
     assert summary["selected_iteration"] == best
     last = train_nirl(demos, config, NIRLRun(envs=4, out="", eval_every=1, eval_episodes=6, keep_best=False,
