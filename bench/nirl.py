@@ -370,7 +370,7 @@ def main() -> int:
     args = parser.parse_args()
     runs = Path(args.runs or (VALIDATION_RUNS if args.split == "validation" else RUNS[args.nav]))
     args.nirl_overrides = parse_overrides(parser, args.nirl)
-    if args.keep_best and args.curve_iterations > args.iterations:
+    if args.keep_best and "nirl" in args.methods.split(",") and args.curve_iterations > args.iterations:
         parser.error("--keep-best keeps the best of the rounds tested: --curve-iterations <= --iterations")
     if args.report:
         return report(runs)
