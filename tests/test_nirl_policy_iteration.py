@@ -224,7 +224,7 @@ def test_keep_best_keeps_the_own_round_that_validated_best(tmp_path):
         steps_per_iteration=32, fix_reward_after=1,
     )  # fmt: skip
     run = NIRLRun(envs=4, out=str(tmp_path / "kept"), eval_every=1, eval_episodes=6, final_eval_episodes=0,
-                  progress=False)  # fmt: skip
+                  progress=False, keep_best=True)  # fmt: skip
     result = train_nirl(demos, config, run)
     scores = [(p["eval_success"], p["eval_spl"], p["iteration"]) for p in result.curve]
     assert len(scores) == 4  # every round validated, the last one included
