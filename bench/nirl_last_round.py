@@ -1,0 +1,70 @@
+"""The last round of NIRL runs that kept another (issue 15 part 7): what the same run tests without
+``--keep-best``.
+
+`bench/nirl.py --keep-best --save-runs` tests the round that validated best and saves every round's
+weights (``weights_history.safetensors``). Validation only reads the greedy policy, so a run without
+``--keep-best`` trains the same rounds and tests the last one: this evaluates that last round on the
+same test episodes and appends a copy of each run's line with its figures (``keep_best`` false,
+``last_round_of`` naming the saved run) to ``--out``, where ``python -m bench.nirl --report`` reads it.
+
+    python -m bench.nirl_last_round --runs runs11/own200k_0.jsonl [...] --out bench/nirl_runs_part7.jsonl
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation.policies import GreedyMLPPolicy
+from agents.nirl.weights import HISTORY_FILE, WeightHistory
+from bench._common import machine_load
+from bench._nirl_options import POLICY_RUNS
+from bench._nirl_report import FAMILIES
+from bench.nirl import NAVS, VALIDATION_SEED, figures
+
+
+def last_round_policy(run_dir: Path) -> tuple[GreedyMLPPolicy, int]:
+    """The greedy policy of the last round in ``run_dir``'s weight history, and that round."""
+    history = WeightHistory.load(run_dir / HISTORY_FILE)
+    weights = {name.removeprefix("policy/"): stack[-1] for name, stack in history.snapshots.items()
+               if name.startswith("policy/")}  # fmt: skip
+    config = json.loads((run_dir / "config.json").read_text())
+    return GreedyMLPPolicy(weights, config), history.iterations[-1]
+
+
+def main() -> int:
+    raw = argparse.RawDescriptionHelpFormatter
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=raw)
+    parser.add_argument("--runs", nargs="+", required=True, help="bench/nirl.py runs files with kept rounds")
+    parser.add_argument("--out", required=True, help="JSON lines file the last-round lines are appended to")
+    args = parser.parse_args()
+    written = []
+    for path in args.runs:
+        for line in Path(path).read_text().splitlines():
+            row = json.loads(line)
+            if row["method"] != "nirl" or not row.get("keep_best"):
+                continue
+            run_dir = Path(f"{POLICY_RUNS}/{row['split']}-{row['set']}-{row['seed']}")
+            policy, last = last_round_policy(run_dir)
+            seed = VALIDATION_SEED if row["split"] == "validation" else 0
+            sets = [make_eval_set(f, row["episodes"], seed=seed) for f in FAMILIES]
+            out = {k: v for k, v in row.items() if k not in ("selected_iteration", "load")}
+            tested = figures(evaluate(policy, sets, NAVS[row["nav"]]))
+            out |= {"keep_best": False, "last_round_of": str(run_dir), "last_round": last, "test": tested}
+            out |= {"kept_round": row["selected_iteration"], "load": machine_load()}
+            with open(args.out, "a") as fh:
+                fh.write(json.dumps(out) + "\n")
+            summary = {f: out["test"][f]["success"] for f in FAMILIES}
+            kept = {f: row["test"][f]["success"] for f in FAMILIES}
+            print(f"{row['set']} seed {row['seed']}: last round {last} {summary}, kept round "
+                  f"{row['selected_iteration']} {kept}", flush=True)  # fmt: skip
+            written.append({"set": row["set"], "seed": row["seed"], "last": summary, "kept": kept})
+    print(json.dumps({"runs": written}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
