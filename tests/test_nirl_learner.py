@@ -218,6 +218,9 @@ def test_checkpoint_and_weight_history_round_trip(tmp_path):
         assert np.array_equal(restored.get_weights()[name], value)
     for name, value in learner.reward_weights().items():
         assert np.array_equal(restored.reward_weights()[name], value)
+    named = r"dueling head \(dueling=True\).*NIRLConfig\(dueling=True\) \(--dueling\)"
+    with pytest.raises(ValueError, match=named):
+        NIRLLearner(NIRLConfig(**SMALL, dueling=False)).load_checkpoint(tmp_path / "ckpt")
     learner.update()
     history.record(1, reward=learner.reward_weights(), policy=learner.get_weights())
     history.save(tmp_path / "history.safetensors")

@@ -157,8 +157,17 @@ def save_checkpoint(learner: Any, path: str | Path) -> Path:
 
 def load_checkpoint(learner: Any, path: str | Path) -> None:
     path = Path(path)
-    learner.q.load_checkpoint(path / "q")
     state = torch.load(path / STATE_FILE, map_location=learner.device, weights_only=True)
+    saved_dueling = bool((SAVED_WITHOUT | state["config"])["dueling"])
+    if saved_dueling != learner.config.dueling:  # before the Q checkpoint's bare architecture mismatch
+        head = "a dueling" if saved_dueling else "a plain"
+        flag = "--dueling" if saved_dueling else "--no-dueling"
+        raise ValueError(
+            f"NIRL checkpoint {path}: its Q-network has {head} head (dueling={saved_dueling}), this "
+            f"learner's dueling={learner.config.dueling}: load it with NIRLConfig(dueling={saved_dueling}) "
+            f"({flag}) or start a fresh run"
+        )
+    learner.q.load_checkpoint(path / "q")
     learner.load_state_dict(state)
     if learner.owns_demos and (path / "demos").exists():
         load_replay(learner.demos, path / "demos")
