@@ -257,11 +257,16 @@ def run_one(
 
         keep = {"keep_best": method == "nirl" and args.keep_best}  # NIRL's own rounds keep their best
         keep["eval_every"] = args.curve_every if keep["keep_best"] else 0
+        # ... or average the last (not in a curve run longer than the tested rounds: its test is a snapshot)
+        keep["average_last"] = args.average_last if method == "nirl" and rounds == args.iterations else 0.0
         run = NIRLRun(final_eval_episodes=0, progress=False, **keep, **policy_run(args, set_name, seed))
         result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
         if result.selected_iteration is not None:  # the kept round's policy is the one tested
             tested["policy"], tested["steps"] = result.policy(), int(result.env_steps)
             row["keep_best"], row["selected_iteration"] = True, result.selected_iteration
+        elif result.averaged_rounds:  # the policy averages the last rounds' weights
+            tested["policy"], tested["steps"] = result.policy(), int(result.env_steps)
+            row["averaged_rounds"] = result.averaged_rounds
         if config.policy_steps:  # the NNQL phase's policy is NIRL's (agents.nirl.policy_iteration)
             labels = expert_labels if "noisy" in set_name else None
             tested |= policy_phase(result, curve, labels)  # every set's phase curve (keep-best's points)
@@ -365,6 +370,11 @@ def main() -> int:
         help="nirl and nnql/nnql_line test the weights that scored best on their validations (every "
         "--curve-every rounds / --nnql-eval-every robot-steps, --val-episodes each, the last included) "
         "instead of the last; with --curve-iterations <= --iterations",
+    )  # fmt: skip
+    parser.add_argument(
+        "--average-last", type=float, default=NIRLRun().average_last, metavar="FRACTION",
+        help="nirl: the policy averages the Q-network's weights over this fraction of the rounds at the "
+        "end (NIRLRun.average_last; 0: the last round's); not in a curve run longer than --iterations",
     )  # fmt: skip
     parser.add_argument("--report", action="store_true", help="print the table of --runs and stop")
     args = parser.parse_args()

@@ -1,11 +1,13 @@
-"""The last round of NIRL runs that kept another (issue 15 part 7): what the same run tests without
-``--keep-best``.
+"""The last round (or the last rounds' average) of NIRL runs that kept another (issue 15 part 7): what
+the same run tests without ``--keep-best`` (and with ``--average-last``).
 
 `bench/nirl.py --keep-best --save-runs` tests the round that validated best and saves every round's
 weights (``weights_history.safetensors``). Validation only reads the greedy policy, so a run without
 ``--keep-best`` trains the same rounds and tests the last one: this evaluates that last round on the
 same test episodes and appends a copy of each run's line with its figures (``keep_best`` false,
 ``last_round_of`` naming the saved run) to ``--out``, where ``python -m bench.nirl --report`` reads it.
+With ``--average-last F`` the policy is the Q-network's weights averaged over that fraction of the
+rounds at the end (``NIRLRun.average_last``; ``averaged_rounds`` on the line).
 
     python -m bench.nirl_last_round --runs runs11/own200k_0.jsonl [...] --out bench/nirl_runs_part7.jsonl
 """
@@ -19,6 +21,7 @@ from pathlib import Path
 
 from agents.evaluation import evaluate, make_eval_set
 from agents.evaluation.policies import GreedyMLPPolicy
+from agents.nirl.config import NIRLRun
 from agents.nirl.weights import HISTORY_FILE, WeightHistory
 from bench._common import machine_load
 from bench._nirl_options import POLICY_RUNS
@@ -26,13 +29,13 @@ from bench._nirl_report import FAMILIES
 from bench.nirl import NAVS, VALIDATION_SEED, figures
 
 
-def last_round_policy(run_dir: Path) -> tuple[GreedyMLPPolicy, int]:
-    """The greedy policy of the last round in ``run_dir``'s weight history, and that round."""
-    history = WeightHistory.load(run_dir / HISTORY_FILE)
-    weights = {name.removeprefix("policy/"): stack[-1] for name, stack in history.snapshots.items()
-               if name.startswith("policy/")}  # fmt: skip
+def last_round_policy(run_dir: Path, average_last: float = 0.0) -> tuple[GreedyMLPPolicy, int, int]:
+    """The greedy policy of the last round in ``run_dir``'s weight history (or of the average over the
+    last ``average_last`` of its rounds), that round and how many rounds it averages."""
+    history = WeightHistory.load(run_dir / HISTORY_FILE)  # record 0: the warm start, then one per round
+    averaged = max(1, NIRLRun(average_last=average_last).averaged_rounds(len(history) - 1))
     config = json.loads((run_dir / "config.json").read_text())
-    return GreedyMLPPolicy(weights, config), history.iterations[-1]
+    return GreedyMLPPolicy(history.averaged("policy", averaged), config), history.iterations[-1], averaged
 
 
 def main() -> int:
@@ -40,6 +43,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=raw)
     parser.add_argument("--runs", nargs="+", required=True, help="bench/nirl.py runs files with kept rounds")
     parser.add_argument("--out", required=True, help="JSON lines file the last-round lines are appended to")
+    parser.add_argument("--average-last", type=float, default=0.0, metavar="FRACTION",
+                        help="average the Q-network over this fraction of the rounds at the end")  # fmt: skip
     args = parser.parse_args()
     written = []
     for path in args.runs:
@@ -48,19 +53,21 @@ def main() -> int:
             if row["method"] != "nirl" or not row.get("keep_best"):
                 continue
             run_dir = Path(f"{POLICY_RUNS}/{row['split']}-{row['set']}-{row['seed']}")
-            policy, last = last_round_policy(run_dir)
+            policy, last, averaged = last_round_policy(run_dir, args.average_last)
             seed = VALIDATION_SEED if row["split"] == "validation" else 0
             sets = [make_eval_set(f, row["episodes"], seed=seed) for f in FAMILIES]
             out = {k: v for k, v in row.items() if k not in ("selected_iteration", "load")}
             tested = figures(evaluate(policy, sets, NAVS[row["nav"]]))
             out |= {"keep_best": False, "last_round_of": str(run_dir), "last_round": last, "test": tested}
             out |= {"kept_round": row["selected_iteration"], "load": machine_load()}
+            if averaged > 1:
+                out["averaged_rounds"] = averaged
             with open(args.out, "a") as fh:
                 fh.write(json.dumps(out) + "\n")
             summary = {f: out["test"][f]["success"] for f in FAMILIES}
             kept = {f: row["test"][f]["success"] for f in FAMILIES}
-            print(f"{row['set']} seed {row['seed']}: last round {last} {summary}, kept round "
-                  f"{row['selected_iteration']} {kept}", flush=True)  # fmt: skip
+            print(f"{row['set']} seed {row['seed']}: last round {last} ({averaged} averaged) {summary}, "
+                  f"kept round {row['selected_iteration']} {kept}", flush=True)  # fmt: skip
             written.append({"set": row["set"], "seed": row["seed"], "last": summary, "kept": kept})
     print(json.dumps({"runs": written}))
     return 0

@@ -16,6 +16,7 @@ from agents.nirl.networks import goal_reached
 from agents.nirl.policy_iteration import FixedReward, nnql_config, warm_weights
 from agents.nirl.progress import ProgressPotential, shaped_progress_reward
 from agents.nirl.train_local import train_nirl
+from agents.nirl.weights import WeightHistory
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.train_local import LocalTrainConfig, train_local
@@ -251,3 +252,34 @@ def test_keep_best_keeps_the_own_round_that_validated_best(tmp_path):
     for name, stack in silent.history.snapshots.items():
         other = last.history.snapshots[name]
         assert all(np.array_equal(a, b) for a, b in zip(stack, other, strict=True)), name
+
+
+def test_the_policy_averages_the_last_rounds_weights(tmp_path):
+    demos, _ = generate_demos("mixed:16", 2, seed=0, config=LEARNING_NAV)
+    config = NIRLConfig(
+        hidden_sizes=(16,), iterations=4, warmstart_updates=2, q_updates=8, reward_updates=1,
+        steps_per_iteration=32, fix_reward_after=1,
+    )  # fmt: skip
+    run = NIRLRun(envs=4, out=str(tmp_path / "avg"), eval_every=0, final_eval_episodes=0, progress=False,
+                  average_last=0.5)  # fmt: skip
+    result = train_nirl(demos, config, run)
+    assert result.averaged_rounds == 2 and run.averaged_rounds(200) == 100
+    rounds = result.history.snapshots
+    saved = load_file(str(tmp_path / "avg" / "model.safetensors"))
+    for name, value in result.learner.get_weights().items():
+        mean = (rounds[f"policy/{name}"][-1] + rounds[f"policy/{name}"][-2]) / 2
+        assert np.allclose(value, mean, atol=1e-5) and not np.allclose(value, rounds[f"policy/{name}"][-1])
+        assert np.array_equal(saved[name], value)
+    assert json.loads((tmp_path / "avg" / "summary.json").read_text())["averaged_rounds"] == 2
+    with pytest.raises(ValueError, match="average_last"):
+        NIRLRun(average_last=1.5)
+
+
+def test_a_weight_history_averages_its_last_records():
+    history = WeightHistory()
+    for k in range(3):
+        history.record(k, policy={"w": np.full(2, k, np.float32)}, reward={"b": np.zeros(1, np.float32)})
+    assert np.array_equal(history.averaged("policy", 2)["w"], [1.5, 1.5])
+    assert set(history.averaged("policy", 3)) == {"w"}
+    with pytest.raises(ValueError, match="last=4 outside the 3"):
+        history.averaged("policy", 4)

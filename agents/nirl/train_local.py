@@ -67,6 +67,8 @@ class NIRLResult:
     """the progress potential re-fitted on the refined demonstrations' steps to go"""
     selected_iteration: int | None = None
     """NIRLRun.keep_best: the own round whose Q-network the learner now holds (the best validated)"""
+    averaged_rounds: int = 0
+    """NIRLRun.average_last: how many own rounds at the end the learner's Q-network now averages"""
 
     def policy(self) -> Any:
         """NIRL's final policy: the NNQL phase's kept one, else the learner's Q-network (greedy)."""
@@ -156,6 +158,9 @@ def train_nirl(
     result.env_steps = result.iq_steps = rollout.steps
     if best is not None:  # keep_best: the learner (and so the saved policy) holds the best validated Q
         learner.q.set_weights(best.weights)
+    elif not config.policy_steps and run.averaged_rounds(rounds) > 1:  # ... else the rounds' average
+        result.averaged_rounds = run.averaged_rounds(rounds)
+        learner.q.set_weights(history.averaged("policy", result.averaged_rounds))
     if config.policy_steps:
         result.policy_result = policy_iteration(learner, config, run, nav)
         result.env_steps += result.policy_result.env_steps
@@ -231,6 +236,8 @@ def write_outputs(out: Path, result: NIRLResult, config: NIRLConfig, run: NIRLRu
     """Policy files, weight history, learning curve and summary in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     kept = {} if result.selected_iteration is None else {"selected_iteration": result.selected_iteration}
+    if result.averaged_rounds:
+        kept["averaged_rounds"] = result.averaged_rounds
     result.learner.save_policy(out, env_steps=result.env_steps, maps=run.maps, **kept)
     result.history.save(out / HISTORY_FILE)
     with open(out / "curve.jsonl", "w") as fh:
@@ -248,6 +255,7 @@ def write_outputs(out: Path, result: NIRLResult, config: NIRLConfig, run: NIRLRu
         "final_eval": result.final_eval,
         "iq_steps": result.iq_steps,
         "selected_iteration": result.selected_iteration,
+        "averaged_rounds": result.averaged_rounds,
         "policy_iteration": None if result.policy_result is None else result.policy_result.out,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")

@@ -62,6 +62,15 @@ class WeightHistory:
         history.snapshots = {name: list(stack) for name, stack in data.items()}
         return history
 
+    def averaged(self, network: str, last: int) -> dict[str, np.ndarray]:
+        """``network``'s weights averaged over the last ``last`` records (stochastic weight averaging
+        along the rounds, Izmailov et al. 2018), name -> array as ``record`` took them."""
+        if not 1 <= last <= len(self):
+            raise ValueError(f"averaged: last={last} outside the {len(self)} recorded iterations")
+        prefix = network + "/"
+        return {name.removeprefix(prefix): np.mean(stack[-last:], axis=0, dtype=np.float64).astype(np.float32)
+                for name, stack in self.snapshots.items() if name.startswith(prefix)}  # fmt: skip
+
     def layer_changes(self, network: str) -> dict[str, dict[str, np.ndarray]]:
         """Per weight matrix of ``network``: relative ``step`` and ``drift`` per iteration (K,)."""
         out = {}

@@ -18,8 +18,9 @@ reward.safetensors and potential.safetensors, the weights of both networks at ev
 (weights_history.safetensors, plotted in weights.png), curve.jsonl and summary.json; prints the
 greedy evaluation on 100 held-out generated maps. 100 rounds (204,800 robot-steps) reach about 93%
 from 20 expert demonstrations on unseen maps (README, "NIRL and the demonstrator"). The policy is
-the last round's; --keep-best keeps the round that scored best on the --eval-every validations
-instead (off by default: with 100 static episodes it chose worse rounds than the last).
+the Q-network's weights averaged over the last quarter of the rounds (--average-last 0.25; 0: the
+last round's); --keep-best keeps the round that scored best on the --eval-every validations instead
+(off by default: with 100 static episodes it chose worse rounds than the last).
 With --policy-steps N the rounds stop once the reward is fixed (--fix-reward-after) and NNQL's own
 trainer runs N robot-steps on the fixed learned reward; its policy, NIRL's final one, is written to
 OUT/policy_iteration (`navlearn evaluate --policy OUT/policy_iteration`); --policy-warm-start K
