@@ -218,12 +218,18 @@ def test_relabelled_demonstrations_train_the_fixed_reward_phase_on_the_action_th
         assert np.array_equal(learners[1][0].get_weights()[name], value), name
 
 
-def test_keep_best_keeps_the_own_round_that_validated_best(tmp_path):
+def four_tiny_rounds() -> tuple[list, NIRLConfig]:
+    """Two expert demonstrations and a NIRL config of four tiny rounds (the reward fixed after one)."""
     demos, _ = generate_demos("mixed:16", 2, seed=0, config=LEARNING_NAV)
     config = NIRLConfig(
         hidden_sizes=(16,), iterations=4, warmstart_updates=2, q_updates=8, reward_updates=1,
         steps_per_iteration=32, fix_reward_after=1,
     )  # fmt: skip
+    return demos, config
+
+
+def test_keep_best_keeps_the_own_round_that_validated_best(tmp_path):
+    demos, config = four_tiny_rounds()
     run = NIRLRun(envs=4, out=str(tmp_path / "kept"), eval_every=1, eval_episodes=6, final_eval_episodes=0,
                   progress=False, keep_best=True)  # fmt: skip
     result = train_nirl(demos, config, run)
@@ -255,11 +261,7 @@ def test_keep_best_keeps_the_own_round_that_validated_best(tmp_path):
 
 
 def test_the_policy_averages_the_last_rounds_weights(tmp_path):
-    demos, _ = generate_demos("mixed:16", 2, seed=0, config=LEARNING_NAV)
-    config = NIRLConfig(
-        hidden_sizes=(16,), iterations=4, warmstart_updates=2, q_updates=8, reward_updates=1,
-        steps_per_iteration=32, fix_reward_after=1,
-    )  # fmt: skip
+    demos, config = four_tiny_rounds()
     run = NIRLRun(envs=4, out=str(tmp_path / "avg"), eval_every=0, final_eval_episodes=0, progress=False,
                   average_last=0.5)  # fmt: skip
     result = train_nirl(demos, config, run)
