@@ -7,7 +7,9 @@ weights (``weights_history.safetensors``). Validation only reads the greedy poli
 same test episodes and appends a copy of each run's line with its figures (``keep_best`` false,
 ``last_round_of`` naming the saved run) to ``--out``, where ``python -m bench.nirl --report`` reads it.
 With ``--average-last F`` the policy is the Q-network's weights averaged over that fraction of the
-rounds at the end (``NIRLRun.average_last``; ``averaged_rounds`` on the line).
+rounds at the end (``NIRLRun.average_last``; ``averaged_rounds`` on the line). ``--validation``
+evaluates on the validation seed's episodes instead of the run's test episodes (how part 7 chose
+``--average-last``; the lines then say ``"split": "validation"``).
 
     python -m bench.nirl_last_round --runs runs11/own200k_0.jsonl [...] --out bench/nirl_runs_part7.jsonl
 """
@@ -45,6 +47,9 @@ def main() -> int:
     parser.add_argument("--out", required=True, help="JSON lines file the last-round lines are appended to")
     parser.add_argument("--average-last", type=float, default=0.0, metavar="FRACTION",
                         help="average the Q-network over this fraction of the rounds at the end")  # fmt: skip
+    parser.add_argument(
+        "--validation", action="store_true", help=f"evaluate on validation seed {VALIDATION_SEED} episodes"
+    )
     args = parser.parse_args()
     written = []
     for path in args.runs:
@@ -54,9 +59,10 @@ def main() -> int:
                 continue
             run_dir = Path(f"{POLICY_RUNS}/{row['split']}-{row['set']}-{row['seed']}")
             policy, last, averaged = last_round_policy(run_dir, args.average_last)
-            seed = VALIDATION_SEED if row["split"] == "validation" else 0
+            split = "validation" if args.validation else row["split"]
+            seed = VALIDATION_SEED if split == "validation" else 0
             sets = [make_eval_set(f, row["episodes"], seed=seed) for f in FAMILIES]
-            out = {k: v for k, v in row.items() if k not in ("selected_iteration", "load")}
+            out = {k: v for k, v in row.items() if k not in ("selected_iteration", "load")} | {"split": split}
             tested = figures(evaluate(policy, sets, NAVS[row["nav"]]))
             out |= {"keep_best": False, "last_round_of": str(run_dir), "last_round": last, "test": tested}
             out |= {"kept_round": row["selected_iteration"], "load": machine_load()}
