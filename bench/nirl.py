@@ -261,11 +261,11 @@ def run_one(
         keep["average_last"] = args.average_last if method == "nirl" and rounds == args.iterations else 0.0
         run = NIRLRun(final_eval_episodes=0, progress=False, **keep, **policy_run(args, set_name, seed))
         result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
-        if result.selected_iteration is not None:  # the kept round's policy is the one tested
+        if result.selected_iteration is not None or result.averaged_rounds:  # the kept round or the average
             tested["policy"], tested["steps"] = result.policy(), int(result.env_steps)
+        if result.selected_iteration is not None:
             row["keep_best"], row["selected_iteration"] = True, result.selected_iteration
-        elif result.averaged_rounds:  # the policy averages the last rounds' weights
-            tested["policy"], tested["steps"] = result.policy(), int(result.env_steps)
+        elif result.averaged_rounds:
             row["averaged_rounds"] = result.averaged_rounds
         if config.policy_steps:  # the NNQL phase's policy is NIRL's (agents.nirl.policy_iteration)
             labels = expert_labels if "noisy" in set_name else None

@@ -135,11 +135,12 @@ def train_nirl(
         point["temperature"] = policy.temperature
         last = it + 1 == rounds and not config.policy_steps
         if keep_best and ((it + 1) % run.eval_every == 0 or last):  # the last round competes too
-            kept, best = best, _validate(learner, run, nav, point, best)
+            kept, score = best, _validate(learner, run, nav, point)
+            best = Candidate.better(best, score, learner.version, learner.get_weights)
             if best is not kept:
                 result.selected_iteration = learner.iteration
         elif run.eval_every and (it + 1) % run.eval_every == 0 and not (last and run.final_eval_episodes):
-            _validate(learner, run, nav, point, None)
+            _validate(learner, run, nav, point)
         result.curve.append(point)
         if writer is not None:
             for name, value in point.items():
@@ -156,11 +157,12 @@ def train_nirl(
         writer.close()
     env.close()
     result.env_steps = result.iq_steps = rollout.steps
+    averaged = 0 if config.policy_steps else run.averaged_rounds(rounds)
     if best is not None:  # keep_best: the learner (and so the saved policy) holds the best validated Q
         learner.q.set_weights(best.weights)
-    elif not config.policy_steps and run.averaged_rounds(rounds) > 1:  # ... else the rounds' average
-        result.averaged_rounds = run.averaged_rounds(rounds)
-        learner.q.set_weights(history.averaged("policy", result.averaged_rounds))
+    elif averaged > 1:  # ... else the average of the last rounds' Q-networks
+        result.averaged_rounds = averaged
+        learner.q.set_weights(history.averaged("policy", averaged))
     if config.policy_steps:
         result.policy_result = policy_iteration(learner, config, run, nav)
         result.env_steps += result.policy_result.env_steps
@@ -181,15 +183,12 @@ def train_nirl(
     return result
 
 
-def _validate(learner: NIRLLearner, run: NIRLRun, nav: Any, point: dict, best: Candidate | None):
-    """Evaluate the greedy Q-network on the validation set, note it on ``point``, return the better of
-    it and ``best`` (score: success, then SPL; ties go to the later, as NNQL's keep_best)."""
+def _validate(learner: NIRLLearner, run: NIRLRun, nav: Any, point: dict) -> tuple[float, float]:
+    """Evaluate the greedy Q-network on the validation set, note it on ``point``, return keep_best's
+    score (success, then SPL)."""
     metrics = evaluate_greedy(learner, run.eval_episodes, VALIDATION_SEED, nav).metrics["unseen"]
     point["eval_success"], point["eval_spl"] = metrics.success.value, metrics.spl
-    score = (metrics.success.value, metrics.spl)
-    if best is None or score >= best.score:
-        return Candidate(score, learner.version, learner.get_weights())
-    return best
+    return metrics.success.value, metrics.spl
 
 
 def _curve_point(learner, env_steps, wall, recent, metrics) -> dict[str, float]:

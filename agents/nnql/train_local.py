@@ -235,6 +235,14 @@ class Candidate:
     version: int
     weights: dict[str, np.ndarray]
 
+    @staticmethod
+    def better(best: Candidate | None, score: tuple[float, float], version: int, weights) -> Candidate:
+        """keep_best's rule: ``best`` or the new weights (``weights()`` copies them) scored ``score``,
+        whichever scores higher; ties go to the new, later weights."""
+        if best is None or score >= best.score:
+            return Candidate(score, version, weights())
+        return best
+
 
 def _validate(policy: Any, run: LocalTrainConfig, nav: Any, point: dict[str, float], best: Candidate | None):
     """Evaluate on the validation set, note it on the curve point, return the better candidate."""
@@ -249,9 +257,7 @@ def _validate(policy: Any, run: LocalTrainConfig, nav: Any, point: dict[str, flo
     score = (solved / episodes, metrics.spl)
     if not run.keep_best:
         return None
-    if best is None or score >= best.score:
-        return Candidate(score, policy.version, policy.get_weights())
-    return best
+    return Candidate.better(best, score, policy.version, policy.get_weights)
 
 
 def _curve_point(steps, wall, learner, recent, policy, metrics) -> dict[str, float]:
