@@ -190,7 +190,8 @@ def test_nirls_own_rounds_collect_experience_with_the_moving_disc_mix_asked_for(
 
 def test_relabelled_demonstrations_train_the_fixed_reward_phase_on_the_action_that_was_taken():
     """TD learns what happened: a demonstrated step's next state is the recorded action's, so MAP
-    refinement's relabel (every step here) must not change the fixed-reward phase's update."""
+    refinement's relabel (every step here) must not change the fixed-reward phase's update; the
+    phase does not run the refinement (nor chart it) at all."""
     demos, _ = generate_demos("mixed:16", 2, seed=0, config=LEARNING_NAV)
     config = NIRLConfig(hidden_sizes=(16,), batch_size=16, demo_fraction=0.5)
     learners = []
@@ -212,7 +213,9 @@ def test_relabelled_demonstrations_train_the_fixed_reward_phase_on_the_action_th
 
         fit.refine = refine
         fit.mixed_batch = lambda offline, batch=batch, is_expert=is_expert: (batch.clone(), is_expert)
-        losses.append(fit.q_step()["losses/td_loss"])
+        metrics = fit.q_step()
+        assert not any(name.startswith("charts/refine_") for name in metrics)
+        losses.append(metrics["losses/td_loss"])
     assert losses[0] == losses[1]
     for name, value in learners[0][0].get_weights().items():
         assert np.array_equal(learners[1][0].get_weights()[name], value), name

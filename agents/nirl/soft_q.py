@@ -112,20 +112,22 @@ class SoftQFit(FitParts):
         terminated = batch[("next", "terminated")].reshape(-1)
         labels = batch["action"].long().reshape(-1).clone()
         weights = torch.ones(len(labels), device=labels.device)
-        refined = self.refine(obs[is_expert], labels[is_expert], batch["noise"][is_expert])
-        labels[is_expert], weights[is_expert] = refined.labels, refined.weights
+        fixed = cfg.core == "iq" and self.reward_fixed
+        refined = None
+        if not fixed:
+            # MAP refinement feeds the IQ-Learn and SQIL terms; once the reward is fixed, TD learns what
+            # happened: the recorded action led to next_obs, whatever refinement would relabel it to
+            refined = self.refine(obs[is_expert], labels[is_expert], batch["noise"][is_expert])
+            labels[is_expert], weights[is_expert] = refined.labels, refined.weights
         q_all = self.q.network(obs)
         q_taken = q_all.gather(1, labels[:, None]).squeeze(1)
         next_value = soft_value(self.target_q(next_obs), cfg.alpha)
         metrics: dict[str, float] = {}
         at_goal = goal_reached(next_obs, self.reward.n_beams, self.goal_tolerance, self.max_range)
         next_value, terminated = absorbing_next(cfg, next_value, terminated, at_goal)
-        if cfg.core == "iq" and self.reward_fixed:
+        if fixed:
             # NNQL policy iteration on the learned reward, now frozen: soft Q-learning with r = R(s, a)
-            # of the reward network (the absorbing crash state keeps its value). TD learns what happened:
-            # the recorded action led to next_obs, whatever MAP refinement relabelled it to
-            labels = batch["action"].long().reshape(-1)
-            q_taken = q_all.gather(1, labels[:, None]).squeeze(1)
+            # of the reward network (the absorbing crash state keeps its value), on the recorded actions
             if self.potential is not None:  # the progress reward (agents.nirl.progress): ends folded in
                 raw_end = batch[("next", "terminated")].reshape(-1).bool()
                 reward = shaped_progress_reward(self.potential, obs, next_obs, raw_end, at_goal, cfg.gamma)
@@ -161,15 +163,15 @@ class SoftQFit(FitParts):
         self.q.updates += 1
         self.after_update()
         metrics.update(self.reward_scale(reward, q_taken.detach(), q_all.detach(), batch, is_expert))
-        decisions = refined.decisions
-        metrics.update({
-            "losses/grad_norm": norm,
-            "charts/refine_keep": float((decisions == KEEP).float().mean()),
-            "charts/refine_reweight": float((decisions == REWEIGHT).float().mean()),
-            "charts/refine_relabel": float((decisions == RELABEL).float().mean()),
-            "charts/demo_weight": float(refined.weights.mean()),
-            "charts/version": float(self.q.updates),
-        })  # fmt: skip
+        metrics.update({"losses/grad_norm": norm, "charts/version": float(self.q.updates)})
+        if refined is not None:
+            decisions = refined.decisions
+            metrics.update({
+                "charts/refine_keep": float((decisions == KEEP).float().mean()),
+                "charts/refine_reweight": float((decisions == REWEIGHT).float().mean()),
+                "charts/refine_relabel": float((decisions == RELABEL).float().mean()),
+                "charts/demo_weight": float(refined.weights.mean()),
+            })  # fmt: skip
         return metrics
 
     def reward_scale(self, reward, q_taken, q_all, batch, is_expert) -> dict[str, float]:

@@ -223,9 +223,10 @@ def _progress_bar(run: NIRLRun, config: NIRLConfig):
 def _postfix(point: dict[str, float]) -> str:
     text = (
         f"steps {point['env_steps']:.0f} train success {point['train_success']:.0%} "
-        f"reward/step {point.get('nirl/learned_reward', float('nan')):.3f} "
-        f"relabel {point.get('charts/refine_relabel', 0.0):.0%}"
+        f"reward/step {point.get('nirl/learned_reward', float('nan')):.3f}"
     )
+    if "charts/refine_relabel" in point:  # MAP refinement runs until the reward is fixed
+        text += f" relabel {point['charts/refine_relabel']:.0%}"
     if "eval_success" in point:
         text += f" eval {point['eval_success']:.0%}"
     return text
