@@ -15,16 +15,17 @@ import json
 import sys
 from pathlib import Path
 
-from bench._nirl_report import FAMILIES, SETS, mcnemar
+from bench._nirl_report import FAMILIES, SETS, mcnemar, paired
 
 
-def outcomes(path: Path, method: str) -> dict[tuple[str, int], dict]:
-    """The last line of ``method`` per (demo set, seed) in a runs file: its test figures."""
+def lines(path: Path, method: str, label: str) -> dict[tuple[str, str, int], dict]:
+    """The last line of ``method`` per (demo set, seed) in a runs file (a re-run replaces its line),
+    keyed ``(label, set, seed)`` as ``_nirl_report.paired`` reads cells."""
     rows = {}
     for line in path.read_text().splitlines():
         row = json.loads(line)
         if row["method"] == method:
-            rows[(row["set"], row["seed"])] = row["test"]
+            rows[(label, row["set"], row["seed"])] = row
     return rows
 
 
@@ -35,15 +36,15 @@ def main() -> int:
     parser.add_argument("--b", type=Path, required=True, help="runs file of the setting it is compared with")
     parser.add_argument("--method", default="nirl", help="the method whose lines are paired (default nirl)")
     args = parser.parse_args()
-    a, b = outcomes(args.a, args.method), outcomes(args.b, args.method)
+    latest = lines(args.a, args.method, "a") | lines(args.b, args.method, "b")
     cells = {}
     for demo_set in SETS:
-        seeds = sorted(seed for (s, seed) in a if s == demo_set and (s, seed) in b)
+        seeds = sorted(seed for (label, s, seed) in latest if label == "a" and s == demo_set
+                       and ("b", s, seed) in latest)  # fmt: skip
         for family in FAMILIES:
             if not seeds:
                 continue
-            x = [v for seed in seeds for v in a[(demo_set, seed)][family]["solved"]]
-            y = [v for seed in seeds for v in b[(demo_set, seed)][family]["solved"]]
+            x, y = paired(latest, ("a", demo_set), ("b", demo_set), family)
             only_a, only_b, p = mcnemar(x, y)
             rate_a, rate_b = sum(x) / len(x), sum(y) / len(y)
             print(f"{demo_set} {family}: {rate_a:.1%} vs {rate_b:.1%}, only a {only_a} / only b {only_b}, "
