@@ -8,7 +8,7 @@ import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 from safetensors.numpy import save_file
@@ -21,6 +21,9 @@ from agents.nirl.progress import ProgressPotential
 from agents.nnql.persistence import replace_dir
 from agents.replay_files import load_replay, save_replay
 
+if TYPE_CHECKING:  # the learner calls these functions with itself; typing only, no import cycle at run time
+    from agents.nirl.learner import NIRLLearner
+
 MODEL_NAME = "nirl"
 REWARD_FILE = "reward.safetensors"
 POTENTIAL_FILE = "potential.safetensors"
@@ -28,7 +31,7 @@ POTENTIAL_FILE = "potential.safetensors"
 STATE_FILE = "nirl.pt"
 
 
-def save_policy_files(learner: Any, path: str | Path, **metadata: Any) -> Path:
+def save_policy_files(learner: NIRLLearner, path: str | Path, **metadata: Any) -> Path:
     """The Q-network in the shared policy format (``agents.mlp``: model "nirl",
     kind "q_network", loadable by ``navlearn evaluate``) plus ``reward.safetensors`` and, with a
     progress potential, ``potential.safetensors`` (``navlearn nirl reward`` draws both)."""
@@ -71,7 +74,7 @@ def load_potential(path: str | Path) -> ProgressPotential | None:
     return potential.eval()
 
 
-def nirl_state(learner: Any) -> dict[str, Any]:
+def nirl_state(learner: NIRLLearner) -> dict[str, Any]:
     """Reward network, its optimiser, the frozen prior, the progress potential (if any), whether the
     reward is fixed, and NIRL's counters (the Q side is NNQLLearner's)."""
     potential = learner.potential
@@ -95,7 +98,7 @@ def nirl_state(learner: Any) -> dict[str, Any]:
     }
 
 
-def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
+def load_nirl_state(learner: NIRLLearner, state: Mapping[str, Any]) -> None:
     """Inverse of nirl_state. A state saved before cores existed (format 1) was the max-margin
     learner's: it loads into a learner with ``core="max_margin"`` and is refused, with the fix
     named, by the others."""
@@ -109,6 +112,15 @@ def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
         raise ValueError(
             f"NIRL state was saved by the {saved_core!r} core (format {version}); this learner runs "
             f"{core!r}: load it with NIRLConfig(core={saved_core!r}) or start a fresh run"
+        )
+    saved_dueling = bool(saved_config["dueling"])
+    if saved_dueling != learner.config.dueling:
+        head = "a dueling" if saved_dueling else "a plain"
+        flag = "--dueling" if saved_dueling else "--no-dueling"
+        raise ValueError(
+            f"NIRL state's Q-network has {head} head (dueling={saved_dueling}), this learner's "
+            f"dueling={learner.config.dueling}: load it with NIRLConfig(dueling={saved_dueling}) ({flag}) "
+            "or start a fresh run"
         )
     saved = RewardNetwork.from_architecture(state["reward_architecture"]).architecture
     if saved != learner.reward.architecture:
@@ -142,7 +154,7 @@ def load_nirl_state(learner: Any, state: Mapping[str, Any]) -> None:
     learner.demo_path_steps = int(counters.get("demo_path_steps", 0))
 
 
-def save_checkpoint(learner: Any, path: str | Path) -> Path:
+def save_checkpoint(learner: NIRLLearner, path: str | Path) -> Path:
     """A directory with q/ (the NNQLLearner checkpoint), nirl.pt (reward network, optimiser,
     counters) and demos/ when the learner owns its demonstration buffer; replaced atomically."""
 
@@ -155,19 +167,13 @@ def save_checkpoint(learner: Any, path: str | Path) -> Path:
     return replace_dir(path, write)
 
 
-def load_checkpoint(learner: Any, path: str | Path) -> None:
+def load_checkpoint(learner: NIRLLearner, path: str | Path) -> None:
     path = Path(path)
     state = torch.load(path / STATE_FILE, map_location=learner.device, weights_only=True)
-    saved_dueling = bool((SAVED_WITHOUT | state["config"])["dueling"])
-    if saved_dueling != learner.config.dueling:  # before the Q checkpoint's bare architecture mismatch
-        head = "a dueling" if saved_dueling else "a plain"
-        flag = "--dueling" if saved_dueling else "--no-dueling"
-        raise ValueError(
-            f"NIRL checkpoint {path}: its Q-network has {head} head (dueling={saved_dueling}), this "
-            f"learner's dueling={learner.config.dueling}: load it with NIRLConfig(dueling={saved_dueling}) "
-            f"({flag}) or start a fresh run"
-        )
+    try:  # first: its checks name the setting that loads it, before q/'s bare shape mismatch
+        learner.load_state_dict(state)
+    except ValueError as error:
+        raise ValueError(f"NIRL checkpoint {path}: {error}") from error
     learner.q.load_checkpoint(path / "q")
-    learner.load_state_dict(state)
     if learner.owns_demos and (path / "demos").exists():
         load_replay(learner.demos, path / "demos")

@@ -111,13 +111,13 @@ class SoftQFit(FitParts):
         obs, next_obs = batch["observation"], batch[("next", "observation")]
         terminated = batch[("next", "terminated")].reshape(-1)
         labels = batch["action"].long().reshape(-1).clone()
-        weights = torch.ones(len(labels), device=labels.device)
         fixed = cfg.core == "iq" and self.reward_fixed
         refined = None
         if not fixed:
             # MAP refinement feeds the IQ-Learn and SQIL terms; once the reward is fixed, TD learns what
             # happened: the recorded action led to next_obs, whatever refinement would relabel it to
             refined = self.refine(obs[is_expert], labels[is_expert], batch["noise"][is_expert])
+            weights = torch.ones(len(labels), device=labels.device)
             labels[is_expert], weights[is_expert] = refined.labels, refined.weights
         q_all = self.q.network(obs)
         q_taken = q_all.gather(1, labels[:, None]).squeeze(1)
