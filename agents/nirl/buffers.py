@@ -4,7 +4,6 @@ transitions, and sampling at any batch size."""
 from __future__ import annotations
 
 import warnings
-from typing import Any
 
 import numpy as np
 import torch
@@ -13,10 +12,10 @@ from torchrl.data import LazyTensorStorage, RandomSampler, TensorDictReplayBuffe
 
 from agents.demo_observation import load_demos_for
 from agents.demos import Demo, DemoFormatError
-from worlds.config import LEARNING_NAV
+from worlds.config import LEARNING_NAV, NavConfig
 
 
-def load_demonstrations(path: str, nav: Any = None) -> list[Demo]:
+def load_demonstrations(path: str, nav: NavConfig | None = None) -> list[Demo]:
     """The demonstrations of the Minari dataset ``path``, checked for a NIRL learner of ``nav``'s
     observation (default :data:`worlds.config.LEARNING_NAV`) and actions. Anything unusable - no
     such dataset, an empty one, steps without actions, observations of another size or recorded

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluation.runner import evaluate, make_eval_set
+from agents.evaluation.runner import EvalResult, Policy, evaluate, make_eval_set
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.learner import NIRLLearner
 from agents.nirl.losses import Refinement
@@ -37,7 +37,7 @@ from agents.nirl.refine_progress import refine_after_policy_iteration
 from agents.nirl.weights import HISTORY_FILE, WeightHistory, plot_weight_changes
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
 from agents.nnql.train_local import Candidate, TrainResult
-from worlds.config import LEARNING_NAV, with_moving_discs
+from worlds.config import LEARNING_NAV, NavConfig, with_moving_discs
 from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
@@ -70,19 +70,21 @@ class NIRLResult:
     averaged_rounds: int = 0
     """NIRLRun.average_last: how many own rounds at the end the learner's Q-network now averages"""
 
-    def policy(self) -> Any:
+    def policy(self) -> Policy:
         """NIRL's final policy: the NNQL phase's kept one, else the learner's Q-network (greedy)."""
         if self.policy_result is not None:
             return self.policy_result.policy.greedy()
         return self.learner.policy()
 
 
-def evaluate_greedy(learner: NIRLLearner, episodes: int, seed: int, nav: Any = None) -> Any:
+def evaluate_greedy(
+    learner: NIRLLearner, episodes: int, seed: int, nav: NavConfig | None = None
+) -> EvalResult:
     """Greedy policy on the shared held-out "unseen" set -> agents.evaluation EvalResult."""
     return evaluate_policy(learner.policy(), episodes, seed, nav)
 
 
-def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None) -> Any:
+def evaluate_policy(policy: Policy, episodes: int, seed: int, nav: NavConfig | None = None) -> EvalResult:
     return evaluate(policy, make_eval_set("unseen", episodes, seed=seed), config=nav)
 
 
@@ -90,7 +92,7 @@ def train_nirl(
     demos: Sequence[Any],
     config: NIRLConfig | None = None,
     run: NIRLRun | None = None,
-    nav: Any = None,
+    nav: NavConfig | None = None,
     on_iteration: Callable[[dict[str, float], NIRLLearner], None] | None = None,
 ) -> NIRLResult:
     """Warm-start on ``demos`` (``agents.demos.Demo`` list, recorded in ``nav``'s observation,
@@ -183,7 +185,7 @@ def train_nirl(
     return result
 
 
-def _validate(learner: NIRLLearner, run: NIRLRun, nav: Any, point: dict) -> tuple[float, float]:
+def _validate(learner: NIRLLearner, run: NIRLRun, nav: NavConfig, point: dict) -> tuple[float, float]:
     """Evaluate the greedy Q-network on the validation set, note it on ``point``, return keep_best's
     score (success, then SPL)."""
     metrics = evaluate_greedy(learner, run.eval_episodes, VALIDATION_SEED, nav).metrics["unseen"]

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from agents.evaluation.runner import evaluate, make_eval_set
+from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
@@ -102,7 +102,9 @@ TEST_SEED = 0
 """the final, reported evaluation uses the set of this seed (the one `navlearn evaluate` uses)"""
 
 
-def evaluate_policy(policy: Any, episodes: int, seed: int, nav: Any = None, dynamic: int = 0) -> Any:
+def evaluate_policy(
+    policy: NNQLPolicy, episodes: int, seed: int, nav: NavConfig | None = None, dynamic: int = 0
+) -> EvalResult:
     """Greedy evaluation on the shared held-out "unseen" set (agents.evaluation), plus ``dynamic``
     episodes of its "dynamic" set when positive -> EvalResult."""
     sets = [make_eval_set("unseen", episodes, seed=seed)]
@@ -244,7 +246,9 @@ class Candidate:
         return best
 
 
-def _validate(policy: Any, run: LocalTrainConfig, nav: Any, point: dict[str, float], best: Candidate | None):
+def _validate(
+    policy: NNQLPolicy, run: LocalTrainConfig, nav: NavConfig, point: dict[str, float], best: Candidate | None
+):
     """Evaluate on the validation set, note it on the curve point, return the better candidate."""
     report = evaluate_policy(policy, run.eval_episodes, VALIDATION_SEED, nav, run.eval_dynamic_episodes)
     metrics = report.metrics["unseen"]
