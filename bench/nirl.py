@@ -286,11 +286,13 @@ def run_one(
         result = train_local(
             LocalTrainConfig(steps=args.nnql_steps, eval_every=args.nnql_eval_every,
                              eval_episodes=args.val_episodes, keep_best=args.keep_best,
-                             final_eval_episodes=0, out="", seed=seed, progress=False, moving_discs=0),
-            NNQLConfig(seed=seed, dueling=args.nnql_dueling),  # static maps (nav)
+                             final_eval_episodes=0, out="", seed=seed, progress=False,
+                             moving_discs=args.nnql_discs),
+            NNQLConfig(seed=seed, dueling=args.nnql_dueling),
             nav=reward_nav,
         )  # fmt: skip
         kept = result.policy.greedy() if args.keep_best else result.learner.policy()  # the kept weights
+        row["nnql_discs"] = args.nnql_discs
         policy, row["env_steps"] = kept, result.env_steps
         if args.keep_best:
             row["keep_best"], row["selected_version"] = True, result.selected_version
@@ -340,6 +342,9 @@ def main() -> int:
     parser.add_argument("--nnql-dueling", action="store_true",
                         help="NNQL from scratch with its default dueling head (the recorded rows before "
                         "issue 15 part 7: the plain head)")  # fmt: skip
+    parser.add_argument("--nnql-discs", type=int, default=0,
+                        help="NNQL from scratch trains with 0..N moving discs per episode (train --local's "
+                        "default: 6; the recorded rows before issue 15 part 9: 0, static maps)")  # fmt: skip
     parser.add_argument("--val-episodes", type=int, default=50, help="validation episodes of the curves")
     parser.add_argument("--noise", type=float, default=0.3, help="random-action probability of the noisy set")
     parser.add_argument(
