@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import torch
+from tensordict import TensorDictBase
 from torchrl.data import TensorDictReplayBuffer
 
 from agents.nirl.config import NIRLConfig
@@ -17,8 +18,8 @@ from agents.nnql.learner import NNQLLearner
 
 ClipStep = Callable[[torch.Tensor, Any, torch.optim.Optimizer], float]
 """(loss, parameters, optimiser) -> gradient norm: backward, clip, step."""
-Refine = Callable[[torch.Tensor, torch.Tensor, torch.Tensor | None], Refinement]
-"""(observations, demonstrated actions, per-step noise or None) -> MAP refinement."""
+Refine = Callable[[TensorDictBase], Refinement]
+"""demonstrated steps (observation, action, recorded noise, ...) -> MAP refinement."""
 
 
 @dataclass(eq=False)

@@ -26,16 +26,18 @@ from typing import Any
 
 import numpy as np
 import torch
-from tensordict import TensorDict
+from tensordict import TensorDict, TensorDictBase
 from torchrl.data import TensorDictReplayBuffer
 
 from agents.nirl import persistence
 from agents.nirl.buffers import demo_buffer, demo_steps
 from agents.nirl.config import NIRLConfig
+from agents.nirl.hindsight import STORED, refine_demo
 from agents.nirl.losses import KEEP, Refinement, map_posterior, refine_steps, structured_margins
 from agents.nirl.max_margin import MaxMarginFit
 from agents.nirl.networks import RewardNetwork
 from agents.nirl.progress import ProgressPotential, steps_to_go
+from agents.nirl.refine_progress import refined_to_go
 from agents.nirl.soft_q import SoftQFit
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
@@ -66,6 +68,7 @@ class NIRLLearner:
     ):
         self.config = config
         nav = nav or NavConfig()
+        self.nav: NavConfig = nav
         obs_dim, n_actions = observation_dim(nav), nav.robot.n_actions
         observation = observation_settings(nav)
         self.q = NNQLLearner(
@@ -152,16 +155,34 @@ class NIRLLearner:
             self._check_episode(index, fields[0], fields[1])
             td = transitions_to_tensordict(demo_steps(*fields), self.obs_dim)
             n = td.batch_size[0]
-            td.set("episode", torch.full((n,), self.demo_episodes, dtype=torch.int64))
+            episode = torch.full((n,), self.demo_episodes, dtype=torch.int64)
+            td.set("episode", episode)
             noise = meta.get("noise") if isinstance(meta, Mapping) else None
-            td.set("noise", torch.full((n,), self.config.demo_noise if noise is None else float(noise)))
+            noise = self.config.demo_noise if noise is None else float(noise)
+            td.set("noise", torch.full((n,), noise))
             reached = bool(np.asarray(fields[2])[-1]) if len(fields[2]) else False  # ended by termination
-            td.set("to_go", torch.as_tensor(steps_to_go(n, reached)))
+            to_go = torch.as_tensor(steps_to_go(n, reached))
+            if self.config.refine and self.config.refine_prior == "hindsight":
+                refined = self._hindsight(index, item, noise)
+                for key, value in zip(STORED, refined, strict=True):
+                    td.set(key, value)
+                to_go = refined_to_go(episode, to_go, refined.decisions)  # steps judged noise do not count
+            td.set("to_go", to_go)
             self.demos.extend(td)
             self.demo_episodes += 1
             self.demo_path_steps += td.batch_size[0]
             steps += td.batch_size[0]
         return steps
+
+    def _hindsight(self, index: int, item: Any, noise: float) -> Refinement:
+        """The hindsight refinement of one added episode (agents.nirl.hindsight)."""
+        if getattr(item, "poses", None) is None or getattr(item, "grid", None) is None:
+            raise ValueError(
+                f"demonstration {index}: NIRLConfig.refine_prior='hindsight' needs the episode's poses, goal "
+                "and map size (an agents.demos.Demo); demonstrations sent over the wire carry none - use "
+                "refine_prior='policy'"
+            )
+        return refine_demo(item, self.nav, noise)
 
     def _check_episode(self, index: int, observations: Any, actions: Any) -> None:
         obs, acts = np.asarray(observations), np.asarray(actions)
@@ -197,25 +218,26 @@ class NIRLLearner:
         if self.prior_network is None and self.config.refine and self.q.updates >= self.config.refine_start:
             self.prior_network = copy.deepcopy(self.q.network).requires_grad_(False)
 
-    def refine(
-        self, obs: torch.Tensor, actions: torch.Tensor, noise: torch.Tensor | None = None
-    ) -> Refinement:
-        """MAP refinement of demonstrated steps under the current policy prior (see losses.refine_steps);
-        ``noise`` (N,) is each step's random-action probability as its dataset recorded it (None:
-        ``demo_noise``). Every step is kept with weight 1 while refinement is off or before
-        ``refine_start`` Q updates."""
-        actions = actions.long().reshape(-1)
-        if not self.config.refine or self.q.updates < self.config.refine_start:
+    def refine(self, steps: TensorDictBase) -> Refinement:
+        """MAP refinement of demonstrated ``steps`` (their observation, action and recorded noise): the
+        hindsight refinement stored with them when ``refine_prior`` is hindsight, else under the current
+        policy prior (see losses.refine_steps). With the policy prior every step is kept with weight 1
+        while refinement is off or before ``refine_start`` Q updates."""
+        actions = steps["action"].long().reshape(-1)
+        if not self.config.refine or (
+            self.config.refine_prior == "policy" and self.q.updates < self.config.refine_start
+        ):
             ones = torch.ones(len(actions), device=actions.device)
             return Refinement(actions, ones, torch.full_like(actions, KEEP))
-        noise = self.config.demo_noise if noise is None else noise
-        posterior = map_posterior(self.prior(obs), actions, noise)
+        if self.config.refine_prior == "hindsight":
+            return Refinement(*(steps[key].reshape(-1) for key in STORED))
+        posterior = map_posterior(self.prior(steps["observation"]), actions, steps["noise"])
         return refine_steps(posterior, actions, self.config.relabel_threshold)
 
     def refine_all(self) -> tuple[TensorDict, Refinement]:
         """Every stored demonstration step and its refinement (for reports and tests)."""
         steps = self.demos.storage.get(torch.arange(len(self.demos))).to(self.device)
-        return steps, self.refine(steps["observation"], steps["action"], steps.get("noise", None))
+        return steps, self.refine(steps)
 
     # ------------------------------------------------------------ updates
 

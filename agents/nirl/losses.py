@@ -239,18 +239,25 @@ class Refinement(NamedTuple):
     """(N,) int64: KEEP, REWEIGHT or RELABEL"""
 
 
-def refine_steps(posterior: torch.Tensor, observed: torch.Tensor, relabel_threshold: float) -> Refinement:
+def refine_steps(
+    posterior: torch.Tensor, observed: torch.Tensor, relabel_threshold: float, judge_recorded: bool = False
+) -> Refinement:
     """Keep, re-weight or relabel each demonstrated step from its posterior.
 
     The MAP action replaces the recorded one when it differs and its posterior reaches
     ``relabel_threshold`` (RELABEL); otherwise the recorded action stays, weighted by its
     own posterior - KEEP when it is the MAP action, REWEIGHT when the posterior doubts it
-    but names no confident alternative.
+    but names no confident alternative. With ``judge_recorded`` the test is on the recorded
+    action instead: it is replaced by the MAP action when it was noise with posterior at least
+    ``relabel_threshold`` (its own posterior at most ``1 - relabel_threshold``) - for a prior that
+    splits its mass over several near-equal actions, where no single one reaches the threshold
+    even when the recorded action is surely a random one (agents.nirl.hindsight).
     """
     observed = observed.long().reshape(-1)
     best_p, best = posterior.max(dim=1)
     kept_p = posterior.gather(1, observed[:, None]).squeeze(1)
-    relabel = (best != observed) & (best_p >= relabel_threshold)
+    confident = kept_p <= 1.0 - relabel_threshold if judge_recorded else best_p >= relabel_threshold
+    relabel = (best != observed) & confident
     labels = torch.where(relabel, best, observed)
     weights = torch.where(relabel, best_p, kept_p)
     decisions = torch.full_like(observed, REWEIGHT)

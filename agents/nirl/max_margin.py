@@ -66,7 +66,7 @@ class MaxMarginFit(FitParts):
         cfg = self.config
         batch = sample(self.demos, cfg.demo_batch_size, self.q.device)
         obs = batch["observation"]
-        refined = self.refine(obs, batch["action"], None)
+        refined = self.refine(batch)
         reward = self.reward(obs)
         if myopic:
             q_hat = reward
@@ -130,7 +130,7 @@ class MaxMarginFit(FitParts):
         margin = torch.zeros(())
         if coef > 0 and len(self.demos):
             demo = sample(self.demos, self.config.demo_batch_size, self.q.device)
-            refined = self.refine(demo["observation"], demo["action"], None)
+            refined = self.refine(demo)
             margin = max_margin_loss(
                 q.network(demo["observation"]), refined.labels, self.margins, refined.weights
             )

@@ -17,6 +17,7 @@ from tensordict import TensorDict
 
 from agents.nirl.buffers import sample
 from agents.nirl.fit_parts import FitParts
+from agents.nirl.hindsight import STORED
 from agents.nirl.losses import (
     KEEP,
     RELABEL,
@@ -91,6 +92,10 @@ class SoftQFit(FitParts):
             parts.append(sample(self.experience, cfg.batch_size - n_demo).select(*BATCH_KEYS))
         batch = torch.cat(parts) if len(parts) > 1 else parts[0]
         batch.set("noise", torch.cat([noise, torch.zeros(cfg.batch_size - n_demo)]))
+        for key in STORED:  # the hindsight refinement of the demonstrated rows (refine_prior hindsight)
+            if key in demos:
+                value = demos[key]
+                batch.set(key, torch.cat([value, torch.zeros(cfg.batch_size - n_demo, dtype=value.dtype)]))
         is_expert = torch.zeros(cfg.batch_size, dtype=torch.bool)
         is_expert[:n_demo] = True
         device = self.q.device
@@ -116,7 +121,7 @@ class SoftQFit(FitParts):
         if not fixed:
             # MAP refinement feeds the IQ-Learn and SQIL terms; once the reward is fixed, TD learns what
             # happened: the recorded action led to next_obs, whatever refinement would relabel it to
-            refined = self.refine(obs[is_expert], labels[is_expert], batch["noise"][is_expert])
+            refined = self.refine(batch[is_expert])
             weights = torch.ones(len(labels), device=labels.device)
             labels[is_expert], weights[is_expert] = refined.labels, refined.weights
         q_all = self.q.network(obs)
