@@ -4,6 +4,7 @@ costs, the refinement on demonstrations with known injected noise, and the learn
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -23,6 +24,7 @@ from agents.nirl.hindsight import (
 from agents.nirl.learner import NIRLLearner
 from agents.nirl.losses import RELABEL, map_posterior, refine_steps
 from agents.planning.demonstrate import generate_demos
+from services.cli import main
 from worlds.config import LEARNING_NAV
 from worlds.maps import GridMap
 from worlds.sensors import cast_rays
@@ -155,3 +157,34 @@ def test_hindsight_needs_episodes_with_poses_and_a_known_prior_name():
         NIRLConfig(refine_prior="oracle")
     with pytest.raises(ValueError, match="temperature"):
         HindsightSettings(temperature=0.0)
+
+
+def test_nirl_train_with_the_hindsight_prior_from_the_command_line(tmp_path, capsys):
+    """`navlearn demos generate` with noise, then `navlearn nirl train --refine-prior hindsight` (tiny
+    sizes): the run prints and records what refinement relabelled."""
+    demos = tmp_path / "noisy-v0"
+    assert main(["demos", "generate", "--maps", "mixed:16", "--episodes", "6", "--noise", "0.3",
+                 "--seed", "20007", "--out", str(demos)]) == 0  # fmt: skip
+    out = tmp_path / "run"
+    argv = ["nirl", "train", "--demos", str(demos), "--refine-prior", "hindsight", "--iterations", "1",
+            "--warmstart-updates", "4", "--q-updates", "4", "--reward-updates", "1", "--steps-per-iteration",
+            "32", "--envs", "4", "--eval-every", "0", "--final-eval-episodes", "0", "--hidden-sizes", "16",
+            "--out", str(out), "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    refined = summary["refinement"]
+    assert refined["prior"] == "hindsight" and summary["nirl"]["refine_prior"] == "hindsight"
+    assert refined["steps"] == summary["demo_steps"] and refined["relabelled"] > 0
+    assert f"MAP refinement (hindsight prior): {refined['relabelled']} of {refined['steps']}" in printed
+
+
+def test_the_distributed_learner_refuses_the_hindsight_prior(tmp_path, capsys):
+    """Demonstrations reach `navlearn learner --nirl` without their poses: refused before it starts."""
+    config = tmp_path / "nirl.json"
+    config.write_text(json.dumps({"refine_prior": "hindsight"}))
+    argv = ["learner", "--nirl", "--nirl-config", str(config), "--checkpoint-dir", str(tmp_path / "ckpt")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("navlearn learner: NIRLConfig.refine_prior='hindsight'") and err.count("\n") == 1
+    assert not (tmp_path / "ckpt").exists()

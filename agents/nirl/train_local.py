@@ -30,7 +30,7 @@ import numpy as np
 from agents.evaluation.runner import EvalResult, Policy, evaluate, make_eval_set
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nirl.learner import NIRLLearner
-from agents.nirl.losses import Refinement
+from agents.nirl.losses import KEEP, RELABEL, REWEIGHT, Refinement
 from agents.nirl.policy_iteration import policy_iteration
 from agents.nirl.progress import ProgressPotential
 from agents.nirl.refine_progress import refine_after_policy_iteration
@@ -234,6 +234,21 @@ def _postfix(point: dict[str, float]) -> str:
     return text
 
 
+def refinement_summary(learner: NIRLLearner) -> dict[str, Any]:
+    """What MAP refinement made of the demonstrated steps at the end of a run: its prior (or off) and
+    how many steps it kept, re-weighted and relabelled."""
+    _, refined = learner.refine_all()
+    decisions = refined.decisions
+    config = learner.config
+    return {
+        "prior": config.refine_prior if config.refine else "off",
+        "steps": len(decisions),
+        "kept": int((decisions == KEEP).sum()),
+        "reweighted": int((decisions == REWEIGHT).sum()),
+        "relabelled": int((decisions == RELABEL).sum()),
+    }
+
+
 def write_outputs(out: Path, result: NIRLResult, config: NIRLConfig, run: NIRLRun) -> Path:
     """Policy files, weight history, learning curve and summary in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
@@ -259,6 +274,7 @@ def write_outputs(out: Path, result: NIRLResult, config: NIRLConfig, run: NIRLRu
         "selected_iteration": result.selected_iteration,
         "averaged_rounds": result.averaged_rounds,
         "policy_iteration": None if result.policy_result is None else result.policy_result.out,
+        "refinement": refinement_summary(result.learner),
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     if len(result.history) >= 2:

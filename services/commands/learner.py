@@ -104,4 +104,11 @@ def nirl_config(args: argparse.Namespace, seed: int):
         if unknown:
             raise ValueError(f"{args.nirl_config}: unknown NIRLConfig field(s) {unknown}")
         values.update(loaded)
-    return options_from_args(NIRLConfig, None, "NAVLEARN_NIRL", **values)
+    config = options_from_args(NIRLConfig, None, "NAVLEARN_NIRL", **values)
+    if config.refine and config.refine_prior == "hindsight":  # demonstrations arrive without their poses
+        raise ValueError(
+            "NIRLConfig.refine_prior='hindsight' needs each demonstration's poses, which the wire does "
+            "not carry: the distributed learner refines with refine_prior='policy' (hindsight: "
+            "`navlearn nirl train`)"
+        )
+    return config

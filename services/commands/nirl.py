@@ -28,6 +28,12 @@ runs K more of NIRL's rounds on the fixed reward first and starts NNQL's network
 The progress potential is fitted on the goal and subgoal features only (--potential-inputs goal,
 the default: it generalises better from 20 paths; observation: every feature); --moving-discs N
 adds 0..N moving discs to the rounds' episodes.
+MAP refinement's prior is the policy's own softmax by default; --refine-prior hindsight judges each
+demonstrated action instead by the lattice A* on the map the demonstration's own range readings
+drew (its recorded poses and readings, never the true map; agents/nirl/hindsight.py): on 20
+demonstrations with 30% random actions it relabels 31-42% of the random actions to the expert's
+and 80% of those that cost a detour, keeping 99% of the clean steps. The run prints and
+summary.json records how many demonstrated steps refinement relabelled.
 """
 
 
@@ -100,7 +106,7 @@ def run_train(args: argparse.Namespace) -> int:
     from agents.device import resolve_device
     from agents.nirl.buffers import load_demonstrations
     from agents.nirl.config import NIRLConfig, NIRLRun
-    from agents.nirl.train_local import train_nirl
+    from agents.nirl.train_local import refinement_summary, train_nirl
     from services.common.options import OptionError, options_from_args
     from worlds.tasks import parse_map_spec
 
@@ -123,6 +129,12 @@ def run_train(args: argparse.Namespace) -> int:
         f"{result.learner.iteration} iterations, {result.env_steps} robot-steps, "
         f"{result.learner.version} Q updates in {result.wall_time:.0f} s"
     )
+    refined = refinement_summary(result.learner)
+    if refined["prior"] != "off":
+        print(
+            f"MAP refinement ({refined['prior']} prior): {refined['relabelled']} of {refined['steps']} "
+            f"demonstrated steps relabelled, {refined['reweighted']} re-weighted"
+        )
     if result.final_table:
         print(result.final_table)
     if run.out:
