@@ -123,8 +123,12 @@ def test_refinement_relabels_injected_noise_and_keeps_clean_steps(noisy_sets):
         assert (labels[injected] != recorded[injected]).mean() >= 0.35
         assert (labels[~injected] == recorded[~injected]).mean() >= 0.97
     clean, _ = generate_demos("mixed:16", 5, seed=10_004, config=NAV)
-    for demo in clean:  # a clean expert (recorded noise 0) is never relabelled
-        assert (refine_demo(demo, NAV, 0.0).decisions != RELABEL).all()
+    for demo in clean:  # a clean expert (recorded noise 0) is kept as the posterior says, weight 1
+        kept = refine_demo(demo, NAV, 0.0)
+        assert torch.equal(kept.labels, torch.as_tensor(demo.actions)) and torch.all(kept.weights == 1)
+        prior = torch.as_tensor(hindsight_prior(demo_costs(demo, NAV), 0.2), dtype=torch.float32)
+        full = refine_steps(map_posterior(prior, kept.labels, 0.0), kept.labels, 0.7, judge_recorded=True)
+        assert torch.equal(full.decisions, kept.decisions) and torch.equal(full.weights, kept.weights)
 
 
 def test_learner_stores_the_refinement_and_counts_steps_to_go_without_noise(noisy_sets):

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from agents.nirl.losses import Refinement, map_posterior, refine_steps
+from agents.nirl.losses import KEEP, Refinement, map_posterior, refine_steps
 from agents.planning.astar import distance_field
 from agents.planning.lattice import plan_lattice
 from worlds.config import NavConfig
@@ -180,9 +180,13 @@ def demo_costs(demo, nav: NavConfig, margin: float = 0.1) -> np.ndarray:
 
 
 def refine_demo(demo, nav: NavConfig, noise: float, settings: HindsightSettings | None = None) -> Refinement:
-    """MAP refinement of every step of ``demo`` under the hindsight prior (module docstring)."""
+    """MAP refinement of every step of ``demo`` under the hindsight prior (module docstring). With
+    ``noise`` 0 (a clean expert) every step is kept with weight 1 - what the posterior gives - without
+    planning."""
     settings = settings or HindsightSettings()
-    prior = hindsight_prior(demo_costs(demo, nav, settings.margin), settings.temperature)
     recorded = torch.as_tensor(np.asarray(demo.actions), dtype=torch.int64)
+    if noise == 0:
+        return Refinement(recorded, torch.ones(len(recorded)), torch.full_like(recorded, KEEP))
+    prior = hindsight_prior(demo_costs(demo, nav, settings.margin), settings.temperature)
     posterior = map_posterior(torch.as_tensor(prior, dtype=torch.float32), recorded, noise)
     return refine_steps(posterior, recorded, settings.threshold, judge_recorded=True)
