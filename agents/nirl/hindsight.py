@@ -61,6 +61,8 @@ STORED = ("hindsight_label", "hindsight_weight", "hindsight_decision")
 """the demonstration buffer's fields holding each step's refinement (``Refinement``'s three, in order)"""
 TRACE_STEP = 0.05
 """spacing of the points traced along a ray (m): a 1 m cell is crossed by about 20 of them"""
+RANGE_MARGIN = 0.1
+"""a reading ``r`` marks its rays' cells free only up to ``r - RANGE_MARGIN`` (m), a margin for range noise"""
 
 
 @dataclass(frozen=True)
@@ -72,8 +74,8 @@ class HindsightSettings:
     """Boltzmann temperature of the prior over the actions' cost-to-go (m)"""
     threshold: float = 0.7
     """relabel (to the MAP action) when the recorded action was noise with at least this posterior"""
-    margin: float = 0.1
-    """a reading ``r`` marks its rays' cells free only up to ``r - margin`` (m): range noise"""
+    margin: float = RANGE_MARGIN
+    """a reading ``r`` marks its rays' cells free only up to ``r - margin`` (m)"""
 
     def __post_init__(self) -> None:
         if not self.temperature > 0:
@@ -90,7 +92,7 @@ def seen_map(
     nav: NavConfig,
     shape: tuple[int, int],
     cell_size: float,
-    margin: float = 0.1,
+    margin: float = RANGE_MARGIN,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The occupancy grid the readings of ``observations`` (T, obs_dim) taken at ``poses`` (T, 3)
     show (module docstring, step 1) -> (blocked, reached) boolean (H, W) arrays; ``reached`` marks
@@ -163,7 +165,7 @@ def hindsight_prior(costs: np.ndarray, temperature: float) -> np.ndarray:
     return weights / weights.sum(axis=1, keepdims=True)
 
 
-def demo_costs(demo, nav: NavConfig, margin: float = 0.1) -> np.ndarray:
+def demo_costs(demo, nav: NavConfig, margin: float = RANGE_MARGIN) -> np.ndarray:
     """(T, A) action costs at every demonstrated step of ``demo`` (an ``agents.demos.Demo``: its
     observations, poses, goal and the map's size; not the map's cells) on its seen map."""
     if demo.grid is None or "goal" not in demo.metadata:
