@@ -26,9 +26,8 @@ import time
 import numpy as np
 import torch
 
-from agents.nirl.hindsight import HindsightSettings, action_costs, demo_costs, hindsight_prior, seen_map
+from agents.nirl.hindsight import HindsightSettings, costs_along, demo_costs, hindsight_prior, seen_map
 from agents.nirl.losses import map_posterior, refine_steps
-from agents.planning.astar import distance_field
 from bench._nirl_options import cached, rates
 from bench.nirl import demo_sets
 from bench.nirl_refine import noisy_set
@@ -45,10 +44,7 @@ NEAR_BEST = 0.1
 
 def true_costs(demo, nav) -> np.ndarray:
     """(T, A) the same action costs on the true map (the bench's reference, never the learner's)."""
-    grid = demo.task().grid
-    goal = tuple(int(v) for v in demo.metadata["goal"])
-    field = distance_field(grid, goal)
-    return np.stack([action_costs(grid, demo.poses[t], goal, nav, field) for t in range(len(demo.actions))])
+    return costs_along(demo, demo.task().grid, nav)
 
 
 def map_figures(demos, nav, margin: float) -> dict:

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from agents.nirl.losses import KEEP, Refinement, map_posterior, refine_steps
+from agents.nirl.losses import Refinement, kept_as_recorded, map_posterior, refine_steps
 from agents.planning.astar import distance_field
 from agents.planning.lattice import plan_lattice
 from worlds.config import NavConfig
@@ -172,13 +172,16 @@ def demo_costs(demo, nav: NavConfig, margin: float = RANGE_MARGIN) -> np.ndarray
         raise ValueError(
             "hindsight refinement needs the demonstration's map size and goal (Demo.grid, .metadata)"
         )
-    shape, cell = demo.grid.shape, float(demo.grid.cell_size)
-    steps = len(demo.actions)
-    blocked, _ = seen_map(demo.observations, demo.poses, nav, shape, cell, margin)
-    grid = GridMap(blocked, cell)
+    cell = float(demo.grid.cell_size)
+    blocked, _ = seen_map(demo.observations, demo.poses, nav, demo.grid.shape, cell, margin)
+    return costs_along(demo, GridMap(blocked, cell), nav)
+
+
+def costs_along(demo, grid: GridMap, nav: NavConfig) -> np.ndarray:
+    """(T, A) ``action_costs`` on ``grid`` at every demonstrated pose of ``demo``, towards its goal."""
     goal = tuple(int(v) for v in demo.metadata["goal"])
     field = distance_field(grid, goal)
-    return np.stack([action_costs(grid, demo.poses[t], goal, nav, field) for t in range(steps)])
+    return np.stack([action_costs(grid, demo.poses[t], goal, nav, field) for t in range(len(demo.actions))])
 
 
 def refine_demo(demo, nav: NavConfig, noise: float, settings: HindsightSettings | None = None) -> Refinement:
@@ -188,7 +191,7 @@ def refine_demo(demo, nav: NavConfig, noise: float, settings: HindsightSettings 
     settings = settings or HindsightSettings()
     recorded = torch.as_tensor(np.asarray(demo.actions), dtype=torch.int64)
     if noise == 0:
-        return Refinement(recorded, torch.ones(len(recorded)), torch.full_like(recorded, KEEP))
+        return kept_as_recorded(recorded)
     prior = hindsight_prior(demo_costs(demo, nav, settings.margin), settings.temperature)
     posterior = map_posterior(torch.as_tensor(prior, dtype=torch.float32), recorded, noise)
     return refine_steps(posterior, recorded, settings.threshold, judge_recorded=True)

@@ -33,7 +33,7 @@ from agents.nirl import persistence
 from agents.nirl.buffers import demo_buffer, demo_steps
 from agents.nirl.config import NIRLConfig
 from agents.nirl.hindsight import STORED, refine_demo
-from agents.nirl.losses import KEEP, Refinement, map_posterior, refine_steps, structured_margins
+from agents.nirl.losses import Refinement, kept_as_recorded, map_posterior, refine_steps, structured_margins
 from agents.nirl.max_margin import MaxMarginFit
 from agents.nirl.networks import RewardNetwork
 from agents.nirl.progress import ProgressPotential, steps_to_go
@@ -227,8 +227,7 @@ class NIRLLearner:
         if not self.config.refine or (
             self.config.refine_prior == "policy" and self.q.updates < self.config.refine_start
         ):
-            ones = torch.ones(len(actions), device=actions.device)
-            return Refinement(actions, ones, torch.full_like(actions, KEEP))
+            return kept_as_recorded(actions)
         if self.config.refine_prior == "hindsight":
             return Refinement(*(steps[key].reshape(-1) for key in STORED))
         posterior = map_posterior(self.prior(steps["observation"]), actions, steps["noise"])

@@ -239,6 +239,14 @@ class Refinement(NamedTuple):
     """(N,) int64: KEEP, REWEIGHT or RELABEL"""
 
 
+def kept_as_recorded(observed: torch.Tensor) -> Refinement:
+    """Every demonstrated step kept as recorded, weight 1 (refinement off, not started, or a clean
+    demonstrator, whose posterior is certain of the recorded action)."""
+    observed = observed.long().reshape(-1)
+    ones = torch.ones(len(observed), device=observed.device)
+    return Refinement(observed, ones, torch.full_like(observed, KEEP))
+
+
 def refine_steps(
     posterior: torch.Tensor, observed: torch.Tensor, relabel_threshold: float, judge_recorded: bool = False
 ) -> Refinement:

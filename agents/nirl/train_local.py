@@ -65,6 +65,8 @@ class NIRLResult:
     evidence (agents.nirl.refine_progress), in the demonstration buffer's order"""
     refined_potential: ProgressPotential | None = None
     """the progress potential re-fitted on the refined demonstrations' steps to go"""
+    demo_refinement: dict[str, Any] = field(default_factory=dict)
+    """what the learner's own MAP refinement made of the demonstrations at the end (``refinement_summary``)"""
     selected_iteration: int | None = None
     """NIRLRun.keep_best: the own round whose Q-network the learner now holds (the best validated)"""
     averaged_rounds: int = 0
@@ -179,6 +181,7 @@ def train_nirl(
         result.final_table = report.table()
         if result.curve and "eval_success" not in result.curve[-1]:
             result.curve[-1]["eval_success"] = report.metrics["unseen"].success.value
+    result.demo_refinement = refinement_summary(learner)
     result.wall_time = time.perf_counter() - start
     if run.out:
         write_outputs(Path(run.out), result, config, run)
@@ -274,7 +277,7 @@ def write_outputs(out: Path, result: NIRLResult, config: NIRLConfig, run: NIRLRu
         "selected_iteration": result.selected_iteration,
         "averaged_rounds": result.averaged_rounds,
         "policy_iteration": None if result.policy_result is None else result.policy_result.out,
-        "refinement": refinement_summary(result.learner),
+        "refinement": result.demo_refinement,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     if len(result.history) >= 2:

@@ -106,7 +106,7 @@ def run_train(args: argparse.Namespace) -> int:
     from agents.device import resolve_device
     from agents.nirl.buffers import load_demonstrations
     from agents.nirl.config import NIRLConfig, NIRLRun
-    from agents.nirl.train_local import refinement_summary, train_nirl
+    from agents.nirl.train_local import train_nirl
     from services.common.options import OptionError, options_from_args
     from worlds.tasks import parse_map_spec
 
@@ -129,7 +129,7 @@ def run_train(args: argparse.Namespace) -> int:
         f"{result.learner.iteration} iterations, {result.env_steps} robot-steps, "
         f"{result.learner.version} Q updates in {result.wall_time:.0f} s"
     )
-    refined = refinement_summary(result.learner)
+    refined = result.demo_refinement
     if refined["prior"] != "off":
         print(
             f"MAP refinement ({refined['prior']} prior): {refined['relabelled']} of {refined['steps']} "
