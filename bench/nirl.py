@@ -29,9 +29,10 @@ The grid-world check (``agents.nirl.gridcheck``) measures reward recovery where 
 
 Observation (``--nav``): ``learning`` (the default, ``worlds.config.LEARNING_NAV``: 24 sector minima,
 the goal, the subgoal from the robot's own map, geodesic progress reward for the learners that use the
-environment's reward) or ``default`` (``NavConfig()``: 8 beams + goal, the first table's). The expert
-acts on the true map either way; its demonstrations are recorded in the chosen observation, and its
-own success on the same test episodes is measured beside (``--methods expert``).
+environment's reward), ``learning_plan`` (the same and the length of the own map's plan to the
+goal, ``ObservationConfig.plan_length``) or ``default`` (``NavConfig()``: 8 beams + goal, the first
+table's). The expert acts on the true map either way; its demonstrations are recorded in the
+chosen observation, and its own success on the same test episodes is measured beside (``--methods expert``).
 
 Runs append one JSON line each to ``--runs`` (default ``bench/nirl_runs_learning.jsonl`` for
 ``--nav learning``, ``bench/nirl_runs.jsonl``, the first table's, for ``--nav default``; so the grid
@@ -87,7 +88,7 @@ from bench._nirl_options import (
 )
 from bench._nirl_report import FAMILIES, METHODS, SETS, report
 from bench.planning import expert_outcomes
-from worlds.config import LEARNING_NAV, NavConfig, RewardConfig, observation_settings
+from worlds.config import LEARNING_NAV, NavConfig, RewardConfig, observation_settings, with_observation
 from worlds.outcomes import Outcome
 from worlds.perception import observation_dim
 
@@ -100,10 +101,18 @@ ISSUE8 = {
 SQIL = {"core": "sqil", "q_updates": 256}
 """SQIL as the tables measured it (256 Q updates per round, NIRL's default before issue 15 part 3)"""
 VALIDATION_SEED = 1
-NAVS = {"learning": LEARNING_NAV, "default": NavConfig()}
+NAVS = {
+    "learning": LEARNING_NAV,
+    "learning_plan": with_observation(LEARNING_NAV, {"observation.plan_length": True}),
+    "default": NavConfig(),
+}
 NO_DEMOS = ("nnql", "nnql_line")
 """learners that take no demonstrations (one run per seed)"""
-RUNS = {"learning": "bench/nirl_runs_learning.jsonl", "default": "bench/nirl_runs.jsonl"}
+RUNS = {
+    "learning": "bench/nirl_runs_learning.jsonl",
+    "learning_plan": "bench/nirl_runs_learning_plan.jsonl",
+    "default": "bench/nirl_runs.jsonl",
+}
 
 
 def demo_sets(
@@ -357,7 +366,10 @@ def main() -> int:
     )  # fmt: skip
     parser.add_argument("--gridcheck", action="store_true", help="also run the grid-world reward recovery")
     parser.add_argument(
-        "--nav", choices=list(NAVS), default="learning", help="observation: LEARNING_NAV or NavConfig()"
+        "--nav",
+        choices=list(NAVS),
+        default="learning",
+        help="observation: LEARNING_NAV, LEARNING_NAV with the own map's plan length, or NavConfig()",
     )
     parser.add_argument("--runs", default=None, help="JSON lines file runs append to (default by --nav)")
     parser.add_argument(

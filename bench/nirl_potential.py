@@ -2,13 +2,14 @@
 
 The potential (``agents.nirl.progress``) is fitted as NIRL fits it - Adam (AdamW's decoupled decay
 in the weight-decay rows), 750 steps of 128 states, the same MLP - on the 20 clean demonstrations of
-bench/nirl.py's seed (the expert on ``mixed:16``, demo seed 10000 + seed), in LEARNING_NAV, with
-several inputs and regularisers; each is scored on 40 held-out expert episodes (seed 30001 + seed,
-other maps): root-mean-square error of the steps to go (the fitted discounted value inverted) and its
-correlation with them, mean of ``--fits`` fitting seeds. CPU seconds; prints a table, then one JSON
-object on the last line.
+bench/nirl.py's seed (the expert on ``mixed:16``, demo seed 10000 + seed), in LEARNING_NAV (or
+``--nav``'s observation), with several inputs and regularisers; each is scored on 40 held-out
+expert episodes (seed 30001 + seed, other maps): root-mean-square error of the steps to go (the
+fitted discounted value inverted) and its correlation with them, mean of ``--fits`` fitting seeds.
+CPU seconds; prints a table, then one JSON object on the last line.
 
-    python -m bench.nirl_potential            # seed 0, 3 fits
+    python -m bench.nirl_potential                       # seed 0, 3 fits, LEARNING_NAV
+    python -m bench.nirl_potential --nav learning_plan   # with the own map's plan length observed
 """
 
 from __future__ import annotations
@@ -24,15 +25,17 @@ from agents.nirl.learner import NIRLLearner
 from agents.nirl.progress import ProgressPotential
 from agents.nirl.refine_progress import fit_potential
 from agents.planning.demonstrate import generate_demos
-from worlds.config import LEARNING_NAV
+from bench.nirl import NAVS
+from worlds.config import NavConfig
+from worlds.perception import frame_layout
 
 GAMMA = 0.99
 
 
-def states(demos) -> tuple[torch.Tensor, torch.Tensor]:
+def states(demos, nav: NavConfig) -> tuple[torch.Tensor, torch.Tensor]:
     """Observations of the demonstrated steps and the expert's steps to go from each (0: unknown), as
     NIRL's learner stores them (``NIRLLearner.add_demos``)."""
-    learner = NIRLLearner(NIRLConfig(), LEARNING_NAV)
+    learner = NIRLLearner(NIRLConfig(), nav)
     learner.add_demos(demos)
     steps = learner.demos.storage.get(torch.arange(len(learner.demos)))
     return steps["observation"], steps["to_go"]
@@ -66,11 +69,13 @@ def main() -> int:
     )
     parser.add_argument("--seed", type=int, default=0, help="bench/nirl.py's seed of the demonstrations")
     parser.add_argument("--fits", type=int, default=3, help="fitting seeds averaged per variant")
+    parser.add_argument("--nav", choices=list(NAVS), default="learning", help="observation (bench/nirl.py's)")
     args = parser.parse_args()
-    train, _ = generate_demos("mixed:16", 20, seed=10_000 + args.seed, config=LEARNING_NAV)
-    heldout, _ = generate_demos("mixed:16", 40, seed=30_001 + args.seed, config=LEARNING_NAV)
-    (obs, to_go), (obs_h, to_go_h) = states(train), states(heldout)
-    goal = LEARNING_NAV.sensors.n_beams  # the goal and subgoal features follow the range readings
+    nav = NAVS[args.nav]
+    train, _ = generate_demos("mixed:16", 20, seed=10_000 + args.seed, config=nav)
+    heldout, _ = generate_demos("mixed:16", 40, seed=30_001 + args.seed, config=nav)
+    (obs, to_go), (obs_h, to_go_h) = states(train, nav), states(heldout, nav)
+    goal = nav.sensors.n_beams  # the goal and subgoal features follow the range readings
     variants = {
         "all 30 features (part 3-4)": {},
         "all, weight decay 0.01": {"weight_decay": 1e-2},
@@ -81,6 +86,8 @@ def main() -> int:
         "goal and subgoal only": {"first_input": goal},
         "goal and subgoal only, one layer of 32": {"first_input": goal, "hidden": (32,)},
     }
+    if "plan_length" in frame_layout(nav):
+        variants["plan length only"] = {"first_input": frame_layout(nav)["plan_length"][0]}
     print(f"{int((to_go > 0).sum())} demonstrated states, {int((to_go_h > 0).sum())} held-out expert states")
     print("| inputs, fit | demos: RMSE / correlation | held-out expert: RMSE / correlation |")
     print("| --- | --- | --- |")
@@ -98,7 +105,17 @@ def main() -> int:
             "heldout_r": mean[3],
         }
         print(f"| {name} | {mean[0]:.2f} / {mean[1]:.3f} | {mean[2]:.2f} / {mean[3]:.3f} |")
-    print(json.dumps({"bench": "nirl_potential", "seed": args.seed, "fits": args.fits, "variants": rows}))
+    print(
+        json.dumps(
+            {
+                "bench": "nirl_potential",
+                "nav": args.nav,
+                "seed": args.seed,
+                "fits": args.fits,
+                "variants": rows,
+            }
+        )
+    )
     return 0
 
 

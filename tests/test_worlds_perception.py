@@ -3,6 +3,7 @@ option validation and the geodesic reward."""
 
 from __future__ import annotations
 
+import heapq
 import math
 
 import numpy as np
@@ -124,7 +125,9 @@ def test_own_map_subgoal_cannot_peek_at_unseen_cells():
     below, above = wall_with_gap(15), wall_with_gap(0)
     sensors = SensorConfig(n_beams=12, n_rays=48, noise_std=0.0)
     actions = [2, 2, 2, 2]
-    own = NavConfig(robot=EXACT, sensors=sensors, observation=ObservationConfig(subgoal="own_map"))
+    own = NavConfig(
+        robot=EXACT, sensors=sensors, observation=ObservationConfig(subgoal="own_map", plan_length=True)
+    )
     frames_a, occ_a = _run(below, own, actions)
     frames_b, occ_b = _run(above, own, actions)
     for occ in (occ_a, occ_b):
@@ -153,6 +156,62 @@ def test_own_map_subgoal_leads_around_a_seen_wall():
     assert sub_bearing > 0.5  # ... the waypoint leads towards +y, round the wall's open end (row 8+)
 
 
+def _grid_path_length(passable: np.ndarray, start, goal) -> float:
+    """Dijkstra on 8-connected cells, diagonals only between two passable side cells (cells of 1 m)."""
+    dist = {start: 0.0}
+    todo = [(0.0, start)]
+    while todo:
+        d, (r, c) = heapq.heappop(todo)
+        if (r, c) == goal:
+            return d
+        if d > dist[(r, c)]:
+            continue
+        for dr, dc in [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)]:
+            nr, nc = r + dr, c + dc
+            if not (0 <= nr < passable.shape[0] and 0 <= nc < passable.shape[1]) or not passable[nr, nc]:
+                continue
+            if dr and dc and not (passable[r, nc] and passable[nr, c]):
+                continue
+            nd = d + (math.sqrt(2) if dr and dc else 1.0)
+            if nd < dist.get((nr, nc), math.inf):
+                dist[(nr, nc)] = nd
+                heapq.heappush(todo, (nd, (nr, nc)))
+    return math.inf
+
+
+def test_plan_length_is_the_own_map_path_to_the_goal():
+    # a wall between robot and goal, seen from the start: the observed length is the shortest path
+    # round what the robot has seen (unknown cells free), longer than the straight line; with
+    # nothing seen in the way it is the straight grid path
+    wall = [(r, 5) for r in range(0, 8)]
+    config = NavConfig(robot=EXACT, sensors=SensorConfig(n_beams=24, n_rays=96, noise_std=0.0),
+                       observation=ObservationConfig(subgoal="own_map", plan_length=True))  # fmt: skip
+    at = frame_layout(config)["plan_length"][0]
+    assert frame_layout(config)["subgoal"][1] == at  # right after the subgoal
+
+    def observed(obs):
+        squashed = float(obs[at])
+        return squashed * 6.0 / (1.0 - squashed)  # squashed like the goal distance, by max_range
+
+    env = NavigationEnv(config)
+    obs, _ = env.reset(seed=0, options={"task": Task(grid_with([], size=10), (2, 2), (2, 8))})
+    assert observed(obs) == pytest.approx(6.0, abs=1e-4)
+    obs, _ = env.reset(seed=0, options={"task": Task(grid_with(wall, size=10), (2, 2), (2, 8))})
+    occ = env.batch.perception.occ[0, :10, :10]
+    assert (occ[:8, 5] == SEEN_BLOCKED).sum() >= 3  # the robot saw the wall
+    expected = _grid_path_length(occ != SEEN_BLOCKED, (2, 2), (2, 8))
+    assert expected > 6.5
+    assert observed(obs) == pytest.approx(expected, abs=1e-4)
+    for action in (2, 2, 1):  # and step by step, from each cell the robot reaches
+        obs, _, terminated, truncated, info = env.step(action)
+        assert not (terminated or truncated)
+        x, y, _ = info["pose"]
+        occ = env.batch.perception.occ[0, :10, :10]
+        assert observed(obs) == pytest.approx(
+            _grid_path_length(occ != SEEN_BLOCKED, (int(y), int(x)), (2, 8)), abs=1e-4
+        )
+
+
 @pytest.mark.parametrize(
     ("make", "field"),
     [
@@ -163,6 +222,8 @@ def test_own_map_subgoal_leads_around_a_seen_wall():
         (lambda: SensorConfig(n_beams=24, n_rays=12), "sensors.n_rays"),
         (lambda: SensorConfig(n_beams=24, n_rays=50), "sensors.n_rays"),
         (lambda: RewardConfig(geodesic_progress=-0.1), "rewards.geodesic_progress"),
+        (lambda: ObservationConfig(plan_length=True), "observation.plan_length"),
+        (lambda: ObservationConfig(subgoal="own_map", plan_length="yes"), "observation.plan_length"),
     ],
 )
 def test_bad_option_values_name_the_field(make, field):

@@ -51,6 +51,19 @@ def test_reused_plans_change_no_observation_or_reward(maps, policy):
     assert np.array_equal(fin0, fin1)
 
 
+PLAN_LENGTH = dataclasses.replace(
+    LEARNING_NAV, observation=dataclasses.replace(LEARNING_NAV.observation, plan_length=True)
+)
+
+
+@pytest.mark.parametrize("policy", ["random", "goal"])
+def test_reused_plans_keep_the_plan_length(policy):
+    obs0, rew0, fin0, _ = rollout(PLAN_LENGTH, "mixed:16", reuse=False, policy=policy)
+    obs1, rew1, fin1, planned = rollout(PLAN_LENGTH, "mixed:16", reuse=True, policy=policy)
+    assert planned > 0
+    assert np.array_equal(obs0, obs1) and np.array_equal(rew0, rew1) and np.array_equal(fin0, fin1)
+
+
 def test_reused_plans_on_the_known_map_change_nothing():
     obs0, rew0, fin0, _ = rollout(KNOWN_MAP, "rooms:16", reuse=False, policy="goal")
     obs1, rew1, fin1, _ = rollout(KNOWN_MAP, "rooms:16", reuse=True, policy="goal")

@@ -183,11 +183,20 @@ class ObservationConfig:
     """append each reading's change since the previous step, in metres, clipped to [-1, 1] (negative:
     something came closer; 0 at the first step): a cheap motion cue for moving discs in place of a
     frame stack"""
+    plan_length: bool = False
+    """append the length of the subgoal's path from the robot's cell to the goal (m, squashed like
+    the goal distance; the straight-line distance when no path exists): how far the goal is around
+    the walls the robot has seen, which the straight line and a waypoint 2.5 m ahead do not say.
+    Needs a subgoal"""
 
     def __post_init__(self) -> None:
+        for name in ("range_rate", "plan_length"):
+            value = getattr(self, name)
+            _check(isinstance(value, bool | np.bool_), f"observation.{name}={value!r}: must be True or False")
         _check(
-            isinstance(self.range_rate, bool | np.bool_),
-            f"observation.range_rate={self.range_rate!r}: must be True or False",
+            not self.plan_length or self.subgoal != "none",
+            "observation.plan_length=True needs a subgoal planner (subgoal 'own_map' or 'known_map'), "
+            "got subgoal='none'",
         )
         _check(self.frame_stack >= 1, f"observation.frame_stack={self.frame_stack}: must be >= 1")
         _check(self.subgoal in SUBGOALS, f"observation.subgoal={self.subgoal!r}: expected one of {SUBGOALS}")
@@ -210,6 +219,7 @@ class ObservationConfig:
             and self.subgoal == "none"
             and not self.patch_size
             and not self.range_rate
+            and not self.plan_length
         )
 
 
@@ -253,6 +263,7 @@ OBSERVATION_FIELDS = (
     "observation.subgoal_distance",
     "observation.patch_size",
     "observation.range_rate",
+    "observation.plan_length",
 )
 """the settings that fix what a policy observes (and its action count); saved policies record them"""
 
@@ -268,6 +279,7 @@ LEGACY_OBSERVATION = {
     "observation.subgoal_distance": 2.5,
     "observation.patch_size": 0,
     "observation.range_rate": False,
+    "observation.plan_length": False,
 }
 """what a policy saved without an ``observation`` record observes: 8 beams, goal, one frame
 (every navlearn policy saved before these settings existed, e.g. the first ``pretrained/nnql``)"""

@@ -120,15 +120,16 @@ def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam,
     exists. ``work``: the search's work arrays (:func:`worlds.gridsearch.new_work`). The cells it
     expanded get the stamp ``exam_id`` in ``exam`` (a search reads only their 3x3 neighbourhoods,
     so changes elsewhere leave its result as it is). Returns (the waypoint's padded cell, -1 for the
-    goal itself; searched)."""
+    goal itself; searched; the path's length in metres from the robot's cell to the goal's, -1.0
+    when there is no path or no search)."""
     g, parent, seen, order, meta = work[0], work[1], work[3], work[7], work[8]
     stride = width + 2
     c, r = int(x / cell), int(y / cell)
     if c < 0 or r < 0 or c >= width or r >= height:
-        return -1, False
+        return -1, False, -1.0
     start, goal = (r + 1) * stride + c + 1, (goal_r + 1) * stride + goal_c + 1
     if plan[start] == BLOCKED:
-        return -1, False
+        return -1, False, -1.0
     was = plan[goal]
     plan[goal] = 0
     search_start(start, goal, stride, True, *work)
@@ -137,13 +138,13 @@ def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam,
     for k in range(expanded):
         exam[order[k]] = exam_id
     if seen[goal] != meta[GEN]:
-        return -1, True
+        return -1, True, -1.0
     # parent links run goal -> start: the node at path length >= along is the last one walking back
     # from the goal whose g is still >= along (g grows along the path from the start)
     node = goal
     while parent[node] >= 0 and g[parent[node]] * cell >= along:
         node = parent[node]
-    return (-1 if node == goal else node), True
+    return (-1 if node == goal else node), True, g[goal] * cell
 
 
 @njit(cache=True, inline="always")

@@ -29,11 +29,13 @@ and pauses the geodesic field's Dijkstra, 0 is the straightforward program (a se
 replan, the whole field per reset)"""
 RATE_PARAM = 11
 """index in :attr:`worlds.perception.Perception.params` of the range rates' frame offset (-1: absent)"""
+LENGTH_PARAM = 12
+"""index in :attr:`worlds.perception.Perception.params` of the plan length's frame offset (-1: absent)"""
 
 
 @njit(cache=True, _nrt=False)
 def _frame(out, base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions, action, patch_at, patch, occ,
-           visits, height, width, cell, value, rate_at, n_beams):  # fmt: skip
+           visits, height, width, cell, value, rate_at, n_beams, len_at, length):  # fmt: skip
     """Write one frame into ``out`` (which holds the robot's previous frame, or anything when
     ``action`` < 0: a fresh episode): the base observation, then the optional parts."""
     if rate_at >= 0:  # before the readings are overwritten: out[:n_beams] are the previous ones
@@ -49,6 +51,8 @@ def _frame(out, base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions,
         out[sub_at] = d / (d + max_range)
         out[sub_at + 1] = (-ux * sin_t + uy * cos_t) / d if d > 0.0 else 0.0
         out[sub_at + 2] = (ux * cos_t + uy * sin_t) / d if d > 0.0 else 1.0
+    if len_at >= 0:
+        out[len_at] = length / (length + max_range)
     if act_at >= 0:
         for k in range(n_actions):
             out[act_at + k] = 1.0 if k == action else 0.0
@@ -76,7 +80,7 @@ def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell,
     ``dirty``: a cell became blocked or free; ``replan``: one where the last search looked), else
     kept; with ``reuse``, from the plans kept per cell of this plan map, and kept on a new plan map
     when no change lies where the search that made it looked."""
-    plan, wpt, last, plan_node, stamp, version, exam, exam_id, searches = plans
+    plan, wpt, last, plan_node, stamp, version, exam, exam_id, searches, plan_length, path_length = plans
     rc, cc = int(y / cell), int(x / cell)
     moved = rc != last[i, 0] or cc != last[i, 1]
     if not (fresh or dirty or moved):
@@ -94,19 +98,20 @@ def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell,
         return
     if reuse and on_map and stamp[i, rc, cc] == version[i]:
         # a cell already planned from on this plan map (same map, goal, cell: same plan)
-        node = plan_node[i, rc, cc]
+        node, path_length[i] = plan_node[i, rc, cc], plan_length[i, rc, cc]
         exam_id[i] = -1  # where its search looked is not known
     else:
         if searches[i] >= STAMP_WRAP:
             _fill(exam[i], 0)
             searches[i] = 0
         searches[i] += 1
-        node, searched = waypoint(
+        node, searched, path_length[i] = waypoint(
             plan[i], height, width, cell, x, y, gr, gc, along, work, exam[i], searches[i]
         )
         exam_id[i] = searches[i] if searched else -1
         if on_map:
             plan_node[i, rc, cc], stamp[i, rc, cc] = node, version[i]
+            plan_length[i, rc, cc] = path_length[i]
     wpt[i, 0], wpt[i, 1] = centre(node, width, cell, gx, gy)
 
 
@@ -132,9 +137,10 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     patch, w_geo, n_actions, per = int(params[6]), params[7], int(params[8]), int(params[9])
     reuse = params[REUSE_PARAM] > 0.0
     rate_at, n_beams = int(params[RATE_PARAM]), ray_c.shape[0] // per
+    len_at = int(params[LENGTH_PARAM])
     field, moff, mh, mw, mcell = world
     occ, visits, plans, moves, geo, pgeo, stack = mem
-    plan, wpt, exam, exam_id = plans[0], plans[1], plans[6], plans[7]
+    plan, wpt, exam, exam_id, path_length = plans[0], plans[1], plans[6], plans[7], plans[10]
     height, width, cell, at = mh[m], mw[m], mcell[m], moff[m]
     uses_map = occ.shape[1] > 0
     shaped, shaping = False, 0.0
@@ -164,19 +170,22 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
                          ray_c, ray_s, rays, max_range, per)  # fmt: skip
         dirty = dirty or (own and flags & CHANGED != 0)
         replan = replan or (own and flags & ON_PLAN != 0)
-    wx, wy = gx, gy
+    wx, wy, length = gx, gy, 0.0
     if sub_kind != SUB_NONE:
         _subgoal(
             i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell, along, reuse, plans, work
         )
-        wx, wy = wpt[i, 0], wpt[i, 1]
+        wx, wy, length = wpt[i, 0], wpt[i, 1], path_length[i]
+        if length < 0.0:  # no path on the plan map: the straight line
+            length = math.sqrt((gx - x) ** 2 + (gy - y) ** 2)
     k, d = stack.shape[1], stack.shape[2]
     if not fresh:
         for j in range(k - 1, 0, -1):
             for q in range(d):
                 stack[i, j, q] = stack[i, j - 1, q]
     _frame(stack[i, 0], base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions, action, patch_at,
-           patch, occ[i], visits[i], height, width, cell, PATCH_VALUE, rate_at, n_beams)  # fmt: skip
+           patch, occ[i], visits[i], height, width, cell, PATCH_VALUE, rate_at, n_beams, len_at,
+           length)  # fmt: skip
     for j in range(k):
         for q in range(d):
             if fresh:

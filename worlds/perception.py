@@ -5,7 +5,7 @@ readings, goal distance and bearing) and the noise-free range of every cast ray.
 turns them into the observation of :class:`worlds.config.ObservationConfig`, one frame per
 step, the last ``frame_stack`` frames observed newest first::
 
-    frame = [readings (n_beams), goal (3), subgoal (3)?, range rates (n_beams)?,
+    frame = [readings (n_beams), goal (3), subgoal (3)?, plan length (1)?, range rates (n_beams)?,
              previous action one-hot (n_actions)?, own-map patch (2 * patch_size**2)?]
 
 * **Range rates** (``range_rate``): each reading's change since the robot's previous step, in
@@ -28,7 +28,8 @@ step, the last ``frame_stack`` frames observed newest first::
   the last search expanded: a search reads nothing else), which gives the same plan as
   replanning every step; the plan found from a cell is kept until the map changes, so coming
   back to that cell costs no search. ``known_map`` plans on the true map instead, for a user who
-  has one.
+  has one. ``plan_length`` adds that path's length from the robot's cell to the goal, squashed
+  like the goal distance (the straight line when no path exists).
 * **The geodesic reward** (``rewards.geodesic_progress``): potential-based shaping by the true
   shortest-path distance from the robot's cell to the goal. It is a training signal; the policy
   never observes it. The Dijkstra from the goal (a bucket queue, :mod:`worlds.geodesic`) is paused
@@ -79,6 +80,8 @@ def frame_layout(config: NavConfig) -> dict[str, tuple[int, int]]:
     parts = [("readings", n), ("goal", 3)]
     if o.subgoal != "none":
         parts.append(("subgoal", 3))
+    if o.plan_length:
+        parts.append(("plan_length", 1))
     if o.range_rate:
         parts.append(("range_rate", n))
     if o.previous_action:
@@ -148,6 +151,7 @@ class Perception:
                 config.sensors.rays_per_beam,
                 reuse,
                 layout.get("range_rate", (-1,))[0],  # worlds.perceive.RATE_PARAM
+                layout.get("plan_length", (-1,))[0],  # worlds.perceive.LENGTH_PARAM
             ],
             dtype=np.float64,
         )
@@ -155,6 +159,7 @@ class Perception:
         self.geodesic = config.rewards.geodesic_progress > 0
         self.stack = np.zeros((n, o.frame_stack, self.frame_dim), np.float32)
         self.waypoint = np.zeros((n, 2), np.float64)
+        self.path_length = np.zeros(n, np.float64)  # the plan's length to the goal (m; -1: no path)
         self.last = np.zeros((n, 2), np.int64)
         self.version, self.searches = np.zeros(n, np.int32), np.zeros(n, np.int32)
         self.exam_id = np.full(n, -1, np.int32)
@@ -183,6 +188,7 @@ class Perception:
         self.plan = grow(getattr(self, "plan", None), np.uint8, self.plans, flat=True)
         # per cell: the waypoint cell planned from it (-1: the goal), valid on plan-map version ``stamp``
         self.plan_node = grow(getattr(self, "plan_node", None), np.int32, self.plans)
+        self.plan_length = grow(getattr(self, "plan_length", None), np.float64, self.plans)  # and its length
         self.stamp = grow(getattr(self, "stamp", None), np.int32, self.plans, -1)
         self.exam = grow(getattr(self, "exam", None), np.int32, self.plans, flat=True)  # searches' cells
         # the geodesic field's Dijkstra, one row of work arrays per robot (worlds.geodesic)
@@ -202,7 +208,7 @@ class Perception:
         if self.geodesic and field is not self._moves_for:
             self.moves, self._moves_for = move_masks(field, moff, mh, mw), field
         plans = (self.plan, self.waypoint, self.last, self.plan_node, self.stamp, self.version, self.exam,
-                 self.exam_id, self.searches)  # fmt: skip
+                 self.exam_id, self.searches, self.plan_length, self.path_length)  # fmt: skip
         return self.occ, self.visits, plans, self.moves, self.geo, self.pgeo, self.stack
 
     def _state(self, maps) -> tuple:

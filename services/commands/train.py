@@ -130,6 +130,12 @@ def register(subparsers) -> None:
         help="observe each reading's change since the previous step (a motion cue for moving discs)",
     )
     parser.add_argument(
+        "--plan-length",
+        action="store_true",
+        help="observe the length of the subgoal's path to the goal on the robot's own map (how far the goal "
+        "is round the walls seen so far); needs the subgoal",
+    )
+    parser.add_argument(
         "--q-network",
         choices=Q_NETWORKS,
         default=defaults.q_network,
@@ -141,7 +147,7 @@ def register(subparsers) -> None:
 
 def observation_of(args: argparse.Namespace):
     """worlds.config.LEARNING_NAV with the observation flags (--patch, --no-subgoal, --frame-stack,
-    --previous-action, --range-rate) applied."""
+    --previous-action, --range-rate, --plan-length) applied."""
     subgoal = "none" if args.no_subgoal else LEARNING_NAV.observation.subgoal
     observation = replace(
         LEARNING_NAV.observation,
@@ -150,6 +156,7 @@ def observation_of(args: argparse.Namespace):
         frame_stack=args.frame_stack,
         previous_action=args.previous_action or LEARNING_NAV.observation.previous_action,
         range_rate=args.range_rate or LEARNING_NAV.observation.range_rate,
+        plan_length=args.plan_length or LEARNING_NAV.observation.plan_length,
     )
     return replace(LEARNING_NAV, observation=observation)
 

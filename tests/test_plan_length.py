@@ -1,0 +1,45 @@
+"""The own map's plan length (ObservationConfig.plan_length) through what users run: `train --local
+--plan-length` saves a policy that records it and evaluates in it; a policy saved before the option
+existed observes without it and says so in an env with it; the flag without a subgoal is refused
+naming the field. Its values are checked in tests/test_worlds_perception.py, its reuse of plans in
+tests/test_worlds_reuse.py."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import pytest
+
+from agents.evaluation.policies import load_policy
+from agents.evaluation.runner import evaluate, make_eval_set
+from services.cli import main
+from worlds.config import LEARNING_NAV, check_observation, observation_settings, saved_observation
+from worlds.perception import observation_dim
+
+PLANNED = replace(LEARNING_NAV, observation=replace(LEARNING_NAV.observation, plan_length=True))
+
+
+def test_plan_length_is_recorded_and_checked_in_saved_policies():
+    assert observation_dim(PLANNED) == observation_dim(LEARNING_NAV) + 1
+    assert observation_settings(PLANNED)["observation.plan_length"] is True
+    before = {k: v for k, v in observation_settings(LEARNING_NAV).items() if k != "observation.plan_length"}
+    assert saved_observation(before)["observation.plan_length"] is False
+    with pytest.raises(ValueError, match=r"observation\.plan_length=False \(the env has True\)"):
+        check_observation(saved_observation(before), PLANNED)
+
+
+def test_train_local_plan_length_trains_saves_and_evaluates(tmp_path, capsys):
+    assert main(["train", "--local", "--plan-length", "--no-subgoal", "--steps", "10"]) == 2
+    assert "observation.plan_length=True needs a subgoal" in capsys.readouterr().err
+    out = tmp_path / "planned"
+    argv = ["train", "--local", "--plan-length", "--steps", "400", "--envs", "4", "--out", str(out),
+            "--eval-every", "200", "--eval-episodes", "3", "--eval-dynamic-episodes", "0",
+            "--final-eval-episodes", "0", "--hidden", "16", "--no-progress"]  # fmt: skip
+    assert main(argv) == 0
+    saved = json.loads((out / "config.json").read_text())["observation"]
+    assert saved["observation.plan_length"] is True
+    policy = load_policy(out)  # evaluates in the observation it records
+    result = evaluate(policy, [make_eval_set("unseen", 3)])
+    assert result.metrics["unseen"].episodes == 3
+    assert main(["evaluate", "--policy", str(out), "--episodes", "2", "--maps", "unseen"]) == 0
