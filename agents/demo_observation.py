@@ -16,18 +16,11 @@ import json
 from pathlib import Path
 
 from agents.demos import Demo, DemoFormatError, dataset_location, datasets_root, load_demos
-from worlds.config import (
-    LEARNING_NAV,
-    LEGACY_OBSERVATION,
-    NavConfig,
-    observation_differences,
-    with_observation,
-)
+from worlds.config import LEARNING_NAV, LEGACY_OBSERVATION, OBSERVATIONS, NavConfig, observation_differences
 from worlds.perception import observation_dim
 
-NAVS = {"learning": LEARNING_NAV, "plain": with_observation(NavConfig(), LEGACY_OBSERVATION)}
-"""the worlds a demonstration learner can be trained in (``--observation``): ``learning``, the default
-(worlds.config.LEARNING_NAV, what NNQL learns in), or ``plain``, today's 8 beams + goal"""
+NAVS = OBSERVATIONS
+"""the worlds a demonstration learner can be trained in (``--observation``): worlds.config.OBSERVATIONS"""
 
 
 def recorded_observation(navlearn_metadata: str | dict | None, width: int) -> dict | None:

@@ -88,7 +88,7 @@ from bench._nirl_options import (
 )
 from bench._nirl_report import FAMILIES, METHODS, SETS, report
 from bench.planning import expert_outcomes
-from worlds.config import LEARNING_NAV, NavConfig, RewardConfig, observation_settings, with_observation
+from worlds.config import LEARNING_NAV, LEARNING_PLAN_NAV, NavConfig, RewardConfig, observation_settings
 from worlds.outcomes import Outcome
 from worlds.perception import observation_dim
 
@@ -103,7 +103,7 @@ SQIL = {"core": "sqil", "q_updates": 256}
 VALIDATION_SEED = 1
 NAVS = {
     "learning": LEARNING_NAV,
-    "learning_plan": with_observation(LEARNING_NAV, {"observation.plan_length": True}),
+    "learning_plan": LEARNING_PLAN_NAV,
     "default": NavConfig(),
 }
 NO_DEMOS = ("nnql", "nnql_line")

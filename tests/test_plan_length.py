@@ -43,3 +43,33 @@ def test_train_local_plan_length_trains_saves_and_evaluates(tmp_path, capsys):
     result = evaluate(policy, [make_eval_set("unseen", 3)])
     assert result.metrics["unseen"].episodes == 3
     assert main(["evaluate", "--policy", str(out), "--episodes", "2", "--maps", "unseen"]) == 0
+
+
+def test_nirl_learns_in_learning_plan_from_demos_recorded_in_it(tmp_path, capsys):
+    """README's NIRL path: `demos generate --observation learning_plan`, then `nirl train` in the same
+    observation (tiny sizes); a learner of another observation refuses the set naming the field."""
+    demos = tmp_path / "planned-v0"
+    assert main(["demos", "generate", "--maps", "mixed:16", "--episodes", "3", "--seed", "20011",
+                 "--observation", "learning_plan", "--out", str(demos)]) == 0  # fmt: skip
+    tiny = ["--iterations", "1", "--warmstart-updates", "4", "--q-updates", "4", "--reward-updates", "1",
+            "--steps-per-iteration", "32", "--envs", "4", "--eval-every", "0", "--final-eval-episodes", "0",
+            "--hidden-sizes", "16", "--no-progress"]  # fmt: skip
+    out = tmp_path / "run"
+    argv = [
+        "nirl",
+        "train",
+        "--demos",
+        str(demos),
+        "--observation",
+        "learning_plan",
+        "--out",
+        str(out),
+        *tiny,
+    ]
+    assert main(argv) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["demo_steps"] > 0
+    capsys.readouterr()
+    assert main(["nirl", "train", "--demos", str(demos), "--out", str(tmp_path / "other"), *tiny]) == 2
+    err = capsys.readouterr().err
+    assert str(demos) in err and "observation.plan_length=True" in err

@@ -352,6 +352,21 @@ evaluator and demonstrator of ``navlearn up``): 24 sector minima of 96 rays, the
 from the robot's own map, trained with the geodesic progress reward - the winner on validation
 success of the observation ablation (``bench/perception.py``, variant "D+geo"; bench/RESULTS.md)"""
 
+LEARNING_PLAN_NAV = replace(LEARNING_NAV, observation=replace(LEARNING_NAV.observation, plan_length=True))
+"""LEARNING_NAV with the length of the own map's plan to the goal observed (``plan_length``): NIRL's
+observation (``navlearn demos generate / nirl train --observation learning_plan``) - its progress
+potential, fitted on the demonstrations' steps to go, reads how far the goal is round the walls the
+robot has seen (bench/RESULTS.md, "issue 15, part 11")"""
+
+OBSERVATIONS = {
+    "learning": LEARNING_NAV,
+    "learning_plan": LEARNING_PLAN_NAV,
+    "plain": with_observation(NavConfig(), LEGACY_OBSERVATION),
+}
+"""the named observations of ``--observation`` (demonstration sets, behaviour cloning, NIRL):
+``learning`` (LEARNING_NAV, what NNQL learns in), ``learning_plan`` (LEARNING_PLAN_NAV) and ``plain``
+(8 beams + goal, the older sets)"""
+
 
 TRAINING_DISCS = 6
 """moving discs per training episode by default (``navlearn train --local``, the actors of ``navlearn

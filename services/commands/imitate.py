@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from worlds.config import OBSERVATIONS
+
 
 def _sizes(text: str) -> tuple[int, ...]:
     try:
@@ -58,9 +60,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     train.add_argument(
         "--observation",
-        choices=("learning", "plain"),
+        choices=list(OBSERVATIONS),
         default="learning",
-        help="what the robot observes: learning (worlds.config.LEARNING_NAV, NNQL's default) or plain "
+        help="what the robot observes: learning (worlds.config.LEARNING_NAV, NNQL's default), "
+        "learning_plan (the same and the own map's plan length to the goal) or plain "
         "(8 beams + goal, older demonstration sets); the demonstrations must have been recorded in it, "
         "and the saved policy records it (default %(default)s)",
     )

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from worlds.config import OBSERVATIONS
+
 TRAIN_DESCRIPTION = """\
 Neural inverse reinforcement learning (thesis ch. 5) in one process. Loads the demonstrations
 (a Minari dataset from `navlearn demos generate` or the file demonstrator), warm-starts the soft
@@ -57,10 +59,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--demos", required=True, help="demonstration dataset directory (Minari)")
     train.add_argument(
         "--observation",
-        choices=("learning", "plain"),
+        choices=list(OBSERVATIONS),
         default="learning",
         help="what the robot observes: learning (worlds.config.LEARNING_NAV, NNQL's default: sector "
-        "minima, goal, subgoal on its own map) or plain (8 beams + goal, older demonstration sets); the "
+        "minima, goal, subgoal on its own map), learning_plan (the same and the length of that plan to the "
+        "goal, which NIRL's progress potential reads: its best) or plain (8 beams + goal, older "
+        "demonstration sets); the "
         "demonstrations must have been recorded in it (default %(default)s)",
     )
     add_options(
