@@ -29,7 +29,10 @@ OUT/policy_iteration (`navlearn evaluate --policy OUT/policy_iteration`); --poli
 runs K more of NIRL's rounds on the fixed reward first and starts NNQL's network from that policy.
 The progress potential is fitted on the goal and subgoal features only (--potential-inputs goal,
 the default: it generalises better from 20 paths; observation: every feature); --moving-discs N
-adds 0..N moving discs to the rounds' episodes.
+adds 0..N moving discs to the rounds' episodes. --observation learning_plan (demonstrations
+generated with the same flag) adds the length of the own map's plan to the goal, which the
+potential then reads: NIRL's best observation (97% static / 90% with discs from 20 clean
+demonstrations with --iterations 400 --q-updates 512 --moving-discs 6; bench/RESULTS.md part 11).
 MAP refinement's prior is the policy's own softmax by default; --refine-prior hindsight judges each
 demonstrated action instead by the lattice A* on the map the demonstration's own range readings
 drew (its recorded poses and readings, never the true map; agents/nirl/hindsight.py): on 20
