@@ -19,9 +19,6 @@ from agents.demos import Demo, DemoFormatError, dataset_location, datasets_root,
 from worlds.config import LEARNING_NAV, LEGACY_OBSERVATION, OBSERVATIONS, NavConfig, observation_differences
 from worlds.perception import observation_dim
 
-NAVS = OBSERVATIONS
-"""the worlds a demonstration learner can be trained in (``--observation``): worlds.config.OBSERVATIONS"""
-
 
 def recorded_observation(navlearn_metadata: str | dict | None, width: int) -> dict | None:
     """The observation settings of a dataset from its ``navlearn`` metadata (JSON text or decoded)
@@ -33,7 +30,7 @@ def recorded_observation(navlearn_metadata: str | dict | None, width: int) -> di
         except ValueError:
             meta = {}
     recorded = meta.get("observation") if isinstance(meta, dict) else None
-    if recorded is None and width == observation_dim(NAVS["plain"]):
+    if recorded is None and width == observation_dim(OBSERVATIONS["plain"]):
         return dict(LEGACY_OBSERVATION)
     return None if recorded is None else dict(recorded)
 

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from agents.demo_observation import NAVS, dataset_observation, load_demos_for
+from agents.demo_observation import dataset_observation, load_demos_for
 from agents.demos import DemoFormatError, write_demos
 from agents.nirl.buffers import load_demonstrations
 from agents.planning.demonstrate import generate_demos
 from services.cli import main
-from worlds.config import LEARNING_NAV, LEGACY_OBSERVATION, NavConfig, observation_settings
+from worlds.config import LEARNING_NAV, LEGACY_OBSERVATION, OBSERVATIONS, NavConfig, observation_settings
 from worlds.env import NavigationEnv, observation_space
 from worlds.perception import observation_dim
 
@@ -54,15 +54,15 @@ def test_recorded_observation_is_the_robots_own_along_the_expert_trajectory(data
 def test_old_8_beam_sets_load_in_their_own_observation(datasets):
     path, demos = datasets["plain"]
     assert dataset_observation(path) == (LEGACY_OBSERVATION, 11)
-    assert len(load_demos_for(path, NAVS["plain"])) == len(demos)
-    assert len(load_demonstrations(str(path), NAVS["plain"])) == len(demos)
+    assert len(load_demos_for(path, OBSERVATIONS["plain"])) == len(demos)
+    assert len(load_demonstrations(str(path), OBSERVATIONS["plain"])) == len(demos)
 
 
 @pytest.mark.parametrize(
     "which, nav, field",
     [
         ("plain", LEARNING_NAV, re.escape("sensors.n_beams=8")),
-        ("learning", NAVS["plain"], re.escape("observation.subgoal='own_map'")),
+        ("learning", OBSERVATIONS["plain"], re.escape("observation.subgoal='own_map'")),
     ],
 )
 def test_a_mismatch_is_one_error_naming_the_file_and_field(datasets, which, nav, field):
@@ -86,7 +86,7 @@ def test_learners_default_to_learning_nav_and_refuse_other_observations(datasets
         check_nirl(UpConfig(nirl=True, demos=str(old)))
     check_nirl(UpConfig(nirl=True, demos=str(new)))
     # behaviour cloning in either observation, the saved policy records the one it was trained in
-    for name, path, nav in (("learning", new, LEARNING_NAV), ("plain", old, NAVS["plain"])):
+    for name, path, nav in (("learning", new, LEARNING_NAV), ("plain", old, OBSERVATIONS["plain"])):
         out = tmp_path / f"bc-{name}"
         argv = ["imitate", "train", "--demos", str(path), "--out", str(out), "--epochs", "2", "--hidden", "8"]
         assert main([*argv, "--observation", name]) == 0

@@ -8,10 +8,10 @@ import h5py
 import numpy as np
 import pytest
 
-from agents.demo_observation import NAVS
 from agents.demos import DemoFormatError, make_demo, write_demos
 from agents.nirl.buffers import load_demonstrations
 from services.cli import main
+from worlds.config import OBSERVATIONS
 from worlds.maps import GridMap, Task
 
 
@@ -57,7 +57,7 @@ def _bad_datasets(tmp_path) -> dict[str, tuple]:
 
 def test_a_good_dataset_loads(tmp_path):
     # written without an observation record, 11 wide: an 8-beam set, loaded in its own observation
-    assert len(load_demonstrations(str(_write(tmp_path / "good-v0")), NAVS["plain"])) == 2
+    assert len(load_demonstrations(str(_write(tmp_path / "good-v0")), OBSERVATIONS["plain"])) == 2
 
 
 def test_bad_demonstration_files_fail_with_one_clear_error_naming_the_file(tmp_path, capsys):

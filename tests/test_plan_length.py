@@ -7,26 +7,29 @@ tests/test_worlds_reuse.py."""
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import pytest
 
 from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import evaluate, make_eval_set
 from services.cli import main
-from worlds.config import LEARNING_NAV, check_observation, observation_settings, saved_observation
+from worlds.config import (
+    LEARNING_NAV,
+    LEARNING_PLAN_NAV,
+    check_observation,
+    observation_settings,
+    saved_observation,
+)
 from worlds.perception import observation_dim
-
-PLANNED = replace(LEARNING_NAV, observation=replace(LEARNING_NAV.observation, plan_length=True))
 
 
 def test_plan_length_is_recorded_and_checked_in_saved_policies():
-    assert observation_dim(PLANNED) == observation_dim(LEARNING_NAV) + 1
-    assert observation_settings(PLANNED)["observation.plan_length"] is True
+    assert observation_dim(LEARNING_PLAN_NAV) == observation_dim(LEARNING_NAV) + 1
+    assert observation_settings(LEARNING_PLAN_NAV)["observation.plan_length"] is True
     before = {k: v for k, v in observation_settings(LEARNING_NAV).items() if k != "observation.plan_length"}
     assert saved_observation(before)["observation.plan_length"] is False
     with pytest.raises(ValueError, match=r"observation\.plan_length=False \(the env has True\)"):
-        check_observation(saved_observation(before), PLANNED)
+        check_observation(saved_observation(before), LEARNING_PLAN_NAV)
 
 
 def test_train_local_plan_length_trains_saves_and_evaluates(tmp_path, capsys):

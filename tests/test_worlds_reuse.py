@@ -10,7 +10,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from worlds.config import LEARNING_NAV, NavConfig
+from worlds.config import LEARNING_NAV, LEARNING_PLAN_NAV, NavConfig
 from worlds.heuristics import goal_seeking_policy
 from worlds.perception import REUSE_PARAM
 from worlds.vector_env import NavigationVectorEnv
@@ -51,15 +51,10 @@ def test_reused_plans_change_no_observation_or_reward(maps, policy):
     assert np.array_equal(fin0, fin1)
 
 
-PLAN_LENGTH = dataclasses.replace(
-    LEARNING_NAV, observation=dataclasses.replace(LEARNING_NAV.observation, plan_length=True)
-)
-
-
 @pytest.mark.parametrize("policy", ["random", "goal"])
 def test_reused_plans_keep_the_plan_length(policy):
-    obs0, rew0, fin0, _ = rollout(PLAN_LENGTH, "mixed:16", reuse=False, policy=policy)
-    obs1, rew1, fin1, planned = rollout(PLAN_LENGTH, "mixed:16", reuse=True, policy=policy)
+    obs0, rew0, fin0, _ = rollout(LEARNING_PLAN_NAV, "mixed:16", reuse=False, policy=policy)
+    obs1, rew1, fin1, planned = rollout(LEARNING_PLAN_NAV, "mixed:16", reuse=True, policy=policy)
     assert planned > 0
     assert np.array_equal(obs0, obs1) and np.array_equal(rew0, rew1) and np.array_equal(fin0, fin1)
 

@@ -73,7 +73,6 @@ def generate(args: argparse.Namespace) -> int:
 
     from rich.progress import Progress
 
-    from agents.demo_observation import NAVS
     from agents.demos import dataset_location, write_demos
     from agents.planning.demonstrate import generate_demos
     from worlds.config import ObstacleConfig, observation_settings
@@ -96,7 +95,7 @@ def generate(args: argparse.Namespace) -> int:
     except ValueError as exc:  # DemoFormatError is a ValueError
         print(f"navlearn demos generate: {exc}", file=sys.stderr)
         return 2
-    base = NAVS[args.observation]
+    base = OBSERVATIONS[args.observation]
     config = replace(
         base, pool_size=min(base.pool_size, args.episodes), obstacles=ObstacleConfig(count=args.obstacles)
     )

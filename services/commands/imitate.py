@@ -77,7 +77,7 @@ def run_train(args: argparse.Namespace) -> int:
 
     from rich.progress import Progress
 
-    from agents.demo_observation import NAVS, load_demos_for
+    from agents.demo_observation import load_demos_for
     from agents.demos import DemoFormatError
     from agents.imitation.config import ImitationConfig
     from agents.imitation.train import save_trained, train_policy
@@ -94,7 +94,7 @@ def run_train(args: argparse.Namespace) -> int:
             val_fraction=args.val_fraction,
             seed=args.seed,
         )
-        nav = NAVS[args.observation]
+        nav = OBSERVATIONS[args.observation]
         demos = load_demos_for(args.demos, nav)
     except (DemoFormatError, ValueError) as exc:
         print(f"navlearn imitate train: {exc}", file=sys.stderr)

@@ -108,7 +108,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run_train(args: argparse.Namespace) -> int:
     import sys
 
-    from agents.demo_observation import NAVS
     from agents.demos import DemoFormatError
     from agents.device import resolve_device
     from agents.nirl.buffers import load_demonstrations
@@ -124,7 +123,7 @@ def run_train(args: argparse.Namespace) -> int:
         if run.envs < 1:
             raise OptionError("--envs must be positive")
         parse_map_spec(run.maps)
-        nav = NAVS[args.observation]
+        nav = OBSERVATIONS[args.observation]
         demos = load_demonstrations(args.demos, nav)
     except (OptionError, DemoFormatError, ValueError) as exc:
         print(f"navlearn nirl train: {exc}", file=sys.stderr)
