@@ -261,6 +261,17 @@ def _read_tensors(body: BodyReader, name: str) -> dict[str, np.ndarray]:
     return tensors
 
 
+def _read_observation(value: object, what: str, limits: Limits) -> dict[str, Any]:
+    """A flat map of observation setting -> number, bool or string (``architecture["observation"]``)."""
+    if not isinstance(value, dict):
+        raise ProtocolError("type", f"{what} must be a map, got {type(value).__name__}")
+    for key, item in value.items():
+        check_string(key, f"{what} key", limits)
+        if not isinstance(item, bool | int | float | str):
+            raise ProtocolError("type", f"{what}[{key!r}] must be a number, bool or string")
+    return dict(value)
+
+
 EXPLORATIONS = ("boltzmann", "epsilon")
 
 
@@ -334,6 +345,12 @@ class WeightsUpdate(Message):
         default=None,
     )
     """How actors explore with these weights (on the wire: ``architecture["exploration"]``)."""
+    observation: dict[str, Any] | None = inside(
+        "architecture", "observation", _read_observation, dict, default=None
+    )
+    """What the network takes as input (``worlds.config.observation_settings``: setting -> value);
+    actors and evaluators of another observation refuse the weights naming the setting (on the wire:
+    ``architecture["observation"]``; None: not said)."""
 
     def __post_init__(self) -> None:
         self.tensors = {name: np.asarray(value) for name, value in self.tensors.items()}

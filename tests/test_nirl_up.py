@@ -1,6 +1,7 @@
 """`navlearn up --nirl` end to end on loopback: the learner trains NIRL beside NNQL from an expert
-demonstrator's episodes, NIRL's weights go out and the evaluator reports NIRL beside NNQL; and a
-bad --demos dataset stops `up` before anything starts, with one line naming the file."""
+demonstrator's episodes, NIRL's weights go out and the evaluator reports NIRL beside NNQL, every
+process in NIRL's observation (``--observation learning_plan``); and a bad --demos dataset stops
+`up` before anything starts, with one line naming the file."""
 
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ def test_up_nirl_with_an_expert_demonstrator_trains_broadcasts_and_evaluates_nir
     env = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
     argv = [sys.executable, "-m", "services.cli", "up", "--run", run, "--out", str(out), *SMALL, "--nirl",
             "--nirl-config", str(tmp_path / "nirl.json"), "--demonstrator", "astar", "--demo-episodes",
-            str(DEMO_EPISODES), "--duration", "25"]  # fmt: skip
+            str(DEMO_EPISODES), "--duration", "25", "--observation", "learning_plan"]  # fmt: skip
     result = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=540)
     logs = {p.name: p.read_text()[-1500:] for p in sorted((out / "logs").glob("*.log"))}
     assert result.returncode == 0, (result.stdout, result.stderr, logs)
@@ -50,6 +51,12 @@ def test_up_nirl_with_an_expert_demonstrator_trains_broadcasts_and_evaluates_nir
     assert set(nirl["metrics"]) == set(nnql["metrics"]) == {"unseen", "dynamic"}
     assert summary["last_evaluation"] == nnql
     assert "nirl unseen: success" in result.stdout and "nnql unseen: success" in result.stdout
+    # all in learning_plan: nothing refused for its width, both networks observe the plan length
+    assert learner["counters"]["transitions_rejected"] == 0
+    saved = [out / "policy", *sorted(out.glob("checkpoints/ckpt-*/nirl/q/policy"))]
+    assert len(saved) >= 2
+    for policy in saved:
+        assert json.loads((policy / "config.json").read_text())["observation"]["observation.plan_length"]
 
 
 def test_up_nirl_stops_on_a_bad_demonstration_dataset_naming_it(tmp_path, capsys):

@@ -368,6 +368,19 @@ OBSERVATIONS = {
 (8 beams + goal, the older sets)"""
 
 
+OBSERVATION_ENV = "NAVLEARN_OBSERVATION"
+"""the one environment variable every service reads ``--observation`` from (like NAVLEARN_RUN)"""
+
+
+def observation_field():
+    """The ``observation`` field of a service's config (``--observation NAME``, one of
+    :data:`OBSERVATIONS`, default ``learning``; environment :data:`OBSERVATION_ENV` for all of them):
+    what the robots of one run observe. The actors, the learner, the evaluator and the demonstrator
+    of a run must name the same one (``navlearn up`` passes its own to each; the learner's weights
+    say which it is, and an actor or evaluator on another refuses them naming the field)."""
+    return field(default="learning", metadata={"choices": tuple(OBSERVATIONS), "env": OBSERVATION_ENV})
+
+
 TRAINING_DISCS = 6
 """moving discs per training episode by default (``navlearn train --local``, the actors of ``navlearn
 up``): 0..6, uniform per episode, so training sees static maps, the dynamic test set's crowds of 4

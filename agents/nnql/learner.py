@@ -37,7 +37,7 @@ from agents.nnql.losses import PRIORITY_KEY, make_loss
 from agents.nnql.networks import export_weights, import_weights, make_q_actor
 from agents.nnql.nstep import NStepAccumulator
 from agents.nnql.patch_network import build_q_network
-from agents.nnql.persistence import CHECKPOINT_STATE, LearnerOutputs
+from agents.nnql.persistence import CHECKPOINT_STATE, LearnerOutputs, check_checkpoint_observation
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.replay_storage import (
     columns,
@@ -272,6 +272,7 @@ class NNQLLearner(LearnerOutputs):
         }
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        check_checkpoint_observation(state.get("observation"), self.observation)
         if state["architecture"] != self.architecture:
             raise ValueError(f"checkpoint architecture {state['architecture']} != {self.architecture}")
         self.loss.load_state_dict(state["loss"])

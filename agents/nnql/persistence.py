@@ -18,10 +18,26 @@ import torch
 
 from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import save_policy_dir
+from worlds.config import saved_observation
 
 CHECKPOINT_STATE = "learner.pt"
 CHECKPOINT_REPLAY = "replay"
 CHECKPOINT_POLICY = "policy"
+
+
+def check_checkpoint_observation(saved: dict | None, mine: dict | None) -> None:
+    """Raise a ValueError naming every observation setting (``worlds.config.observation_settings``)
+    where a checkpoint's network (``saved``) and this learner's (``mine``) differ; settings a record
+    lacks did not exist when it was written (their legacy value, off)."""
+    if saved is None or mine is None:
+        return
+    saved, mine = saved_observation(saved), saved_observation(mine)
+    wrong = [f"{k}={saved[k]!r} (this learner has {mine.get(k)!r})" for k in saved if saved[k] != mine.get(k)]
+    if wrong:
+        raise ValueError(
+            "the checkpoint's network observes " + ", ".join(wrong) + ": resume it with the "
+            "--observation it was trained in, or give a new --run (or --checkpoint-dir)"
+        )
 
 
 def replace_dir(path: str | Path, write: Callable[[Path], None]) -> Path:

@@ -44,7 +44,7 @@ from services.common.outbox import Outbox, decode_ack
 from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.common.warmup import COMPILE_NOTE
 from services.common.weights import WeightsReceiver
-from worlds.config import LEARNING_NAV, with_moving_discs
+from worlds.config import OBSERVATIONS, with_moving_discs
 from worlds.vector_env import NavigationVectorEnv
 
 log = logging.getLogger("navlearn.actor")
@@ -95,7 +95,7 @@ class Actor:
         self._declared = contextlib.ExitStack()
         """everything declared on the session, undeclared by close() in reverse order"""
         self.receiver = self._declared.enter_context(
-            contextlib.closing(WeightsReceiver(session, run, config.model, limits))
+            contextlib.closing(WeightsReceiver(session, run, config.model, limits, config.observation))
         )
         self.publisher = self._declared.enter_context(
             session.declare_publisher(
@@ -299,7 +299,7 @@ def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Even
     keys.check_name(config.id, "actor id")
     seed = config.seed if config.seed is not None else seed_for(config.id)
     log.info("actor %s: building %d robots on %s (%s)", config.id, config.envs, config.maps, COMPILE_NOTE)
-    nav = with_moving_discs(LEARNING_NAV, config.moving_discs)
+    nav = with_moving_discs(OBSERVATIONS[config.observation], config.moving_discs)
     env = NavigationVectorEnv(config.envs, config=nav, maps=config.maps, seed=seed)
     limits = Limits(n_actions=int(env.single_action_space.n))
     with contextlib.closing(env):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from worlds.config import TRAINING_DISCS
+from worlds.config import TRAINING_DISCS, observation_field
 
 
 @dataclass
@@ -19,6 +19,9 @@ class ActorConfig:
     """training map spec (worlds.tasks): rooms:16, rects:24x32, maze:15, mixed:16, a .map/.scen path"""
     moving_discs: int = TRAINING_DISCS
     """each episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
+    observation: str = observation_field()
+    """what the robots observe (worlds.config.OBSERVATIONS): learning (24 sector minima, goal, own-map
+    subgoal) or learning_plan (the same and the own map's plan length to the goal); the learner's"""
     seed: int | None = None
     """env and exploration seed; empty: derived from the actor id (give each actor its own)"""
     model: str = "nnql"

@@ -23,6 +23,7 @@ from protocols.codec import decode, encode
 from protocols.errors import ProtocolError
 from protocols.limits import DEFAULT_LIMITS, Limits
 from protocols.messages import ExplorationSchedule, WeightsUpdate
+from worlds.config import OBSERVATIONS, observation_differences
 
 log = logging.getLogger("navlearn.weights")
 
@@ -50,9 +51,11 @@ class WeightsBroadcaster:
         version: int,
         architecture: dict[str, Any],
         exploration: ExplorationSchedule | None = None,
+        observation: dict[str, Any] | None = None,
     ) -> int:
-        """Broadcast ``weights`` as ``version`` (actors explore as ``exploration`` says); returns the
-        encoded size in bytes."""
+        """Broadcast ``weights`` as ``version`` (actors explore as ``exploration`` says; the network
+        observes ``observation``, ``worlds.config.observation_settings``); returns the encoded size
+        in bytes."""
         self.seq += 1
         message = WeightsUpdate(
             sender=self.sender,
@@ -62,6 +65,7 @@ class WeightsBroadcaster:
             tensors=weights,
             architecture=architecture,
             exploration=exploration,
+            observation=observation,
         )
         payload = encode(message)
         self._latest = payload  # one reference swap: the query callback reads it without a lock
@@ -95,9 +99,15 @@ class WeightsReceiver:
     versions from there). Rejected payloads are counted by reason.
     """
 
-    def __init__(self, session, run: str, model: str, limits: Limits = DEFAULT_LIMITS) -> None:
+    def __init__(
+        self, session, run: str, model: str, limits: Limits = DEFAULT_LIMITS, observation: str | None = None
+    ) -> None:
+        """``observation``: the owner's ``--observation`` (worlds.config.OBSERVATIONS); updates whose
+        network observes something else are refused (counted as ``observation``, said once per sender)."""
         self.key = keys.weights(run, model)
         self.limits = limits
+        self.observation = observation
+        self._warned: set[str] = set()
         self.rejected: Counter[str] = Counter()
         self.received = 0
         self._lock = threading.Lock()
@@ -125,6 +135,14 @@ class WeightsReceiver:
                 self.rejected[exc.reason] += 1
             log.warning("rejected weights on %s: %s", self.key, exc)
             return
+        if (wrong := self.wrong_observation(message)) is not None:
+            with self._lock:
+                self.rejected["observation"] += 1
+                first = message.sender not in self._warned
+                self._warned.add(message.sender)
+            if first:
+                log.warning("ignoring weights on %s from %s: %s", self.key, message.sender, wrong)
+            return
         with self._lock:
             self.received += 1
             stamp = (message.sender, message.version)
@@ -133,6 +151,22 @@ class WeightsReceiver:
                 return
             self._current = stamp
             self._pending = ReceivedWeights(message, arrived)
+
+    def wrong_observation(self, message: WeightsUpdate) -> str | None:
+        """Why ``message``'s network cannot act on this process's observation (None: it can, or
+        either side does not say): the settings that differ and the --observation to start with."""
+        if self.observation is None or message.observation is None:
+            return None
+        wrong = observation_differences(message.observation, OBSERVATIONS[self.observation], "this process")
+        if not wrong:
+            return None
+        said = message.observation
+        named = [name for name, nav in OBSERVATIONS.items() if not observation_differences(said, nav)]
+        fix = f"--observation {named[0]}" if named else "the learner's --observation"
+        return (
+            f"the learner's network observes {', '.join(wrong)}; this process has --observation "
+            f"{self.observation}: start it with {fix}"
+        )
 
     def take(self) -> ReceivedWeights | None:
         """The newest update not taken yet, or None."""

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from worlds.config import observation_field
+
 SOURCES = ("astar", "human", "file")
 
 
@@ -25,6 +27,9 @@ class DemonstratorConfig:
     """astar: probability that a step takes a random wall-free action instead of the expert's"""
     obstacles: int = 0
     """moving discs per astar/human episode"""
+    observation: str = observation_field()
+    """what the demonstrated episodes record (worlds.config.OBSERVATIONS): the learner's; a --file
+    dataset must have been recorded in it"""
     seed: int = 0
     """episode i resets the environment with seed SEED + i"""
     file: str = ""

@@ -14,15 +14,15 @@ from agents.demos import Demo, load_demos
 from agents.planning.demonstrate import record_episode
 from agents.planning.expert import Expert
 from services.demonstrator.config import DemonstratorConfig
-from worlds.config import LEARNING_NAV, NavConfig, ObstacleConfig
+from worlds.config import OBSERVATIONS, NavConfig, ObstacleConfig
 from worlds.env import NavigationEnv
 from worlds.outcomes import Outcome
 
 
 def nav_config(config: DemonstratorConfig) -> NavConfig:
-    """The world the learner's policies see (:data:`worlds.config.LEARNING_NAV`) with
-    ``config.obstacles`` moving discs."""
-    return replace(LEARNING_NAV, obstacles=ObstacleConfig(count=config.obstacles))
+    """The world the learner's policies see (``config.observation``, one of
+    :data:`worlds.config.OBSERVATIONS`) with ``config.obstacles`` moving discs."""
+    return replace(OBSERVATIONS[config.observation], obstacles=ObstacleConfig(count=config.obstacles))
 
 
 def expert_episodes(config: DemonstratorConfig, stop: threading.Event) -> Iterator[Demo]:
@@ -45,7 +45,7 @@ def expert_episodes(config: DemonstratorConfig, stop: threading.Event) -> Iterat
 
 def check_file(config: DemonstratorConfig) -> None:
     """A DemoFormatError unless ``config.file`` loads and was recorded in the learner's observation
-    (:data:`worlds.config.LEARNING_NAV`): the learner would drop every batch of another width."""
+    (``config.observation``): the learner would drop every batch of another width."""
     load_demos_for(config.file, nav_config(config))
 
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from worlds.config import observation_field
+
 
 @dataclass
 class EvaluatorConfig:
@@ -20,6 +22,8 @@ class EvaluatorConfig:
     """episodes per family (the same fixed, seeded tasks for every version)"""
     eval_seed: int = 0
     """seed of the evaluation sets (never overlaps training maps)"""
+    observation: str = observation_field()
+    """what the evaluated robots observe (worlds.config.OBSERVATIONS): the learner's and actors'"""
     every_versions: int = 0
     """evaluate a version only if it is at least this many updates past the last one evaluated
     (0: any newer version)"""

@@ -35,7 +35,7 @@ from services.common.waiting import WaitLog
 from services.common.warmup import COMPILE_NOTE
 from services.common.weights import WeightsReceiver
 from services.evaluator.config import EvaluatorConfig
-from worlds.config import LEARNING_NAV, NavConfig
+from worlds.config import OBSERVATIONS, NavConfig
 
 log = logging.getLogger("navlearn.evaluator")
 CURVE_FILE = "learning_curve.png"
@@ -63,10 +63,11 @@ class Evaluator:
     ) -> None:
         """``where``: the router endpoints, named while waiting for the first weights."""
         self.config = config
+        self.nav = OBSERVATIONS[config.observation]
         self.session = session
         self.run_name = run
         self.eval_sets = eval_sets
-        self.receiver = WeightsReceiver(session, run, config.model, limits)
+        self.receiver = WeightsReceiver(session, run, config.model, limits, config.observation)
         self.receivers = {config.model: self.receiver}
         self.first_weights = WaitLog(
             log,
@@ -77,7 +78,7 @@ class Evaluator:
         )
         for model in config.compare:
             if model not in self.receivers:
-                self.receivers[model] = WeightsReceiver(session, run, model, limits)
+                self.receivers[model] = WeightsReceiver(session, run, model, limits, config.observation)
         self.lasts: dict[str, tuple[str, int]] = {}  # model -> (learner sender, version) last evaluated
         self.key = keys.evaluation(run, config.id)
         self.out = Path(config.out)
@@ -105,7 +106,7 @@ class Evaluator:
         kind = RecurrentNNQLPolicy if is_recurrent(architecture) else NNQLPolicy  # memory reset per episode
         policy = kind(weights, architecture, mode="greedy", version=version)
         start = time.perf_counter()
-        result = evaluate(policy, self.eval_sets, config=LEARNING_NAV)  # what the actors observe
+        result = evaluate(policy, self.eval_sets, config=self.nav)  # what the actors observe
         metrics = result.to_dict(with_episodes=False)["metrics"]
         log.info("version %d evaluated in %.1f s\n%s", version, time.perf_counter() - start, result.table())
         return metrics

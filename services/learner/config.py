@@ -7,6 +7,7 @@ from pathlib import Path
 
 from agents.device import DEVICES
 from agents.nnql.config import STORAGES
+from worlds.config import observation_field
 
 
 @dataclass
@@ -53,6 +54,9 @@ class LearnerConfig:
     """stop (with a checkpoint) after this many updates; 0: run until stopped"""
     wal_fsync: str = "always"
     """write-ahead log (checkpoint_dir/wal) fsync: always, never, or milliseconds between fsyncs"""
+    observation: str = observation_field()
+    """what the actors' robots observe (worlds.config.OBSERVATIONS): learning or learning_plan; the
+    networks take it as input, and transitions of another width are refused"""
     nirl: bool = False
     """also train NIRL (thesis ch. 5) on the demonstrations and the actors' experience; weights/nirl"""
     nirl_updates: int = 1

@@ -75,9 +75,9 @@ class NIRLTrainer:
         if not self.learner.ready():
             return  # no demonstrations yet: nothing learned worth sending
         exploration = ExplorationSchedule(**self.learner.exploration_schedule())
-        self.weights.publish(
-            self.learner.get_weights(), self.learner.version, self.learner.q.architecture, exploration
-        )
+        learner, q = self.learner, self.learner.q
+        weights = learner.get_weights()
+        self.weights.publish(weights, learner.version, q.architecture, exploration, q.observation)
 
     def status_fields(self) -> tuple[dict[str, int], dict[str, float]]:
         """(counters, losses) to merge into the StatusReport, prefixed ``nirl/``."""

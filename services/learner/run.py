@@ -21,7 +21,7 @@ from services.learner.inbox import learner_inbox
 from services.learner.nirl import NIRLTrainer
 from services.learner.service import LearnerService
 from services.ops.router import exposure_warning
-from worlds.config import LEARNING_NAV, observation_settings
+from worlds.config import OBSERVATIONS, observation_settings
 from worlds.env import observation_space
 
 log = logging.getLogger("navlearn.learner")
@@ -36,7 +36,7 @@ def run_learner(
 ) -> int:
     """Process set-up around the learner loop; returns the exit code. ``nirl`` configures NIRL
     when ``config.nirl`` is on (its defaults otherwise)."""
-    nav = LEARNING_NAV  # what the actors observe
+    nav = OBSERVATIONS[config.observation]  # what the actors observe
     obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
     if nnql.recurrent:  # R2D2-style: sequence replay in RAM, SequenceBatches from --recurrent actors
         if config.replay_dir:

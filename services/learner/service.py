@@ -377,8 +377,9 @@ class LearnerService:
 
     def broadcast(self) -> None:
         exploration = ExplorationSchedule.of(self.learner.config)
+        learner = self.learner
         self.weights.publish(
-            self.learner.get_weights(), self.learner.version, self.learner.architecture, exploration
+            learner.get_weights(), learner.version, learner.architecture, exploration, learner.observation
         )
         self._count("weights_broadcast")
         if self.nirl is not None:

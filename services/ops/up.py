@@ -162,13 +162,16 @@ class Up:
                 str(cfg.checkpoint_every),
                 "--tensorboard",
                 str(out / "tb"),
+                "--observation",
+                cfg.observation,
                 *(["--nirl"] if cfg.nirl else []),
                 *(["--nirl-config", cfg.nirl_config] if cfg.nirl_config else []),
             ],
             learner_env,
         )
         if cfg.nirl:
-            argv = ["demonstrator", "--connect", self.endpoint, *demonstrator_argv(cfg)]
+            argv = ["demonstrator", "--connect", self.endpoint, "--observation", cfg.observation,
+                    *demonstrator_argv(cfg)]  # fmt: skip
             self._spawn("demonstrator", argv, base)
         for i in range(cfg.actors):
             self._spawn(
@@ -187,6 +190,8 @@ class Up:
                     str(cfg.moving_discs),
                     "--seed",
                     str(cfg.seed + i),
+                    "--observation",
+                    cfg.observation,
                     *self._recurrent_actor(),
                 ],
                 base,
@@ -207,6 +212,8 @@ class Up:
                 str(out / "tb"),
                 "--launched",
                 str(self.launched),
+                "--observation",
+                cfg.observation,
                 *(["--compare", "nirl"] if cfg.nirl else []),
                 *(["--imitation", cfg.imitation] if cfg.imitation else []),
             ],

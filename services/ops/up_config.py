@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from protocols import keys
-from worlds.config import TRAINING_DISCS
+from worlds.config import OBSERVATIONS, TRAINING_DISCS, observation_field
 
 
 @dataclass
@@ -27,6 +27,9 @@ class UpConfig:
     """training map spec for the actors (worlds.tasks)"""
     moving_discs: int = TRAINING_DISCS
     """each actor episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
+    observation: str = observation_field()
+    """what every process of the run observes (worlds.config.OBSERVATIONS): learning (NNQL's default)
+    or learning_plan (and the own map's plan length to the goal: NIRL's best, bench/RESULTS.md)"""
     seed: int = 0
     """seed of the learner (network, replay sampling); actor i uses seed + i"""
     duration: float = 90.0
@@ -112,9 +115,9 @@ def check_nirl(config: UpConfig) -> None:
         raise ValueError(f"--demo-episodes {config.demo_episodes}: must be 0 or more")
     if config.demos:
         from agents.nirl.buffers import load_demonstrations  # torch: only when there is a dataset
-        from worlds.config import LEARNING_NAV
 
-        load_demonstrations(config.demos, LEARNING_NAV)  # a file demonstrator sends it to the learner
+        # a file demonstrator sends it to the learner, which takes the run's observation only
+        load_demonstrations(config.demos, OBSERVATIONS[config.observation])
     if config.nirl_config and not Path(config.nirl_config).is_file():
         raise ValueError(f"--nirl-config {config.nirl_config}: no such file")
     if config.imitation and not Path(config.imitation, "config.json").exists():
