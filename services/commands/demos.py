@@ -50,8 +50,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="learning",
         help="what the recorded robot observes (the expert acts on the true map; the robot's own "
         "observation of each episode is recorded, and the dataset records its settings): learning "
-        "(worlds.config.LEARNING_NAV, what NNQL, `nirl train`, `imitate train` and `up --nirl` learn in), "
-        "learning_plan (the same and the own map's plan length to the goal, NIRL's best: its README command) "
+        "(worlds.config.LEARNING_NAV, what NNQL, `nirl train`, `imitate train` and `up --nirl` learn in "
+        "by default), "
+        "learning_plan (the same and the own map's plan length to the goal, NIRL's best: its README command; "
+        "`up --nirl --observation learning_plan`) "
         "or plain (8 beams + goal, the older sets); default %(default)s",
     )
     gen.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
