@@ -242,7 +242,10 @@ class DemoBatch(Message):
             "demos", steps, *((k, fields[k]) for k in ("actions", "rewards", "terminations", "truncations"))
         )
         if not 1 <= fields["obs"].shape[1] <= limits.max_obs_dim:
-            raise ProtocolError("shape", f"demos.obs has dimension {fields['obs'].shape[1]}")
+            raise ProtocolError(
+                "shape",
+                f"demos.obs has dimension {fields['obs'].shape[1]} (accepted: 1 to {limits.max_obs_dim})",
+            )
 
 
 def _read_tensors(body: BodyReader, name: str) -> dict[str, np.ndarray]:

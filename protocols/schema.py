@@ -304,7 +304,10 @@ def check_columns(schema: Schema, out: dict[str, Any], limits: Limits) -> None:
     for names in schema.widths.values():
         first = out[names[0]]
         if not 1 <= first.shape[1] <= limits.max_obs_dim:
-            raise ProtocolError("shape", f"{kind}.{names[0]} has dimension {first.shape[1]}")
+            raise ProtocolError(
+                "shape",
+                f"{kind}.{names[0]} has dimension {first.shape[1]} (accepted: 1 to {limits.max_obs_dim})",
+            )
         for name in names[1:]:
             if out[name].shape != first.shape:
                 raise ProtocolError(

@@ -12,7 +12,9 @@ import time
 import msgpack
 import numpy as np
 import pytest
+from conftest import free_port
 from test_wire_zenoh import client, router, wait_until  # noqa: F401 (router: the fixture)
+from wire_helpers import start, stop, wait_for_line
 
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
@@ -128,3 +130,30 @@ def test_an_unknown_observation_is_refused_naming_the_choices(command, capsys) -
         main([command, "--observation", "lidar"])
     err = capsys.readouterr().err
     assert exit_.value.code == 2 and "'lidar'" in err and "learning_plan" in err, err
+
+
+@pytest.mark.integration
+@pytest.mark.timeout(600)
+def test_an_actor_of_another_observation_than_its_learner_says_which_to_give(tmp_path) -> None:
+    """The real processes: a learner in ``learning``, an actor started with ``learning_plan``; the
+    actor refuses the learner's weights naming the flag, the learner refuses its transitions."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    argv = ["-m", "services.cli", "learner", "--listen", endpoint, "--run", "obs",
+            "--checkpoint-dir", str(tmp_path / "ckpt"), "--hidden-sizes", "16"]  # fmt: skip
+    learner, learner_lines = start(argv)
+    try:
+        wait_for_line(learner_lines, "learner learner up", timeout=240)
+        argv = ["-m", "services.cli", "actor", "--connect", endpoint, "--run", "obs", "--id", "a1",
+                "--envs", "1", "--batch-steps", "1", "--observation", "learning_plan"]  # fmt: skip
+        actor, lines = start(argv)
+        try:
+            line = wait_for_line(lines, "ignoring weights", timeout=240)
+            assert "observation.plan_length=False (this process has True)" in line, line
+            assert "start it with --observation learning" in line, line
+            line = wait_for_line(learner_lines, "transitions/a1: shape", timeout=120)
+            dims = observation_dim(LEARNING_PLAN_NAV), observation_dim(LEARNING_NAV)
+            assert "transitions.obs has dimension {} (accepted: 1 to {})".format(*dims) in line, line
+        finally:
+            assert stop(actor) == 0
+    finally:
+        stop(learner, timeout=60)
