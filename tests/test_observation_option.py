@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from conftest import free_port
 from test_wire_zenoh import client, router, wait_until  # noqa: F401 (router: the fixture)
-from wire_helpers import start, stop, wait_for_line
+from wire_helpers import small_learner, start, stop, wait_for_line
 
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
@@ -138,11 +138,7 @@ def test_an_actor_of_another_observation_than_its_learner_says_which_to_give(tmp
     """The real processes: a learner in ``learning``, an actor started with ``learning_plan``; the
     actor refuses the learner's weights naming the flag, the learner refuses its transitions."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    argv = ["-m", "services.cli", "learner", "--listen", endpoint, "--run", "obs",
-            "--checkpoint-dir", str(tmp_path / "ckpt"), "--hidden-sizes", "16"]  # fmt: skip
-    learner, learner_lines = start(argv)
-    try:
-        wait_for_line(learner_lines, "learner learner up", timeout=240)
+    with small_learner(endpoint, "obs", tmp_path / "ckpt") as learner_lines:
         argv = ["-m", "services.cli", "actor", "--connect", endpoint, "--run", "obs", "--id", "a1",
                 "--envs", "1", "--batch-steps", "1", "--observation", "learning_plan"]  # fmt: skip
         actor, lines = start(argv)
@@ -155,5 +151,3 @@ def test_an_actor_of_another_observation_than_its_learner_says_which_to_give(tmp
             assert "transitions.obs has dimension {} (accepted: 1 to {})".format(*dims) in line, line
         finally:
             assert stop(actor) == 0
-    finally:
-        stop(learner, timeout=60)

@@ -14,7 +14,7 @@ import time
 
 import pytest
 from conftest import free_port
-from wire_helpers import start, stop, wait_for_line
+from wire_helpers import small_learner, start, stop, wait_for_line
 
 from protocols import keys
 from services.cli import HelpFormatter, build_parser, main
@@ -106,19 +106,13 @@ def _actor(endpoint: str, run: str):
 
 def test_an_actor_on_a_wrong_run_says_so_and_names_the_run_the_learner_is_on(tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    argv = ["-m", "services.cli", "learner", "--listen", endpoint, "--run", "b",
-            "--checkpoint-dir", str(tmp_path / "ckpt"), "--hidden-sizes", "16"]  # fmt: skip
-    learner, learner_lines = start(argv)
-    try:
-        wait_for_line(learner_lines, "learner learner up", timeout=240)
+    with small_learner(endpoint, "b", tmp_path / "ckpt"):
         proc, lines = _actor(endpoint, "a")
         try:
             line = wait_for_line(lines, "no acknowledgement from the learner on run 'a'", timeout=240)
             assert f"via {endpoint}" in line and "no learner on run 'a', but on 'b': give --run b" in line
         finally:
             assert stop(proc) == 0
-    finally:
-        stop(learner, timeout=60)
 
 
 def test_an_actor_with_no_learner_anywhere_says_so():

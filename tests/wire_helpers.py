@@ -3,11 +3,13 @@ raw envelopes for malformed-input tests, and subprocess helpers for Zenoh tests.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import msgpack
@@ -254,3 +256,17 @@ def stop(proc: subprocess.Popen, timeout: float = 10) -> int:
             proc.kill()
             proc.wait()
     return proc.returncode
+
+
+@contextlib.contextmanager
+def small_learner(endpoint: str, run: str, checkpoints: Path) -> Iterator[list[str]]:
+    """A `navlearn learner` process (16 hidden units) hosting the router on ``endpoint``, up: its
+    output lines while the block runs, then stopped."""
+    argv = ["-m", "services.cli", "learner", "--listen", endpoint, "--run", run,
+            "--checkpoint-dir", str(checkpoints), "--hidden-sizes", "16"]  # fmt: skip
+    learner, lines = start(argv)
+    try:
+        wait_for_line(lines, "learner learner up", timeout=240)
+        yield lines
+    finally:
+        stop(learner, timeout=60)
