@@ -16,7 +16,15 @@ import json
 from pathlib import Path
 
 from agents.demos import Demo, DemoFormatError, dataset_location, datasets_root, load_demos
-from worlds.config import LEARNING_NAV, LEGACY_OBSERVATION, OBSERVATIONS, NavConfig, observation_differences
+from worlds.config import (
+    LEARNING_NAV,
+    LEGACY_OBSERVATION,
+    OBSERVATIONS,
+    NavConfig,
+    observation_differences,
+    observation_name,
+    observation_settings,
+)
 from worlds.perception import observation_dim
 
 
@@ -67,10 +75,14 @@ def check_observation(where: str | Path, recorded: dict | None, width: int, nav:
         return
     wrong = observation_differences(recorded, nav, other="the learner")
     if wrong:
+        theirs, learners = observation_name(recorded), observation_name(observation_settings(nav))
+        train = (
+            f"train in their observation (--observation {theirs})" if theirs else "train in their observation"
+        )
+        again = f" (navlearn demos generate --observation {learners})" if learners else ""
         raise DemoFormatError(
-            f"{where}: the demonstrations were recorded observing " + ", ".join(wrong) + "; train in "
-            "their observation (--observation plain for 8-beam sets) or record them again in the "
-            "learner's (navlearn demos generate --observation learning)"
+            f"{where}: the demonstrations were recorded observing " + ", ".join(wrong) + f"; {train} or "
+            f"record them again in the learner's{again}"
         )
 
 

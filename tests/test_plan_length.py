@@ -76,3 +76,11 @@ def test_nirl_learns_in_learning_plan_from_demos_recorded_in_it(tmp_path, capsys
     assert main(["nirl", "train", "--demos", str(demos), "--out", str(tmp_path / "other"), *tiny]) == 2
     err = capsys.readouterr().err
     assert str(demos) in err and "observation.plan_length=True" in err
+    # ... and which --observation to give either way
+    assert "train in their observation (--observation learning_plan)" in err, err
+    assert "record them again in the learner's (navlearn demos generate --observation learning)" in err, err
+    # up checks its --demos against its own --observation before anything starts
+    capsys.readouterr()
+    assert main(["up", "--nirl", "--demos", str(demos), "--out", str(tmp_path / "up")]) == 2
+    assert "train in their observation (--observation learning_plan)" in capsys.readouterr().err
+    assert not (tmp_path / "up").exists()

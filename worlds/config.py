@@ -368,6 +368,14 @@ OBSERVATIONS = {
 (8 beams + goal, the older sets)"""
 
 
+def observation_name(settings: dict) -> str | None:
+    """The name in :data:`OBSERVATIONS` of the observation ``settings`` (an ``observation_settings``
+    record) describe, or None if none of them (what an error tells a user to give)."""
+    return next(
+        (name for name, nav in OBSERVATIONS.items() if not observation_differences(settings, nav)), None
+    )
+
+
 OBSERVATION_ENV = "NAVLEARN_OBSERVATION"
 """the one environment variable every service reads ``--observation`` from (like NAVLEARN_RUN)"""
 

@@ -23,7 +23,7 @@ from protocols.codec import decode, encode
 from protocols.errors import ProtocolError
 from protocols.limits import DEFAULT_LIMITS, Limits
 from protocols.messages import ExplorationSchedule, WeightsUpdate
-from worlds.config import OBSERVATIONS, observation_differences
+from worlds.config import OBSERVATIONS, observation_differences, observation_name
 
 log = logging.getLogger("navlearn.weights")
 
@@ -160,9 +160,8 @@ class WeightsReceiver:
         wrong = observation_differences(message.observation, OBSERVATIONS[self.observation], "this process")
         if not wrong:
             return None
-        said = message.observation
-        named = [name for name, nav in OBSERVATIONS.items() if not observation_differences(said, nav)]
-        fix = f"--observation {named[0]}" if named else "the learner's --observation"
+        named = observation_name(message.observation)
+        fix = f"--observation {named}" if named else "the learner's --observation"
         return (
             f"the learner's network observes {', '.join(wrong)}; this process has --observation "
             f"{self.observation}: start it with {fix}"
