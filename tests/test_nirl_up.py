@@ -35,7 +35,7 @@ def test_up_nirl_with_an_expert_demonstrator_trains_broadcasts_and_evaluates_nir
     result = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=540)
     logs = {p.name: p.read_text()[-1500:] for p in sorted((out / "logs").glob("*.log"))}
     assert result.returncode == 0, (result.stdout, result.stderr, logs)
-    assert "demonstrator (astar)" in result.stdout
+    assert "demonstrator (astar)" in result.stdout and "observation learning_plan;" in result.stdout
 
     summary = json.loads((out / "summary.json").read_text())
     # the demonstrator exits 0 only once the learner acknowledged every batch it published

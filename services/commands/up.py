@@ -86,6 +86,7 @@ def main(args: argparse.Namespace) -> int:
     console.print(
         f"navlearn up: run [bold]{config.run}[/bold], learner{' (NNQL + NIRL)' * config.nirl} + "
         f"{config.actors} actors x {config.envs} robots{demonstrator} + evaluator on {up.endpoint}; "
+        f"observation {config.observation}; "
         f"budget {budget} from the first transition; "
         f"outputs in {up.out}/",
         soft_wrap=True,
