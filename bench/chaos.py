@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from bench import ingest
+from bench.flooder import launch as launch_flooder
 from protocols.codec import encode
 from services.common.transport import ZenohSettings, free_port, open_session
 from services.learner.checkpoint import CheckpointDir
@@ -262,25 +263,11 @@ def flood(args, root: Path) -> dict:
     rates: dict[str, list[float]] = {phase: [] for phase in args.phases}
     settle(watcher, run)
     rss_before = peak_rss_mb(learner.pid)
-    nice = ["nice", "-n", str(args.flooder_nice)] if args.flooder_nice else []
-    flooder_cmd = [
-        sys.executable,
-        str(Path(__file__).with_name("flooder.py")),
-        "--connect",
-        endpoint,
-        "--run",
-        run,
-    ]
+    flooder_args = ["--connect", endpoint, "--run", run]
     for _ in range(args.flood_rounds):
         for phase in args.phases:
             extra = FLOOD_PHASES[phase]
-            proc = (
-                None
-                if extra is None
-                else subprocess.Popen([*nice, *flooder_cmd, *extra], stdout=subprocess.PIPE)
-            )
-            if proc is not None:
-                time.sleep(3.0)  # its session up and flooding
+            proc = None if extra is None else launch_flooder([*flooder_args, *extra], nice=args.flooder_nice)
             start, acked = time.monotonic(), len(normal.actor.acked_seqs)
             time.sleep(args.flood_seconds)
             rates[phase].append((len(normal.actor.acked_seqs) - acked) / (time.monotonic() - start))

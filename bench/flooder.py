@@ -3,8 +3,9 @@
 It publishes, as fast as Zenoh takes them and never waiting for an acknowledgement, valid
 TransitionBatches of ``--rows`` rows on its own key ``transitions/<id>`` (a new seq each, so
 none is a duplicate), and every ``--big-every`` of them one valid batch of about ``--big-mb`` MB
-on one of ``--big-keys`` more keys (``<id>-big0``, ...). Prints one JSON line when stopped
-(SIGTERM or ``--seconds``): what it published.
+on one of ``--big-keys`` more keys (``<id>-big0``, ...). Prints ``flooding`` once its publishers are
+up and one JSON line when stopped (SIGTERM or ``--seconds``): what it published. :func:`launch`
+starts it and returns once it floods.
 
     python -m bench.flooder --connect tcp/127.0.0.1:7447 --run r --id flood --rows 1000 --big-mb 60
 """
@@ -13,9 +14,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import select
 import signal
+import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import zenoh
@@ -31,6 +36,31 @@ OBS_DIM, N_ACTIONS = (
     observation_dim(LEARNING_NAV),
     5,
 )  # what the learner takes (run as a script: no bench._common)
+
+
+READY = "flooding"
+"""the line the flooder prints once its publishers are up, before it floods"""
+
+
+def launch(args: list[str], nice: int = 0, timeout: float = 120.0) -> subprocess.Popen:
+    """This script in its own process with ``args`` (under ``nice -n NICE`` when NICE > 0), returned
+    once it prints :data:`READY`: a phase timed from then on is flooded, however slowly the process
+    started on a busy machine. Its stdout (text) then holds the summary line it prints when stopped.
+    RuntimeError if it does not get there within ``timeout`` seconds (it is killed)."""
+    command = [*(["nice", "-n", str(nice)] if nice > 0 else []), sys.executable, str(Path(__file__)), *args]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    deadline = time.monotonic() + timeout
+    while True:
+        left = deadline - time.monotonic()
+        line = proc.stdout.readline() if left > 0 and select.select([proc.stdout], [], [], left)[0] else ""
+        if line.strip() == READY:
+            return proc
+        if not line:  # timed out, or it exited
+            proc.kill()
+            proc.wait()
+            raise RuntimeError(
+                f"flooder.py did not start flooding within {timeout:.0f} s (exit {proc.returncode})"
+            )
 
 
 def make_batch(actor: str, rows: int, seq: int) -> TransitionBatch:
@@ -79,6 +109,7 @@ def main(argv: list[str] | None = None) -> None:
     deadline = time.monotonic() + args.seconds if args.seconds else float("inf")
     seq, sent, sent_big, sent_bytes = 0, 0, 0, 0
     template = make_batch(args.id, args.rows, 0) if args.rows else None
+    print(READY, flush=True)
     while not stop.is_set() and time.monotonic() < deadline:
         if template is not None:
             seq += 1

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -22,7 +21,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from bench.flooder import make_batch
+from bench.flooder import launch, make_batch
 from protocols import keys
 from protocols.codec import encode
 from services.common.transport import ZenohSettings, open_session
@@ -91,11 +90,10 @@ class Normal:
 
 
 def flooder(endpoint: str, run: str) -> subprocess.Popen:
-    return subprocess.Popen(
-        ["nice", "-n", "19", sys.executable, str(REPO / "bench" / "flooder.py"), "--connect", endpoint,
-         "--run", run, "--id", "flood", "--rows", "1000", "--big-mb", "60", "--big-keys", "4"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+    """The flooder, returned once it floods (at nice 19 on a busy host its start can take a while)."""
+    args = ["--connect", endpoint, "--run", run, "--id", "flood", "--rows", "1000", "--big-mb", "60",
+            "--big-keys", "4"]  # fmt: skip
+    return launch(args, nice=19)
 
 
 @pytest.mark.integration
@@ -121,8 +119,6 @@ def test_a_flooder_slows_a_normal_actor_by_at_most_the_bound_and_memory_stays_bo
         for _ in range(ROUNDS):
             for phase in ("alone", "flood"):
                 proc = flooder(endpoint, run) if phase == "flood" else None
-                if proc is not None:
-                    time.sleep(3.0)  # its session up and flooding
                 start, acked0 = time.monotonic(), normal.acked()
                 while time.monotonic() - start < ROUND_S:
                     peak = max(peak, rss_mb(learner.pid))
