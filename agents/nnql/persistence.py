@@ -18,7 +18,7 @@ import torch
 
 from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import save_policy_dir
-from worlds.config import saved_observation
+from worlds.config import NavConfig, observation_differences, saved_observation, with_observation
 
 CHECKPOINT_STATE = "learner.pt"
 CHECKPOINT_REPLAY = "replay"
@@ -31,8 +31,8 @@ def check_checkpoint_observation(saved: dict | None, mine: dict | None) -> None:
     lacks did not exist when it was written (their legacy value, off)."""
     if saved is None or mine is None:
         return
-    saved, mine = saved_observation(saved), saved_observation(mine)
-    wrong = [f"{k}={saved[k]!r} (this learner has {mine.get(k)!r})" for k in saved if saved[k] != mine.get(k)]
+    learner = with_observation(NavConfig(), saved_observation(mine))
+    wrong = observation_differences(saved_observation(saved), learner, other="this learner")
     if wrong:
         raise ValueError(
             "the checkpoint's network observes " + ", ".join(wrong) + ": resume it with the "
