@@ -401,6 +401,9 @@ class StatusReport(Message):
     """Latest losses; NaN and infinity are allowed here so a diverged learner can still say so."""
     last_eval: dict[str, Any] | None = json_map(optional=True, default=None)
     """The newest evaluation summary (JSON-like), if any."""
+    observation: str | None = text(optional=True, default=None)
+    """The learner's: the observation its networks take (``--observation``, a name of
+    ``worlds.config.OBSERVATIONS``); actors and the evaluator must run the same. None: not said."""
 
 
 __all__ = [

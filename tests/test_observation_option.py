@@ -6,7 +6,11 @@ in tests/test_nirl_up.py."""
 
 from __future__ import annotations
 
+import json
 import logging
+import re
+import subprocess
+import sys
 import time
 
 import msgpack
@@ -34,6 +38,15 @@ from worlds.config import LEARNING_NAV, LEARNING_PLAN_NAV, OBSERVATION_ENV, obse
 from worlds.perception import observation_dim
 
 TENSORS = {"0.weight": np.ones((4, 3), np.float32)}
+
+
+def navlearn(*argv: str) -> subprocess.CompletedProcess:
+    """The real command line, as a user runs it; must exit 0."""
+    done = subprocess.run(
+        [sys.executable, "-m", "services.cli", *argv], capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, (argv, done.stdout, done.stderr)
+    return done
 
 
 def test_weights_carry_what_their_network_observes_inside_the_architecture() -> None:
@@ -136,7 +149,8 @@ def test_an_unknown_observation_is_refused_naming_the_choices(command, capsys) -
 @pytest.mark.timeout(600)
 def test_an_actor_of_another_observation_than_its_learner_says_which_to_give(tmp_path) -> None:
     """The real processes: a learner in ``learning``, an actor started with ``learning_plan``; the
-    actor refuses the learner's weights naming the flag, the learner refuses its transitions."""
+    actor refuses the learner's weights naming the flag, the learner refuses its transitions, and
+    `navlearn status` shows which observation the learner takes."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with small_learner(endpoint, "obs", tmp_path / "ckpt") as learner_lines:
         argv = ["-m", "services.cli", "actor", "--connect", endpoint, "--run", "obs", "--id", "a1",
@@ -149,5 +163,9 @@ def test_an_actor_of_another_observation_than_its_learner_says_which_to_give(tmp
             line = wait_for_line(learner_lines, "transitions/a1: shape", timeout=120)
             dims = observation_dim(LEARNING_PLAN_NAV), observation_dim(LEARNING_NAV)
             assert "transitions.obs has dimension {} (accepted: 1 to {})".format(*dims) in line, line
+            asked = ["status", "--connect", endpoint, "--run", "obs"]
+            view = json.loads(navlearn(*asked, "--json").stdout)
+            assert view["learner"]["observation"] == "learning", view["learner"]
+            assert re.search(r"observation\s+\S\s+learning\s", navlearn(*asked).stdout)  # the table's row
         finally:
             assert stop(actor) == 0

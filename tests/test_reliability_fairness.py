@@ -98,6 +98,7 @@ def flooder(endpoint: str, run: str) -> subprocess.Popen:
 
 @pytest.mark.integration
 @pytest.mark.slow
+@pytest.mark.alone  # a ratio of two rates: a test beside it would disturb one phase and not the other
 @pytest.mark.timeout(400)
 def test_a_flooder_slows_a_normal_actor_by_at_most_the_bound_and_memory_stays_bounded(tmp_path):
     port = free_port()

@@ -12,7 +12,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "status",
         help="show the learner's status and which processes are alive",
         description=(
-            "Query navlearn/<run>/status/learner (policy version, replay sizes, updates/s, transitions "
+            "Query navlearn/<run>/status/learner (policy version, the observation it trains on, replay "
+            "sizes, updates/s, transitions "
             "received and rejected by reason, per-actor rate and last seen, losses, last evaluation) and "
             "the liveliness tokens under navlearn/<run>/alive/ (learner, actors, demonstrators, "
             "evaluator), then print a table, or JSON with --json. With --actors, also ask every actor "

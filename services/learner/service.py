@@ -392,7 +392,9 @@ class LearnerService:
 
     def status(self) -> StatusReport:
         self.status_seq += 1
-        return build_status(self.parts, self.config.model, self.sender, self.status_seq)
+        return build_status(
+            self.parts, self.config.model, self.config.observation, self.sender, self.status_seq
+        )
 
     def refresh_status(self) -> None:
         status = self.status()

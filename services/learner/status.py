@@ -7,9 +7,10 @@ from services.learner.state import LearnerParts
 from services.learner.stats import LearnerTally
 
 
-def build_status(parts: LearnerParts, model: str, sender: str, seq: int) -> StatusReport:
+def build_status(parts: LearnerParts, model: str, observation: str, sender: str, seq: int) -> StatusReport:
     """Counters (incl. rejections by reason and the write-ahead log's), rates, versions, replay sizes,
-    per-actor totals and last seen, losses and the last evaluation of a learner service's parts."""
+    per-actor totals and last seen, losses, the last evaluation and the observation of a learner
+    service's parts."""
     tally, learner = parts.tally, parts.learner
     counters = {
         **tally.counters,
@@ -46,6 +47,7 @@ def build_status(parts: LearnerParts, model: str, sender: str, seq: int) -> Stat
         actors_last_seen={a: s.last_seen for a, s in tally.actors.items() if s.last_seen},
         losses=losses,
         last_eval=tally.last_eval,
+        observation=observation,
     )
 
 

@@ -109,6 +109,7 @@ def status_dict(status: StatusReport | None, alive: list[tuple[str, str]], now: 
         }
     out["learner"] = {
         "sender": status.sender,
+        "observation": status.observation,
         "versions": status.versions,
         "replay_sizes": status.replay_sizes,
         "counters": {k: v for k, v in status.counters.items() if not k.startswith("transitions/")},
@@ -202,6 +203,8 @@ def render(view: dict):
         summary.add_row("alive", alive)
         return summary
     summary = Table(title=f"learner {learner['sender']}", show_header=False)
+    if learner.get("observation"):
+        summary.add_row("observation", learner["observation"])
     for model, version in learner["versions"].items():
         summary.add_row(f"policy version ({model})", str(version))
     for name, size in learner["replay_sizes"].items():

@@ -1,0 +1,67 @@
+"""The suite's reader-writer lock between xdist workers (tests/conftest.py's ``machine_share``)."""
+
+from __future__ import annotations
+
+import fcntl
+import tempfile
+import threading
+import time
+
+from conftest import machine_share
+
+
+def _held_by_another(path: str) -> bool:
+    with open(path, "a") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        fcntl.flock(f, fcntl.LOCK_UN)
+        return False
+
+
+def _wait_until(condition, what: str) -> None:
+    deadline = time.monotonic() + 10
+    while not condition():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.01)
+
+
+def test_an_alone_test_waits_for_the_running_test_and_the_next_waits_for_it(tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    order: list[str] = []
+    release = {name: threading.Event() for name in ("first", "alone")}
+
+    def run(name: str, alone: bool) -> None:
+        with machine_share(alone, "run"):
+            order.append(f"{name} in")
+            if name in release:
+                release[name].wait(10)
+            order.append(f"{name} out")
+
+    first = threading.Thread(target=run, args=("first", False))
+    first.start()
+    _wait_until(lambda: order == ["first in"], "the first test did not start")
+    alone = threading.Thread(target=run, args=("alone", True))
+    alone.start()
+    # the alone test waits for the room with the gate held: a new test cannot overtake it
+    _wait_until(lambda: _held_by_another(str(tmp_path / "navlearn-tests-run.gate")), "alone never queued")
+    after = threading.Thread(target=run, args=("after", False))
+    after.start()
+    time.sleep(0.2)
+    assert order == ["first in"]  # neither the alone test nor the next one runs beside the first
+    release["first"].set()
+    _wait_until(lambda: "alone in" in order, "the alone test never started")
+    time.sleep(0.2)
+    assert order == ["first in", "first out", "alone in"]  # the next test waits for the alone one
+    release["alone"].set()
+    for t in (first, alone, after):
+        t.join(10)
+    assert order == ["first in", "first out", "alone in", "alone out", "after in", "after out"]
+
+
+def test_without_workers_nothing_is_held(tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    with machine_share(True, None), machine_share(True, None):
+        pass  # two alone holders at once: no lock without xdist
+    assert not list(tmp_path.iterdir())
