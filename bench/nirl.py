@@ -13,6 +13,7 @@ Learners, each per (demo set, seed):
 * ``dqfd``  NNQL with the demonstrations in replay, DQfD-style (Hester et al. 2018): the environment's
             reward, demonstrations kept in their own buffer and 25% of each batch, DQfD's large-margin
             loss (0.8) on them, 500 pre-training updates on demonstrations alone; NIRL's env budget;
+            the disc mix and head of ``nnql`` (``--nnql-discs``, ``--nnql-dueling``);
 * ``nirl``  NIRL with its default core (IQ-Learn), ``--iterations`` x ``--steps-per-iteration``;
 * ``maxmargin`` the max-margin core with issue 8's settings (gamma 0.95 ...), the same budget;
 * ``nnql``  NNQL from scratch (``train --local`` defaults), ``--nnql-steps``: once per seed, no demos.
@@ -88,7 +89,14 @@ from bench._nirl_options import (
 )
 from bench._nirl_report import FAMILIES, METHODS, SETS, report
 from bench.planning import expert_outcomes
-from worlds.config import LEARNING_NAV, LEARNING_PLAN_NAV, NavConfig, RewardConfig, observation_settings
+from worlds.config import (
+    LEARNING_NAV,
+    LEARNING_PLAN_NAV,
+    NavConfig,
+    RewardConfig,
+    observation_settings,
+    with_moving_discs,
+)
 from worlds.outcomes import Outcome
 from worlds.perception import observation_dim
 
@@ -170,11 +178,12 @@ def validation_success(policy, episodes: int, nav) -> float:
     return report.metrics["unseen"].success.value
 
 
-def train_dqfd(demos, seed: int, env_steps: int, nav: NavConfig, margin: float = 0.8):
-    """NNQL with demonstrations in replay, DQfD-style (see the module docstring)."""
+def train_dqfd(demos, seed: int, env_steps: int, nav: NavConfig, margin: float = 0.8, dueling: bool = False):
+    """NNQL with demonstrations in replay, DQfD-style (see the module docstring); trains in ``nav`` as
+    given (its moving discs included); ``dueling`` False: the plain head of the rows before part 13."""
     from worlds.vector_env import NavigationVectorEnv
 
-    cfg = NNQLConfig(seed=seed, learning_starts=256, dueling=False)  # the recorded runs' plain head
+    cfg = NNQLConfig(seed=seed, learning_starts=256, dueling=dueling)
     obs_dim, n_actions = observation_dim(nav), nav.robot.n_actions
     q = NNQLLearner(cfg, obs_dim, n_actions, observation=observation_settings(nav))
     store = demo_buffer(50_000, seed + 1)
@@ -289,7 +298,9 @@ def run_one(
         if set_name == "20noisy" and method != "sqil":
             row["map_refinement"] = refinement_rates(result.learner, expert_labels)
     elif method == "dqfd":
-        policy, row["env_steps"] = train_dqfd(demos, seed, budget, nav)
+        trained_in = with_moving_discs(nav, args.nnql_discs)  # the same disc mix and head as ``nnql``
+        policy, row["env_steps"] = train_dqfd(demos, seed, budget, trained_in, dueling=args.nnql_dueling)
+        row["nnql_discs"], row["dueling"] = args.nnql_discs, args.nnql_dueling
     else:  # nnql from scratch: the env's reward (nnql) or the straight-line progress reward (nnql_line)
         reward_nav = nav if method == "nnql" else dataclasses.replace(nav, rewards=RewardConfig())
         result = train_local(
@@ -349,11 +360,12 @@ def main() -> int:
     parser.add_argument("--nnql-steps", type=int, default=61_440, help="NNQL robot-steps from scratch")
     parser.add_argument("--nnql-eval-every", type=int, default=6_144, help="NNQL validation every N steps")
     parser.add_argument("--nnql-dueling", action="store_true",
-                        help="NNQL from scratch with its default dueling head (the recorded rows before "
-                        "issue 15 part 7: the plain head)")  # fmt: skip
+                        help="NNQL from scratch (and dqfd) with its default dueling head (the recorded rows "
+                        "before issue 15 part 7, and dqfd's before part 13: the plain head)")  # fmt: skip
     parser.add_argument("--nnql-discs", type=int, default=0,
-                        help="NNQL from scratch trains with 0..N moving discs per episode (train --local's "
-                        "default: 6; the recorded rows before issue 15 part 9: 0, static maps)")  # fmt: skip
+                        help="NNQL from scratch (and dqfd) trains with 0..N moving discs per episode (train "
+                        "--local's default: 6; the recorded rows before issue 15 part 9, and dqfd's before "
+                        "part 13: 0, static maps)")  # fmt: skip
     parser.add_argument("--val-episodes", type=int, default=50, help="validation episodes of the curves")
     parser.add_argument("--noise", type=float, default=0.3, help="random-action probability of the noisy set")
     parser.add_argument(
