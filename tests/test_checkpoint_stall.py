@@ -14,7 +14,8 @@ import pytest
 
 from bench.checkpoint_stall import run_case
 
-pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
+# alone: a bound in seconds on the acknowledgements' longest wait, which a test beside it would stretch
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.alone, pytest.mark.timeout(240)]
 BOUND_S = 1.0
 
 
