@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import fcntl
 import os
-import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -57,18 +56,17 @@ def arena_paths() -> tuple[Path, Path]:
 
 
 @contextmanager
-def machine_share(alone: bool, run_id: str | None) -> Iterator[None]:
+def machine_share(alone: bool, shared: Path | None) -> Iterator[None]:
     """Hold the machine shared (any test) or alone (``alone`` tests) for the other xdist workers.
 
-    ``run_id`` names the pytest run (xdist's ``PYTEST_XDIST_TESTRUNUID``, the same in every worker
-    of one run); ``None`` - a run without workers - holds nothing. The gate is taken first by both
-    kinds, so a waiting ``alone`` test is not overtaken by the other worker's next test.
+    ``shared`` is a directory every worker of the run has (the lock files go there); ``None`` - a
+    run without workers - holds nothing. The gate is taken first by both kinds, so a waiting
+    ``alone`` test is not overtaken by the other worker's next test.
     """
-    if run_id is None:
+    if shared is None:
         yield
         return
-    base = Path(tempfile.gettempdir()) / f"navlearn-tests-{run_id}"
-    with open(f"{base}.gate", "a") as gate, open(f"{base}.room", "a") as room:
+    with open(shared / "machine-share.gate", "a") as gate, open(shared / "machine-share.room", "a") as room:
         fcntl.flock(gate, fcntl.LOCK_EX)
         try:
             fcntl.flock(room, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
@@ -81,7 +79,11 @@ def machine_share(alone: bool, run_id: str | None) -> Iterator[None]:
 
 
 @pytest.fixture(autouse=True)
-def _machine_share(request: pytest.FixtureRequest) -> Iterator[None]:
+def _machine_share(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[None]:
     alone = request.node.get_closest_marker("alone") is not None
-    with machine_share(alone, os.environ.get("PYTEST_XDIST_TESTRUNUID")):
+    # a worker's base temporary directory is <the run's>/popen-gwN: their parent is the run's own
+    shared = tmp_path_factory.getbasetemp().parent if os.environ.get("PYTEST_XDIST_WORKER") else None
+    with machine_share(alone, shared):
         yield

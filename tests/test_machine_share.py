@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import fcntl
-import tempfile
 import threading
 import time
 
@@ -27,13 +26,12 @@ def _wait_until(condition, what: str) -> None:
         time.sleep(0.01)
 
 
-def test_an_alone_test_waits_for_the_running_test_and_the_next_waits_for_it(tmp_path, monkeypatch):
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+def test_an_alone_test_waits_for_the_running_test_and_the_next_waits_for_it(tmp_path):
     order: list[str] = []
     release = {name: threading.Event() for name in ("first", "alone")}
 
     def run(name: str, alone: bool) -> None:
-        with machine_share(alone, "run"):
+        with machine_share(alone, tmp_path):
             order.append(f"{name} in")
             if name in release:
                 release[name].wait(10)
@@ -45,7 +43,7 @@ def test_an_alone_test_waits_for_the_running_test_and_the_next_waits_for_it(tmp_
     alone = threading.Thread(target=run, args=("alone", True))
     alone.start()
     # the alone test waits for the room with the gate held: a new test cannot overtake it
-    _wait_until(lambda: _held_by_another(str(tmp_path / "navlearn-tests-run.gate")), "alone never queued")
+    _wait_until(lambda: _held_by_another(str(tmp_path / "machine-share.gate")), "alone never queued")
     after = threading.Thread(target=run, args=("after", False))
     after.start()
     time.sleep(0.2)
@@ -60,8 +58,6 @@ def test_an_alone_test_waits_for_the_running_test_and_the_next_waits_for_it(tmp_
     assert order == ["first in", "first out", "alone in", "alone out", "after in", "after out"]
 
 
-def test_without_workers_nothing_is_held(tmp_path, monkeypatch):
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+def test_without_workers_nothing_is_held():
     with machine_share(True, None), machine_share(True, None):
         pass  # two alone holders at once: no lock without xdist
-    assert not list(tmp_path.iterdir())
