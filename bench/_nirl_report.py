@@ -1,8 +1,8 @@
 """The table of ``python -m bench.nirl --report``: pooled success with Wilson intervals per learner
-and demonstration set, McNemar's exact test of NIRL against behaviour cloning on the same episodes,
-MAP refinement, the learned reward's scale, robot-steps to a validation success, the grid-world check;
-one JSON object on the last line. The grid's names (families, demonstration sets, learners) are
-defined here, where the table reads them, and imported by ``bench/nirl.py``."""
+and demonstration set, McNemar's exact test of NIRL against behaviour cloning, SQIL and DQfD on the
+same episodes, MAP refinement, the learned reward's scale, robot-steps to a validation success, the
+grid-world check; one JSON object on the last line. The grid's names (families, demonstration sets,
+learners) are defined here, where the table reads them, and imported by ``bench/nirl.py``."""
 
 from __future__ import annotations
 
@@ -93,21 +93,23 @@ def report(path: Path) -> int:
             )
             summary["cells"][f"{method}/{set_name}"] = entry
             table.append(entry)
-    # paired comparison on the same episodes: NIRL vs behaviour cloning, same demo set and seed
-    comparisons = {}
-    for set_name in SETS:
-        for family in FAMILIES:
-            a, b = paired(latest, ("nirl", set_name), ("bc", set_name), family)
-            if a:
-                only_nirl, only_bc, p = mcnemar(a, b)
-                comparisons[f"{set_name}/{family}"] = {
-                    "nirl": float(np.mean(a)), "bc": float(np.mean(b)), "only_nirl": only_nirl,
-                    "only_bc": only_bc, "p": p, "n": len(a),
-                }  # fmt: skip
-                print(f"McNemar NIRL vs BC, {set_name} demos, {family}: {np.mean(a):.1%} vs "
-                      f"{np.mean(b):.1%}, {only_nirl} episodes only NIRL solved, {only_bc} only BC, "
-                      f"p = {p:.2g} (n = {len(a)})")  # fmt: skip
-    summary["nirl_vs_bc"] = comparisons
+    # paired comparison on the same episodes: NIRL vs each learner from the same demonstrations
+    # (behaviour cloning, SQIL, DQfD), same demo set and seed
+    for baseline in ("bc", "sqil", "dqfd"):
+        comparisons = {}
+        for set_name in SETS:
+            for family in FAMILIES:
+                a, b = paired(latest, ("nirl", set_name), (baseline, set_name), family)
+                if a:
+                    only_nirl, only_other, p = mcnemar(a, b)
+                    comparisons[f"{set_name}/{family}"] = {
+                        "nirl": float(np.mean(a)), baseline: float(np.mean(b)), "only_nirl": only_nirl,
+                        f"only_{baseline}": only_other, "p": p, "n": len(a),
+                    }  # fmt: skip
+                    print(f"McNemar NIRL vs {baseline.upper()}, {set_name} demos, {family}: {np.mean(a):.1%} "
+                          f"vs {np.mean(b):.1%}, {only_nirl} episodes only NIRL solved, {only_other} only "
+                          f"{baseline.upper()}, p = {p:.2g} (n = {len(a)})")  # fmt: skip
+        summary[f"nirl_vs_{baseline}"] = comparisons
     refinement = [(r["method"], r["map_refinement"]) for r in rows if "map_refinement" in r]
     refinement += [("nirl, after policy iteration", r["map_refinement_progress"])
                    for r in rows if "map_refinement_progress" in r]  # fmt: skip
@@ -176,7 +178,7 @@ def report(path: Path) -> int:
     def cell(name, family="unseen"):
         return summary["cells"].get(name, {}).get(family, {}).get("success")
 
-    noisy = comparisons.get("20noisy/unseen", {})
+    noisy = summary["nirl_vs_bc"].get("20noisy/unseen", {})
     summary["targets"] = {
         "nirl_20_clean_unseen_ge_0.95": cell("nirl/20"),
         "nirl_20_clean_dynamic_ge_0.90": cell("nirl/20", "dynamic"),
