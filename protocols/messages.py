@@ -402,8 +402,8 @@ class StatusReport(Message):
     last_eval: dict[str, Any] | None = json_map(optional=True, default=None)
     """The newest evaluation summary (JSON-like), if any."""
     observation: str | None = text(optional=True, default=None)
-    """The learner's: the observation its networks take (``--observation``, a name of
-    ``worlds.config.OBSERVATIONS``); actors and the evaluator must run the same. None: not said."""
+    """The learner's observation (``--observation``, a name of ``worlds.config.OBSERVATIONS``): what
+    its networks take, and so what its actors and evaluator must run. None: not said (an actor)."""
 
 
 __all__ = [
