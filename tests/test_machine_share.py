@@ -7,6 +7,7 @@ import threading
 import time
 
 from conftest import machine_share
+from test_wire_zenoh import wait_until
 
 
 def _held_by_another(path: str) -> bool:
@@ -17,13 +18,6 @@ def _held_by_another(path: str) -> bool:
             return True
         fcntl.flock(f, fcntl.LOCK_UN)
         return False
-
-
-def _wait_until(condition, what: str) -> None:
-    deadline = time.monotonic() + 10
-    while not condition():
-        assert time.monotonic() < deadline, what
-        time.sleep(0.01)
 
 
 def test_an_alone_test_waits_for_the_running_test_and_the_next_waits_for_it(tmp_path):
@@ -39,17 +33,17 @@ def test_an_alone_test_waits_for_the_running_test_and_the_next_waits_for_it(tmp_
 
     first = threading.Thread(target=run, args=("first", False))
     first.start()
-    _wait_until(lambda: order == ["first in"], "the first test did not start")
+    wait_until(lambda: order == ["first in"], 10, "the first test to start")
     alone = threading.Thread(target=run, args=("alone", True))
     alone.start()
     # the alone test waits for the room with the gate held: a new test cannot overtake it
-    _wait_until(lambda: _held_by_another(str(tmp_path / "machine-share.gate")), "alone never queued")
+    wait_until(lambda: _held_by_another(str(tmp_path / "machine-share.gate")), 10, "the alone test to queue")
     after = threading.Thread(target=run, args=("after", False))
     after.start()
     time.sleep(0.2)
     assert order == ["first in"]  # neither the alone test nor the next one runs beside the first
     release["first"].set()
-    _wait_until(lambda: "alone in" in order, "the alone test never started")
+    wait_until(lambda: "alone in" in order, 10, "the alone test to start")
     time.sleep(0.2)
     assert order == ["first in", "first out", "alone in"]  # the next test waits for the alone one
     release["alone"].set()
