@@ -6,6 +6,8 @@ the project and each other as packages.
 
 from __future__ import annotations
 
+import argparse
+import json
 import os
 import signal
 import socket
@@ -139,3 +141,19 @@ def overheads(service: dict, baseline: dict) -> dict:
 def machine_load() -> list[float]:
     """1, 5 and 15 minute load averages (recorded beside every figure)."""
     return [round(x, 2) for x in os.getloadavg()]
+
+
+def parse_overrides(parser: argparse.ArgumentParser, items: list[str], config: type, option: str) -> dict:
+    """``KEY=VALUE`` strings -> overrides of the dataclass ``config`` (values parsed as JSON, else kept as
+    strings); a KEY that is not one of its fields is a usage error naming ``option``."""
+    fields = set(config.__dataclass_fields__)
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or key not in fields:
+            parser.error(f"{option} {item!r}: expected KEY=VALUE with KEY a {config.__name__} field")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out

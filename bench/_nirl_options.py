@@ -1,38 +1,21 @@
-"""Screening helpers of ``bench/nirl.py`` (issue 15 part 3): where validation-seed runs go, NIRLConfig
-overrides from the command line, held-out expert episodes for ``--diagnose`` and a pickle cache of
-generated demonstrations (``--demo-cache``)."""
+"""Screening helpers of ``bench/nirl.py`` (issue 15 part 3): where validation-seed runs go (NIRLConfig
+overrides from the command line: ``bench._common.parse_overrides``), held-out expert episodes for
+``--diagnose`` and a pickle cache of generated demonstrations (``--demo-cache``)."""
 
 from __future__ import annotations
 
 import argparse
-import json
 import pickle
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from agents.nirl.config import NIRLConfig
 from agents.planning.demonstrate import generate_demos
 from worlds.config import NavConfig
 
 VALIDATION_RUNS = "runs/nirl_validation.jsonl"
 """screening runs (``--split validation``): never mixed with the test seed's table"""
-
-
-def parse_overrides(parser: argparse.ArgumentParser, items: list[str]) -> dict:
-    """``KEY=VALUE`` strings -> NIRLConfig overrides (values parsed as JSON, else kept as strings)."""
-    fields = set(NIRLConfig.__dataclass_fields__)
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or key not in fields:
-            parser.error(f"--nirl {item!r}: expected KEY=VALUE with KEY a NIRLConfig field")
-        try:
-            out[key] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key] = value
-    return out
 
 
 def heldout_demos(seed: int, nav: NavConfig) -> list:

@@ -76,13 +76,12 @@ from agents.nnql.rollout import VectorRollout
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.nnql.transitions import transitions_to_tensordict
 from agents.planning.demonstrate import generate_demos
-from bench._common import machine_load
+from bench._common import machine_load, parse_overrides
 from bench._nirl_options import (
     VALIDATION_RUNS,
     add_policy_options,
     cached,
     heldout_demos,
-    parse_overrides,
     policy_phase,
     policy_run,
     rates,
@@ -408,7 +407,7 @@ def main() -> int:
     parser.add_argument("--report", action="store_true", help="print the table of --runs and stop")
     args = parser.parse_args()
     runs = Path(args.runs or (VALIDATION_RUNS if args.split == "validation" else RUNS[args.nav]))
-    args.nirl_overrides = parse_overrides(parser, args.nirl)
+    args.nirl_overrides = parse_overrides(parser, args.nirl, NIRLConfig, "--nirl")
     if args.keep_best and "nirl" in args.methods.split(",") and args.curve_iterations > args.iterations:
         parser.error("--keep-best keeps the best of the rounds tested: --curve-iterations <= --iterations")
     if args.report:

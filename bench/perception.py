@@ -13,6 +13,8 @@ robot-steps, several seeds, one observation per variant:
     F  B + a 16x16 egocentric patch of the robot's own map (occupancy, visits) read by a small CNN
        beside the MLP (agents.nnql.patch_network; no subgoal: learning alone)
     F+geo  F with the geodesic progress reward
+    Fg+geo  F+geo with the goal also drawn into the CNN's input (NNQLConfig.cnn_goal: one more image
+          channel, the observation's goal at its place in the patch): the same observation
     G, G+geo  B (and B+geo) with the recurrent Q (R2D2-style: LSTM, sequence replay with burn-in and
           stored state; agents/nnql/recurrent_learner.py, options RECURRENT below): memory, no planner
 
@@ -31,6 +33,11 @@ directory whose training finished (summary.json) with the same settings is evalu
 
     python bench/perception.py --steps 200000 --seeds 0 1 2            # human lines, JSON last
     python bench/perception.py --variants A B --seeds 0 --steps 20000   # a smoke run
+
+``--screen`` trains and evaluates on the validation set only (seed 1; runs in ``OUT/screen``), so
+settings are chosen without looking at the test seed; use training seeds no reported run uses:
+
+    python bench/perception.py --screen --variants F+geo Fg+geo --seeds 10 --steps 200000
 """
 
 from __future__ import annotations
@@ -55,6 +62,7 @@ from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.recurrent_policy import RecurrentNNQLPolicy
 from agents.nnql.train_local import LocalTrainConfig, train_local
+from bench._common import parse_overrides
 from worlds.config import (
     LEARNING_NAV,
     LEGACY_OBSERVATION,
@@ -90,12 +98,13 @@ PATCH = 16
 """side of variant F's own-map patch (cells of 1 m: 8 m each way, half a 16x16 training map)"""
 VARIANTS["F"] = NavConfig(sensors=SECTORS, observation=ObservationConfig(patch_size=PATCH))
 VARIANTS["F+geo"] = replace(VARIANTS["F"], rewards=GEODESIC)
+VARIANTS["Fg+geo"] = VARIANTS["F+geo"]
 VARIANTS["G"] = VARIANTS["B"]
 VARIANTS["G+geo"] = VARIANTS["B+geo"]
 RECURRENT = {"recurrent": True, "utd_ratio": 0.04}
 """NNQLConfig of the recurrent variants (the rest default: LSTM 128, 10 burn-in + 20 trained steps,
 32 sequences per update); utd 0.04 replays each transition about as often as the default MLP's 1/16"""
-NNQL_OPTIONS: dict[str, dict] = {"G": RECURRENT, "G+geo": RECURRENT}
+NNQL_OPTIONS: dict[str, dict] = {"G": RECURRENT, "G+geo": RECURRENT, "Fg+geo": {"cnn_goal": True}}
 PAIRED_WITH = ("A", "D+geo")
 """each run is compared (McNemar, same seed, same episodes) with the runs of these variants when present"""
 SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dynamic", 0))
@@ -147,18 +156,26 @@ def to_90(curve: list[dict]) -> dict:
     return {"steps": None, "wall_s": None}
 
 
+def label(variant: str, args) -> str:
+    """The variant's name with the run's ``--nnql`` / ``--rewards`` overrides, e.g. F+geo[n_step=3]."""
+    given = [*getattr(args, "nnql", []), *getattr(args, "rewards", [])]
+    return f"{variant}[{','.join(given)}]" if given else variant
+
+
 def run_one(variant: str, seed: int, args, sets: dict) -> dict:
-    out = Path(args.out) / f"{variant}-s{seed}"
+    out = Path(args.out) / f"{label(variant, args)}-s{seed}"
     cached = out / "result.json"
     if cached.is_file():
         return json.loads(cached.read_text())
     nav = VARIANTS[variant]
+    nav = replace(nav, rewards=replace(nav.rewards, **getattr(args, "reward_overrides", {})))
     run = LocalTrainConfig(
         steps=args.steps, envs=16, seed=seed, out=str(out), eval_every=args.steps // 4,
         eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False,
         moving_discs=0,  # the variant's nav as it is: static maps, as the recorded runs
     )  # fmt: skip
-    nnql = NNQLConfig(seed=seed, **{"dueling": False, **NNQL_OPTIONS.get(variant, {})})  # plain head
+    options = {"dueling": False, **NNQL_OPTIONS.get(variant, {}), **getattr(args, "nnql_overrides", {})}
+    nnql = NNQLConfig(seed=seed, **options)  # a plain head unless overridden
     trained = finished(out, run, nav)
     if trained is None:
         start = time.perf_counter()
@@ -168,7 +185,7 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
     policy = (RecurrentNNQLPolicy if nnql.recurrent else NNQLPolicy).load(out).greedy()
     results = evaluate_sets(policy, nav, sets)
     record = {
-        "variant": variant,
+        "variant": label(variant, args),
         "seed": seed,
         "train_robot_steps": trained["env_steps"],
         "train_wall_s": round(trained["wall"], 1),
@@ -274,6 +291,25 @@ def plot(report: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def screen(args) -> None:
+    """Validation success of each (variant, seed) run, nothing of the test sets; JSON last."""
+    name, family, seed = SETS[0]
+    sets = {name: make_eval_set(family, args.episodes, seed=seed)}
+    args.out = str(Path(args.out) / "screen")
+    report = {"steps": args.steps, "episodes": args.episodes, "runs": []}
+    for v in args.variants:
+        for s in args.seeds:
+            r = run_one(v, s, args, sets)
+            m = r["sets"][name]
+            name_v = label(v, args)
+            print(f"{name_v} seed {s}: validation {m['success']:.1%} [{m['ci'][0]:.1%}, {m['ci'][1]:.1%}], "
+                  f"collisions {m['collision_static']:.1%}, timeouts {m['timeout']:.1%}, "
+                  f"train {r['train_wall_s']:.0f} s, to 90% {r['to_90_validation']}")  # fmt: skip
+            keep = ("train_wall_s", "to_90_validation")
+            report["runs"].append({"variant": name_v, "seed": s, "validation": m, **{k: r[k] for k in keep}})
+    print(json.dumps(report))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -292,9 +328,24 @@ def main() -> None:
     parser.add_argument(
         "--cached-only", action="store_true", help="report the runs already in --out, train nothing"
     )
+    parser.add_argument(
+        "--screen", action="store_true",
+        help="train and evaluate on the validation set only (OUT/screen): choose without the test seed",
+    )  # fmt: skip
+    parser.add_argument("--nnql", nargs="+", default=[], metavar="KEY=VALUE",
+                        help="with --screen: NNQLConfig overrides (JSON values), e.g. n_step=3")  # fmt: skip
+    parser.add_argument("--rewards", nargs="+", default=[], metavar="KEY=VALUE",
+                        help="with --screen: RewardConfig overrides, e.g. collision=-3")  # fmt: skip
     args = parser.parse_args()
+    args.nnql_overrides = parse_overrides(parser, args.nnql, NNQLConfig, "--nnql")
+    args.reward_overrides = parse_overrides(parser, args.rewards, RewardConfig, "--rewards")
+    if (args.nnql or args.rewards) and not args.screen:
+        parser.error("--nnql / --rewards are screening options: add --screen (the table is of the variants)")
 
     start = time.perf_counter()
+    if args.screen:
+        screen(args)
+        return
     sets = {name: make_eval_set(family, args.episodes, seed=seed) for name, family, seed in SETS}
     base = heuristic(sets, Path(args.out))
     if args.cached_only:

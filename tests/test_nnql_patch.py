@@ -13,7 +13,7 @@ from agents.evaluation.runner import evaluate, make_eval_set
 from agents.forward import TorchForward
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
-from agents.nnql.patch_network import PatchQNetwork, build_q_network
+from agents.nnql.patch_network import PatchQNetwork, build_q_network, goal_images
 from agents.nnql.policy import NNQLPolicy
 from services.cli import main
 from worlds.config import NavConfig, ObservationConfig, SensorConfig, observation_settings
@@ -193,3 +193,78 @@ def test_world_show_draws_the_patch(tmp_path, capsys):
     out = tmp_path / "w.png"
     assert main(["world", "show", "--learning", "--patch", "8", "--steps", "5", "--out", str(out)]) == 0
     assert out.stat().st_size > 0
+
+
+def test_goal_images_put_the_goal_where_the_patch_samples_it():
+    """cnn_goal: a goal 3 m ahead lies between the centres of cells u = 10 and 11 (2.5 m, 3.5 m ahead)
+    and v = 7, 8 (0.5 m right, 0.5 m left) of a 16x16 patch of 1 m cells; 6 m left at v = 13.5; a far
+    goal is moved along its bearing onto the border; each image holds the goal's unit mass."""
+    max_range = 6.0
+    goals = torch.tensor([
+        [3 / (3 + max_range), 0.0, 1.0],  # 3 m straight ahead (left, forward unit components)
+        [0.5, 1.0, 0.0],  # 6 m to the left
+        [0.9, 0.6, 0.8],  # 54 m away: forward 43.2, left 32.4 -> the front border
+    ])  # fmt: skip
+    images = goal_images(goals, 16, max_range)
+    assert images.shape == (3, 16, 16)
+    np.testing.assert_allclose(images.sum(dim=(1, 2)).numpy(), 1.0, rtol=1e-6)
+    for k, cells in enumerate([
+        {(10, 7): 0.25, (10, 8): 0.25, (11, 7): 0.25, (11, 8): 0.25},
+        {(7, 13): 0.25, (7, 14): 0.25, (8, 13): 0.25, (8, 14): 0.25},
+        {(15, 13): 0.875, (15, 14): 0.125},  # u on the border 15, v = 7.5 + 32.4 * 7.5 / 43.2
+    ]):  # fmt: skip
+        got = {(u, v): round(images[k, u, v].item(), 6) for u, v in images[k].nonzero().tolist()}
+        assert got == cells
+
+
+def test_cnn_goal_adds_each_frames_goal_as_a_channel_and_travels_with_the_policy(tmp_path):
+    nav = patch_nav(6, frame_stack=2)
+    config = NNQLConfig(**{**SMALL.to_dict(), "cnn_goal": True})
+    learner = learner_for(nav, config)
+    net = learner.network
+    assert isinstance(net, PatchQNetwork) and net.architecture["patch"]["goal"] == {"at": 8, "max_range": 6.0}
+    obs = env_observations(nav, n=4)
+    images = net.split(torch.as_tensor(obs))[0]
+    assert images.shape == (4, 6, 6, 6)  # occupancy, visits of 2 frames, then the 2 frames' goals
+    fdim, at = frame_dim(nav), frame_layout(nav)["goal"][0]
+    for frame in range(2):
+        goal = torch.as_tensor(obs[:, frame * fdim + at : frame * fdim + at + 3])
+        torch.testing.assert_close(images[:, 4 + frame], goal_images(goal, 6, 6.0))
+    without = build_q_network(SMALL, observation_dim(nav), 5, observation_settings(nav))
+    assert "goal" not in without.architecture["patch"]
+    assert without.split(torch.as_tensor(obs))[0].shape[1] == 4
+    # the actor's forward (from the wire's JSON architecture) and a reloaded policy agree with the learner
+    wire = json.loads(json.dumps(learner.architecture))
+    policy = NNQLPolicy(learner.get_weights(), wire, version=learner.version)
+    np.testing.assert_allclose(policy.q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6)
+    learner.save_policy(tmp_path / "p")
+    np.testing.assert_allclose(
+        NNQLPolicy.load(tmp_path / "p").q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6
+    )
+
+
+def test_cnn_goal_without_a_patch_is_a_clear_error():
+    plain = patch_nav(0)
+    config = NNQLConfig(**{**SMALL.to_dict(), "cnn_goal": True})
+    with pytest.raises(ValueError, match=r"cnn_goal.*patch_size"):
+        build_q_network(config, observation_dim(plain), 5, observation_settings(plain))
+
+
+def test_cnn_embed_maps_the_cnn_features_before_the_head_and_travels_with_the_policy(tmp_path):
+    nav = patch_nav(6)
+    learner = learner_for(nav, NNQLConfig(**{**SMALL.to_dict(), "cnn_embed": 5}))
+    net = learner.network
+    assert (
+        net.architecture["patch"]["embed"] == 5
+        and net.head[0].in_features == 5 + frame_layout(nav)["patch"][0]
+    )
+    obs = env_observations(nav, n=4)
+    wire = json.loads(json.dumps(learner.architecture))
+    policy = NNQLPolicy(learner.get_weights(), wire, version=learner.version)
+    np.testing.assert_allclose(policy.q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6)
+    learner.save_policy(tmp_path / "p")
+    np.testing.assert_allclose(
+        NNQLPolicy.load(tmp_path / "p").q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6
+    )
+    with pytest.raises(ValueError, match="cnn_embed"):
+        NNQLConfig(cnn_embed=-1)

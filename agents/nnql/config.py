@@ -99,6 +99,15 @@ class NNQLConfig:
     """kernel side of each convolution"""
     cnn_strides: tuple[int, ...] = (2, 1)
     """stride of each convolution"""
+    cnn_goal: bool = False
+    """draw the goal into the patch CNN's input, one more image channel per frame (bilinear at the goal's
+    egocentric position in patch cells, on the patch's border when farther), so the convolutions see
+    where the goal lies among the walls instead of only the MLP reading its distance and bearing
+    (agents.nnql.patch_network; no planner: the network learns what to make of it)"""
+    cnn_embed: int = 0
+    """0: the CNN's flattened features go to the MLP head as they are (800 beside 27 other inputs for
+    a 16x16 patch); > 0: a linear layer and the activation first map them to this many features, so
+    the readings and goal are not a few inputs among hundreds"""
     recurrent: bool = False
     """R2D2-style recurrent Q (agents/nnql/recurrent_learner.py): encoder, LSTM, Q head; sequence replay"""
     lstm_size: int = 128
@@ -130,6 +139,8 @@ class NNQLConfig:
         for name, (value, allowed) in checks.items():
             if value not in allowed:
                 raise ValueError(f"NNQLConfig.{name}={value!r}: expected one of {allowed}")
+        if self.cnn_embed < 0:
+            raise ValueError(f"NNQLConfig.cnn_embed={self.cnn_embed}: expected >= 0 (0: no embedding layer)")
         if not self.hidden_sizes or min(self.hidden_sizes) < 1:
             raise ValueError(f"NNQLConfig.hidden_sizes={self.hidden_sizes}: need positive widths")
         if not 0.0 < self.gamma <= 1.0:

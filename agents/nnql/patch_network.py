@@ -9,10 +9,17 @@ them to one Q-value per action (variant F of the observation ablation, ``bench/p
 
 The split follows :func:`worlds.perception.frame_layout`: in one frame the patch starts at
 ``start`` and holds ``2 * P * P`` values in the order (u, v, channel), ``u`` from back to front
-along the heading and ``v`` from right to left. The architecture dict (saved in the policy's
-``config.json`` and sent with the weights) records that layout and the CNN's shape, so actors and
-the evaluator rebuild the same module; they run this module's forward too (torch, one definition
-of it), see :mod:`agents.forward`.
+along the heading and ``v`` from right to left.
+
+With ``NNQLConfig.cnn_goal`` the CNN gets one more channel per frame: the goal drawn into the patch
+(:func:`goal_images`), from the frame's own goal distance and bearing, so the convolutions can relate
+the walls to where the goal lies (a conv net cannot read that from a vector the MLP gets after it).
+Nothing else is added: it is the observation's goal, placed where it is. With ``cnn_embed`` a
+linear layer (and the activation) maps the CNN's flattened features to that many before the head.
+
+The architecture dict (saved in the policy's ``config.json`` and sent with the weights) records that
+layout and the CNN's shape, so actors and the evaluator rebuild the same module; they run this
+module's forward too (torch, one definition of it), see :mod:`agents.forward`.
 """
 
 from __future__ import annotations
@@ -30,19 +37,51 @@ from worlds.config import NavConfig, with_observation
 from worlds.perception import frame_dim, frame_layout
 
 PATCH_KEYS = ("size", "start", "frame_dim", "frames", "channels", "kernel_sizes", "strides")
+GOAL_CELL_M = 1.0
+"""metres per patch cell when the goal is drawn into the patch: the patch samples map cells, and the
+map generators' (``worlds.generators``) cells are 1 m; a map of other cells sees its goal scaled"""
 
 
-def patch_layout(observation: Mapping[str, Any] | None) -> dict[str, int] | None:
-    """Where the patch sits in an observation with these settings (``worlds.config.observation_settings``);
-    None when there is no patch."""
+def goal_images(goal: torch.Tensor, size: int, max_range: float) -> torch.Tensor:
+    """(..., size, size) images of the goal in the egocentric patch, from goal parts (..., 3) of the
+    observation (``d / (d + max_range)``, left and forward unit components; ``worlds.kernel``).
+
+    The goal's continuous cell index is ``forward / cell + size / 2 - 1/2`` along ``u`` (back to front)
+    and ``left / cell + size / 2 - 1/2`` along ``v`` (right to left), as the patch samples cell
+    centres; a goal outside the patch is moved along its bearing onto the border cells. Its unit mass
+    is split bilinearly between the four cells around it."""
+    squashed = goal[..., 0].clamp(0.0, 1.0 - 1e-6)
+    distance = max_range * squashed / (1.0 - squashed) / GOAL_CELL_M
+    centre = size / 2 - 0.5
+    du, dv = distance * goal[..., 2], distance * goal[..., 1]
+    reach = torch.maximum(du.abs(), dv.abs()).clamp(min=1e-9)
+    scale = torch.clamp(centre / reach, max=1.0)
+    u, v = centre + du * scale, centre + dv * scale
+    u0 = u.floor().clamp(0, size - 2)
+    v0 = v.floor().clamp(0, size - 2)
+    fu, fv = (u - u0).clamp(0.0, 1.0), (v - v0).clamp(0.0, 1.0)
+    image = goal.new_zeros(*goal.shape[:-1], size * size)
+    base = (u0 * size + v0).long()
+    corners = ((0, (1 - fu) * (1 - fv)), (1, (1 - fu) * fv), (size, fu * (1 - fv)), (size + 1, fu * fv))
+    for off, weight in corners:
+        image.scatter_add_(-1, (base + off).unsqueeze(-1), weight.unsqueeze(-1))
+    return image.reshape(*goal.shape[:-1], size, size)
+
+
+def patch_layout(observation: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """Where the patch sits in an observation with these settings (``worlds.config.observation_settings``),
+    and where its goal part is (for :func:`goal_images`); None when there is no patch."""
     if not observation or not observation.get("observation.patch_size"):
         return None
     nav = with_observation(NavConfig(), dict(observation))
+    layout = frame_layout(nav)
     return {
         "size": nav.observation.patch_size,
-        "start": frame_layout(nav)["patch"][0],
+        "start": layout["patch"][0],
         "frame_dim": frame_dim(nav),
         "frames": nav.observation.frame_stack,
+        "goal_at": layout["goal"][0],
+        "max_range": nav.sensors.max_range,
     }
 
 
@@ -68,8 +107,13 @@ class PatchQNetwork(nn.Module):
                 f"(frames * frame_dim, the patch's 2 * size**2 values inside a frame)"
             )
         rest = self.frames * (self.frame_dim - (self.stop - self.start))
+        goal = patch.get("goal")  # {"at": the goal part's index in a frame, "max_range": m}; absent: off
+        self.goal = None if goal is None else (int(goal["at"]), float(goal["max_range"]))
+        if self.goal is not None and not 0 <= self.goal[0] <= self.frame_dim - 3:
+            raise ValueError(f"architecture['patch']['goal']={goal}: the goal part is outside a frame")
+        self.channels = (3 if self.goal else 2) * self.frames
         self.cnn = ConvNet(
-            in_features=2 * self.frames,
+            in_features=self.channels,
             num_cells=[int(c) for c in patch["channels"]],
             kernel_sizes=[int(k) for k in patch["kernel_sizes"]],
             strides=[int(s) for s in patch["strides"]],
@@ -77,14 +121,17 @@ class PatchQNetwork(nn.Module):
         )
         try:
             with torch.no_grad():
-                features = self.cnn(torch.zeros(1, 2 * self.frames, self.size, self.size)).shape[-1]
+                features = self.cnn(torch.zeros(1, self.channels, self.size, self.size)).shape[-1]
         except RuntimeError as exc:  # the kernels do not fit the image
             raise ValueError(
                 f"architecture['patch']: a {self.size}x{self.size} patch is too small for convolutions of "
                 f"kernel sizes {patch['kernel_sizes']} and strides {patch['strides']} ({exc})"
             ) from None
+        embed = int(patch.get("embed", 0))  # 0: the flat features go to the head as they are
+        activation = ACTIVATIONS[arch["activation"]]
+        self.embed = nn.Sequential(nn.Linear(features, embed), activation()) if embed else None
         self.head = MLP(
-            in_features=features + rest,
+            in_features=(embed or features) + rest,
             out_features=int(arch["n_actions"]),
             num_cells=[int(h) for h in arch["hidden_sizes"]],
             activation_class=ACTIVATIONS[arch["activation"]],
@@ -100,18 +147,27 @@ class PatchQNetwork(nn.Module):
                 "cnn_features": int(features),
             },
         }
+        if self.goal is not None:
+            self.architecture["patch"]["goal"] = {"at": self.goal[0], "max_range": self.goal[1]}
+        if embed:
+            self.architecture["patch"]["embed"] = embed
 
     def split(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(patch images (B, 2 * frames, P, P), the other inputs (B, rest)) of observations (..., obs_dim)."""
+        """(patch images (B, channels, P, P): occupancy and visits of each frame, then each frame's goal
+        image with ``cnn_goal``; the other inputs (B, rest)) of observations (..., obs_dim)."""
         frames = obs.reshape(-1, self.frames, self.frame_dim)
         patch = frames[..., self.start : self.stop].reshape(-1, self.frames, self.size, self.size, 2)
         images = patch.permute(0, 1, 4, 2, 3).reshape(-1, 2 * self.frames, self.size, self.size)
+        if self.goal is not None:
+            at, max_range = self.goal
+            images = torch.cat([images, goal_images(frames[..., at : at + 3], self.size, max_range)], dim=1)
         rest = torch.cat([frames[..., : self.start], frames[..., self.stop :]], dim=-1)
         return images, rest.reshape(len(frames), -1)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         images, rest = self.split(obs)
-        q = self.head(torch.cat([self.cnn(images), rest], dim=-1))
+        features = self.cnn(images) if self.embed is None else self.embed(self.cnn(images))
+        q = self.head(torch.cat([features, rest], dim=-1))
         return q.reshape(*obs.shape[:-1], q.shape[-1])
 
 
@@ -123,12 +179,21 @@ def build_q_network(
     :class:`agents.nnql.networks.QNetwork` (dueling or not, as the config says)."""
     layout = patch_layout(observation) if config.q_network == "auto" else None
     if layout is None:
+        if config.cnn_goal:
+            raise ValueError(
+                "NNQLConfig.cnn_goal=True draws the goal into the patch's CNN: it needs an observation"
+                f" with a patch (observation.patch_size > 0) and q_network='auto' (got {config.q_network!r})"
+            )
         return QNetwork.from_config(config, obs_dim, n_actions)
+    goal_at, max_range = layout.pop("goal_at"), layout.pop("max_range")
+    extra = {"goal": {"at": goal_at, "max_range": max_range}} if config.cnn_goal else {}
+    if config.cnn_embed:
+        extra["embed"] = config.cnn_embed
     return PatchQNetwork({
         "obs_dim": obs_dim, "n_actions": n_actions, "hidden_sizes": config.hidden_sizes,
         "activation": config.activation,
         "patch": {**layout, "channels": config.cnn_channels, "kernel_sizes": config.cnn_kernel_sizes,
-                  "strides": config.cnn_strides},
+                  "strides": config.cnn_strides, **extra},
     })  # fmt: skip
 
 
