@@ -15,6 +15,7 @@ robot-steps, several seeds, one observation per variant:
     F+geo  F with the geodesic progress reward
     Fg+geo  F+geo with the goal also drawn into the CNN's input (NNQLConfig.cnn_goal: one more image
           channel, the observation's goal at its place in the patch): the same observation
+    Fge+geo  Fg+geo with the CNN's 800 features embedded in 64 before the head (NNQLConfig.cnn_embed)
     G, G+geo  B (and B+geo) with the recurrent Q (R2D2-style: LSTM, sequence replay with burn-in and
           stored state; agents/nnql/recurrent_learner.py, options RECURRENT below): memory, no planner
 
@@ -99,12 +100,18 @@ PATCH = 16
 VARIANTS["F"] = NavConfig(sensors=SECTORS, observation=ObservationConfig(patch_size=PATCH))
 VARIANTS["F+geo"] = replace(VARIANTS["F"], rewards=GEODESIC)
 VARIANTS["Fg+geo"] = VARIANTS["F+geo"]
+VARIANTS["Fge+geo"] = VARIANTS["F+geo"]
 VARIANTS["G"] = VARIANTS["B"]
 VARIANTS["G+geo"] = VARIANTS["B+geo"]
 RECURRENT = {"recurrent": True, "utd_ratio": 0.04}
 """NNQLConfig of the recurrent variants (the rest default: LSTM 128, 10 burn-in + 20 trained steps,
 32 sequences per update); utd 0.04 replays each transition about as often as the default MLP's 1/16"""
-NNQL_OPTIONS: dict[str, dict] = {"G": RECURRENT, "G+geo": RECURRENT, "Fg+geo": {"cnn_goal": True}}
+NNQL_OPTIONS: dict[str, dict] = {
+    "G": RECURRENT,
+    "G+geo": RECURRENT,
+    "Fg+geo": {"cnn_goal": True},
+    "Fge+geo": {"cnn_goal": True, "cnn_embed": 64},
+}
 PAIRED_WITH = ("A", "D+geo")
 """each run is compared (McNemar, same seed, same episodes) with the runs of these variants when present"""
 SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dynamic", 0))
