@@ -116,6 +116,18 @@ def register(subparsers) -> None:
         "(occupancy + visits; read by a small CNN beside the MLP); 0: none",
     )
     parser.add_argument(
+        "--cnn-goal",
+        action="store_true",
+        help="with --patch: draw the goal into the patch CNN's input too (one more channel; no planner)",
+    )
+    parser.add_argument(
+        "--cnn-embed",
+        type=int,
+        default=defaults.cnn_embed,
+        help="with --patch: map the CNN's features to this many before the MLP head (0: as they are); "
+        "--patch 16 --no-subgoal --cnn-goal --cnn-embed 64 is bench/perception.py's best no-planner variant",
+    )
+    parser.add_argument(
         "--no-subgoal",
         action="store_true",
         help="drop the subgoal planned on the robot's own map (learning alone; e.g. with --patch 16)",
@@ -180,6 +192,8 @@ def run(args: argparse.Namespace) -> int:
             exploration="epsilon" if args.epsilon_greedy else "boltzmann",
             seed=args.seed,
             q_network=args.q_network,
+            cnn_goal=args.cnn_goal,
+            cnn_embed=args.cnn_embed,
             recurrent=args.recurrent,
             lstm_size=args.lstm_size,
             seq_len=args.seq_len,
@@ -187,6 +201,8 @@ def run(args: argparse.Namespace) -> int:
             sequences=args.sequences,
         )
         nav = observation_of(args)
+        if (args.cnn_goal or args.cnn_embed) and not args.patch:
+            raise ValueError("--cnn-goal and --cnn-embed shape the patch's CNN: add --patch (e.g. 16)")
         if args.steps < 1 or args.envs < 1:
             raise ValueError("--steps and --envs must be positive")
         if args.moving_discs < 0 or args.eval_dynamic_episodes < 0:
