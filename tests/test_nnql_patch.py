@@ -199,6 +199,17 @@ def test_world_show_draws_the_patch(tmp_path, capsys):
     assert out.stat().st_size > 0
 
 
+def assert_travels_with_the_policy(learner: NNQLLearner, obs: np.ndarray, tmp_path) -> None:
+    """The actor's forward (built from the wire's JSON architecture) and a saved-then-loaded policy give
+    the learner's Q-values."""
+    wire = json.loads(json.dumps(learner.architecture))
+    policies = [NNQLPolicy(learner.get_weights(), wire, version=learner.version)]
+    learner.save_policy(tmp_path / "p")
+    policies.append(NNQLPolicy.load(tmp_path / "p"))
+    for policy in policies:
+        np.testing.assert_allclose(policy.q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6)
+
+
 def test_goal_images_put_the_goal_where_the_patch_samples_it():
     """cnn_goal: a goal 3 m ahead lies between the centres of cells u = 10 and 11 (2.5 m, 3.5 m ahead)
     and v = 7, 8 (0.5 m right, 0.5 m left) of a 16x16 patch of 1 m cells; 6 m left at v = 13.5; a far
@@ -237,14 +248,7 @@ def test_cnn_goal_adds_each_frames_goal_as_a_channel_and_travels_with_the_policy
     without = build_q_network(SMALL, observation_dim(nav), 5, observation_settings(nav))
     assert "goal" not in without.architecture["patch"]
     assert without.split(torch.as_tensor(obs))[0].shape[1] == 4
-    # the actor's forward (from the wire's JSON architecture) and a reloaded policy agree with the learner
-    wire = json.loads(json.dumps(learner.architecture))
-    policy = NNQLPolicy(learner.get_weights(), wire, version=learner.version)
-    np.testing.assert_allclose(policy.q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6)
-    learner.save_policy(tmp_path / "p")
-    np.testing.assert_allclose(
-        NNQLPolicy.load(tmp_path / "p").q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6
-    )
+    assert_travels_with_the_policy(learner, obs, tmp_path)
 
 
 def test_cnn_goal_without_a_patch_is_a_clear_error():
@@ -263,12 +267,6 @@ def test_cnn_embed_maps_the_cnn_features_before_the_head_and_travels_with_the_po
         and net.head[0].in_features == 5 + frame_layout(nav)["patch"][0]
     )
     obs = env_observations(nav, n=4)
-    wire = json.loads(json.dumps(learner.architecture))
-    policy = NNQLPolicy(learner.get_weights(), wire, version=learner.version)
-    np.testing.assert_allclose(policy.q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6)
-    learner.save_policy(tmp_path / "p")
-    np.testing.assert_allclose(
-        NNQLPolicy.load(tmp_path / "p").q_values(obs), learner.q_values(obs), rtol=1e-6, atol=1e-6
-    )
+    assert_travels_with_the_policy(learner, obs, tmp_path)
     with pytest.raises(ValueError, match="cnn_embed"):
         NNQLConfig(cnn_embed=-1)
