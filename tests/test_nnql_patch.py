@@ -256,6 +256,9 @@ def test_cnn_goal_without_a_patch_is_a_clear_error():
     config = NNQLConfig(**{**SMALL.to_dict(), "cnn_goal": True})
     with pytest.raises(ValueError, match=r"cnn_goal.*patch_size"):
         build_q_network(config, observation_dim(plain), 5, observation_settings(plain))
+    embed = NNQLConfig(**{**SMALL.to_dict(), "cnn_embed": 8})
+    with pytest.raises(ValueError, match=r"cnn_embed=8.*patch_size"):
+        build_q_network(embed, observation_dim(plain), 5, observation_settings(plain))
 
 
 def test_cnn_embed_maps_the_cnn_features_before_the_head_and_travels_with_the_policy(tmp_path):

@@ -179,10 +179,11 @@ def build_q_network(
     :class:`agents.nnql.networks.QNetwork` (dueling or not, as the config says)."""
     layout = patch_layout(observation) if config.q_network == "auto" else None
     if layout is None:
-        if config.cnn_goal:
+        if config.cnn_goal or config.cnn_embed:
             raise ValueError(
-                "NNQLConfig.cnn_goal=True draws the goal into the patch's CNN: it needs an observation"
-                f" with a patch (observation.patch_size > 0) and q_network='auto' (got {config.q_network!r})"
+                f"NNQLConfig.cnn_goal={config.cnn_goal}, cnn_embed={config.cnn_embed} shape the patch's CNN:"
+                " they need an observation with a patch (observation.patch_size > 0) and q_network='auto'"
+                f" (got {config.q_network!r})"
             )
         return QNetwork.from_config(config, obs_dim, n_actions)
     goal_at, max_range = layout.pop("goal_at"), layout.pop("max_range")
