@@ -108,6 +108,11 @@ class NNQLConfig:
     """0: the CNN's flattened features go to the MLP head as they are (800 beside 27 other inputs for
     a 16x16 patch); > 0: a linear layer and the activation first map them to this many features, so
     the readings and goal are not a few inputs among hundreds"""
+    action_local: int = 0
+    """0: off; k > 0: a branch shared by every action adds to Q(s, a) what it makes of the 2k+1 newest
+    readings centred on a's heading and the goal's distance and bearing seen from that heading (the
+    same small MLP for each action, so what one action learns of a wall ahead holds for all; with a
+    patch, agents.nnql.patch_network; no planner)"""
     recurrent: bool = False
     """R2D2-style recurrent Q (agents/nnql/recurrent_learner.py): encoder, LSTM, Q head; sequence replay"""
     lstm_size: int = 128
@@ -139,6 +144,8 @@ class NNQLConfig:
         for name, (value, allowed) in checks.items():
             if value not in allowed:
                 raise ValueError(f"NNQLConfig.{name}={value!r}: expected one of {allowed}")
+        if self.action_local < 0:
+            raise ValueError(f"NNQLConfig.action_local={self.action_local}: expected >= 0 (0: off)")
         if self.cnn_embed < 0:
             raise ValueError(f"NNQLConfig.cnn_embed={self.cnn_embed}: expected >= 0 (0: no embedding layer)")
         if not self.hidden_sizes or min(self.hidden_sizes) < 1:

@@ -16,6 +16,11 @@ With ``NNQLConfig.cnn_goal`` the CNN gets one more channel per frame: the goal d
 the walls to where the goal lies (a conv net cannot read that from a vector the MLP gets after it).
 Nothing else is added: it is the observation's goal, placed where it is. With ``cnn_embed`` a
 linear layer (and the activation) maps the CNN's flattened features to that many before the head.
+With ``action_local`` = k a branch (:class:`ActionLocal`) adds to each action's Q-value what one
+small MLP, shared by the actions, makes of the newest frame seen from that action's heading: the
+2k+1 readings centred on it and the goal's distance and bearing turned to it. A wall ahead of an
+action is then the same input whichever action it is ahead of (weight sharing over the robot's
+rotations), so a collision learned for one action is learned for all.
 
 The architecture dict (saved in the policy's ``config.json`` and sent with the weights) records that
 layout and the CNN's shape, so actors and the evaluator rebuild the same module; they run this
@@ -27,6 +32,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
 import torch
 from torch import nn
 from torchrl.modules import MLP, ConvNet
@@ -36,6 +42,8 @@ from agents.nnql.networks import ACTIVATIONS, QNetwork
 from worlds.config import NavConfig, with_observation
 from worlds.perception import frame_dim, frame_layout
 
+LOCAL_HIDDEN = 32
+"""hidden width of the action-local branch's MLP"""
 PATCH_KEYS = ("size", "start", "frame_dim", "frames", "channels", "kernel_sizes", "strides")
 GOAL_CELL_M = 1.0
 """metres per patch cell when the goal is drawn into the patch: the patch samples map cells, and the
@@ -82,7 +90,57 @@ def patch_layout(observation: Mapping[str, Any] | None) -> dict[str, Any] | None
         "frames": nav.observation.frame_stack,
         "goal_at": layout["goal"][0],
         "max_range": nav.sensors.max_range,
+        "readings_at": layout["readings"][0],
+        "n_readings": layout["readings"][1] - layout["readings"][0],
+        "headings": nearest_readings(nav),
+        "turns": [float(t) for t in nav.robot.turns],
     }
+
+
+def nearest_readings(nav: NavConfig) -> list[int]:
+    """Index of the reading whose direction is nearest each action's heading change."""
+    angles = nav.sensors.beam_angles
+    gap = np.angle(np.exp(1j * (angles[None, :] - nav.robot.turns[:, None])))
+    return [int(i) for i in np.abs(gap).argmin(axis=1)]
+
+
+class ActionLocal(nn.Module):
+    """(B, n_actions) from frames (B, frame_dim): one MLP, shared by the actions, over each action's
+    own view - the ``2 * window + 1`` readings centred on its heading (wrapping round: the readings
+    cover the full circle) and the goal's (squashed distance, left, forward) turned to that heading."""
+
+    def __init__(self, spec: Mapping[str, Any], activation: type[nn.Module]):
+        super().__init__()
+        self.spec = {"window": int(spec["window"]), "readings_at": int(spec["readings_at"]),
+                     "n_readings": int(spec["n_readings"]), "headings": [int(h) for h in spec["headings"]],
+                     "turns": [float(t) for t in spec["turns"]], "goal_at": int(spec["goal_at"]),
+                     "hidden": int(spec.get("hidden", LOCAL_HIDDEN))}  # fmt: skip
+        window, n = self.spec["window"], self.spec["n_readings"]
+        if not 1 <= 2 * window + 1 <= n or len(self.spec["headings"]) != len(self.spec["turns"]):
+            raise ValueError(
+                f"NNQLConfig.action_local={window}: an action's view of 2 * {window} + 1 readings must fit"
+                f" the {n} readings (action_local <= {(n - 1) // 2})"
+            )
+        offsets = torch.arange(-window, window + 1)
+        index = (torch.tensor(self.spec["headings"])[:, None] + offsets) % n + self.spec["readings_at"]
+        turns = torch.tensor(self.spec["turns"], dtype=torch.float32)
+        self.register_buffer("index", index, persistent=False)  # derived from the spec, not weights
+        self.register_buffer("cos", turns.cos(), persistent=False)
+        self.register_buffer("sin", turns.sin(), persistent=False)
+        self.mlp = MLP(in_features=2 * window + 4, out_features=1, num_cells=[self.spec["hidden"]],
+                       activation_class=activation)  # fmt: skip
+
+    def forward(self, frame: torch.Tensor) -> torch.Tensor:
+        near = frame[:, self.index]  # (B, A, 2w+1)
+        at = self.spec["goal_at"]
+        squashed, left, forward = (frame[:, at + i : at + i + 1] for i in range(3))  # (B, 1) each
+        turned = (
+            squashed.expand(-1, len(self.cos)),
+            left * self.cos - forward * self.sin,  # the goal's bearing minus the action's turn
+            forward * self.cos + left * self.sin,
+        )
+        view = torch.cat([near, torch.stack(turned, dim=-1)], dim=-1)
+        return self.mlp(view).squeeze(-1)
 
 
 class PatchQNetwork(nn.Module):
@@ -151,6 +209,14 @@ class PatchQNetwork(nn.Module):
             self.architecture["patch"]["goal"] = {"at": self.goal[0], "max_range": self.goal[1]}
         if embed:
             self.architecture["patch"]["embed"] = embed
+        local = arch.get("local")  # the ActionLocal spec; absent: off
+        self.local = None if local is None else ActionLocal(local, activation)
+        if self.local is not None:
+            if not 0 <= self.local.spec["goal_at"] <= self.frame_dim - 3 or int(arch["n_actions"]) != len(
+                self.local.spec["turns"]
+            ):
+                raise ValueError(f"architecture['local']={local} does not fit a frame of {self.frame_dim}")
+            self.architecture["local"] = self.local.spec
 
     def split(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(patch images (B, channels, P, P): occupancy and visits of each frame, then each frame's goal
@@ -168,6 +234,8 @@ class PatchQNetwork(nn.Module):
         images, rest = self.split(obs)
         features = self.cnn(images) if self.embed is None else self.embed(self.cnn(images))
         q = self.head(torch.cat([features, rest], dim=-1))
+        if self.local is not None:
+            q = q + self.local(obs.reshape(-1, self.frames, self.frame_dim)[:, 0])
         return q.reshape(*obs.shape[:-1], q.shape[-1])
 
 
@@ -179,22 +247,26 @@ def build_q_network(
     :class:`agents.nnql.networks.QNetwork` (dueling or not, as the config says)."""
     layout = patch_layout(observation) if config.q_network == "auto" else None
     if layout is None:
-        if config.cnn_goal or config.cnn_embed:
+        if config.cnn_goal or config.cnn_embed or config.action_local:
             raise ValueError(
-                f"NNQLConfig.cnn_goal={config.cnn_goal}, cnn_embed={config.cnn_embed} shape the patch's CNN:"
+                f"NNQLConfig.cnn_goal={config.cnn_goal}, cnn_embed={config.cnn_embed},"
+                f" action_local={config.action_local} shape the patch network:"
                 " they need an observation with a patch (observation.patch_size > 0) and q_network='auto'"
                 f" (got {config.q_network!r})"
             )
         return QNetwork.from_config(config, obs_dim, n_actions)
     goal_at, max_range = layout.pop("goal_at"), layout.pop("max_range")
+    local = {key: layout.pop(key) for key in ("readings_at", "n_readings", "headings", "turns")}
     extra = {"goal": {"at": goal_at, "max_range": max_range}} if config.cnn_goal else {}
     if config.cnn_embed:
         extra["embed"] = config.cnn_embed
+    local = {**local, "window": config.action_local, "goal_at": goal_at}
     return PatchQNetwork({
         "obs_dim": obs_dim, "n_actions": n_actions, "hidden_sizes": config.hidden_sizes,
         "activation": config.activation,
         "patch": {**layout, "channels": config.cnn_channels, "kernel_sizes": config.cnn_kernel_sizes,
                   "strides": config.cnn_strides, **extra},
+        **({"local": local} if config.action_local else {}),
     })  # fmt: skip
 
 
