@@ -273,3 +273,40 @@ def test_cnn_embed_maps_the_cnn_features_before_the_head_and_travels_with_the_po
     assert_travels_with_the_policy(learner, obs, tmp_path)
     with pytest.raises(ValueError, match="cnn_embed"):
         NNQLConfig(cnn_embed=-1)
+
+
+def test_action_local_sees_each_actions_view_the_same_way_whichever_action_it_is(tmp_path):
+    """action_local: with 8 readings 45 degrees apart (the first behind the robot), the actions' turns
+    -90..90 degrees face readings 2..6; action 4 (90 degrees left) seeing the readings and goal of an
+    observation is action 2 (straight on) seeing them turned 90 degrees right: the same branch output."""
+    nav = patch_nav(6)
+    learner = learner_for(nav, NNQLConfig(**{**SMALL.to_dict(), "action_local": 1}))
+    local = learner.network.local
+    assert local.spec["headings"] == [2, 3, 4, 5, 6] and local.spec["goal_at"] == 8
+    assert local.index.tolist() == [[1, 2, 3], [2, 3, 4], [3, 4, 5], [4, 5, 6], [5, 6, 7]]
+    obs = torch.as_tensor(env_observations(nav, n=4))
+    turned = obs.clone()
+    turned[:, :8] = obs[:, :8].roll(-2, dims=1)  # reading k of `turned` is reading k + 2 of obs
+    left, forward = obs[:, 9], obs[:, 10]  # bearing b -> b - 90 degrees
+    turned[:, 9], turned[:, 10] = -forward, left
+    with torch.no_grad():
+        torch.testing.assert_close(local(turned)[:, 2], local(obs)[:, 4])
+        torch.testing.assert_close(local(turned)[:, 0], local(obs)[:, 2])
+        assert not torch.allclose(local(obs)[:, 2], local(obs)[:, 4])
+        plain = learner.network.head(torch.cat([learner.network.cnn(learner.network.split(obs)[0]),
+                                                learner.network.split(obs)[1]], dim=-1))  # fmt: skip
+        torch.testing.assert_close(learner.network(obs), plain + local(obs))
+    assert_travels_with_the_policy(learner, obs.numpy(), tmp_path)
+
+
+def test_action_local_bad_values_are_clear_errors():
+    with pytest.raises(ValueError, match="action_local=-1"):
+        NNQLConfig(action_local=-1)
+    nav = patch_nav(6)
+    too_wide = NNQLConfig(**{**SMALL.to_dict(), "action_local": 4})  # 9 readings of 8
+    with pytest.raises(ValueError, match=r"action_local=4.*action_local <= 3"):
+        build_q_network(too_wide, observation_dim(nav), 5, observation_settings(nav))
+    plain = patch_nav(0)
+    with pytest.raises(ValueError, match=r"action_local=1.*patch_size"):
+        build_q_network(NNQLConfig(**{**SMALL.to_dict(), "action_local": 1}), observation_dim(plain), 5,
+                        observation_settings(plain))  # fmt: skip

@@ -124,20 +124,20 @@ class ActionLocal(nn.Module):
         offsets = torch.arange(-window, window + 1)
         index = (torch.tensor(self.spec["headings"])[:, None] + offsets) % n + self.spec["readings_at"]
         turns = torch.tensor(self.spec["turns"], dtype=torch.float32)
-        self.register_buffer("index", index, persistent=False)  # derived from the spec, not weights
-        self.register_buffer("cos", turns.cos(), persistent=False)
-        self.register_buffer("sin", turns.sin(), persistent=False)
+        # derived from the spec, neither weights nor buffers (the loss trains exactly the parameters)
+        self.index, self.turns = index, torch.stack([turns.cos(), turns.sin()])
         self.mlp = MLP(in_features=2 * window + 4, out_features=1, num_cells=[self.spec["hidden"]],
                        activation_class=activation)  # fmt: skip
 
     def forward(self, frame: torch.Tensor) -> torch.Tensor:
-        near = frame[:, self.index]  # (B, A, 2w+1)
+        near = frame[:, self.index.to(frame.device)]  # (B, A, 2w+1)
+        cos, sin = self.turns.to(frame.device)
         at = self.spec["goal_at"]
         squashed, left, forward = (frame[:, at + i : at + i + 1] for i in range(3))  # (B, 1) each
         turned = (
-            squashed.expand(-1, len(self.cos)),
-            left * self.cos - forward * self.sin,  # the goal's bearing minus the action's turn
-            forward * self.cos + left * self.sin,
+            squashed.expand(-1, len(cos)),
+            left * cos - forward * sin,  # the goal's bearing minus the action's turn
+            forward * cos + left * sin,
         )
         view = torch.cat([near, torch.stack(turned, dim=-1)], dim=-1)
         return self.mlp(view).squeeze(-1)
