@@ -159,10 +159,12 @@ def test_train_local_cli_patch_option(tmp_path, capsys):
     assert "patch_size" in capsys.readouterr().err
     assert main(["train", "--local", "--cnn-goal"]) == 2
     assert "add --patch" in capsys.readouterr().err
+    assert main(["train", "--local", "--action-local", "3"]) == 2
+    assert "add --patch" in capsys.readouterr().err
     out = tmp_path / "f"
     argv = ["train", "--local", "--patch", "8", "--no-subgoal", "--steps", "600", "--envs", "4",
             "--out", str(out), "--eval-every", "0", "--final-eval-episodes", "0", "--hidden", "16",
-            "--no-progress", "--cnn-goal", "--cnn-embed", "8"]  # fmt: skip
+            "--no-progress", "--cnn-goal", "--cnn-embed", "8", "--action-local", "2"]  # fmt: skip
     assert main(argv) == 0
     config = json.loads((out / "config.json").read_text())
     assert config["architecture"]["patch"]["size"] == 8
@@ -170,6 +172,7 @@ def test_train_local_cli_patch_option(tmp_path, capsys):
     assert patch["embed"] == 8 and patch["goal"]["at"] == 24  # the goal part follows the 24 sector readings
     assert config["observation"]["observation.subgoal"] == "none"
     assert config["nnql_config"]["q_network"] == "auto"
+    assert config["architecture"]["local"]["window"] == 2 and config["nnql_config"]["action_local"] == 2
 
 
 def test_an_actor_process_runs_a_cnn_policy_on_one_torch_thread(tmp_path):

@@ -128,6 +128,13 @@ def register(subparsers) -> None:
         "--patch 16 --no-subgoal --cnn-goal --cnn-embed 64 is bench/perception.py's best no-planner variant",
     )
     parser.add_argument(
+        "--action-local",
+        type=int,
+        default=defaults.action_local,
+        help="with --patch: K > 0 adds a branch shared by the actions that reads, for each action, the "
+        "2K+1 readings around its heading and the goal seen from it (0: off)",
+    )
+    parser.add_argument(
         "--no-subgoal",
         action="store_true",
         help="drop the subgoal planned on the robot's own map (learning alone; e.g. with --patch 16)",
@@ -194,6 +201,7 @@ def run(args: argparse.Namespace) -> int:
             q_network=args.q_network,
             cnn_goal=args.cnn_goal,
             cnn_embed=args.cnn_embed,
+            action_local=args.action_local,
             recurrent=args.recurrent,
             lstm_size=args.lstm_size,
             seq_len=args.seq_len,
@@ -201,8 +209,10 @@ def run(args: argparse.Namespace) -> int:
             sequences=args.sequences,
         )
         nav = observation_of(args)
-        if (args.cnn_goal or args.cnn_embed) and not args.patch:
-            raise ValueError("--cnn-goal and --cnn-embed shape the patch's CNN: add --patch (e.g. 16)")
+        if (args.cnn_goal or args.cnn_embed or args.action_local) and not args.patch:
+            raise ValueError(
+                "--cnn-goal, --cnn-embed and --action-local shape the patch network: add --patch (e.g. 16)"
+            )
         if args.steps < 1 or args.envs < 1:
             raise ValueError("--steps and --envs must be positive")
         if args.moving_discs < 0 or args.eval_dynamic_episodes < 0:
