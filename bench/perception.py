@@ -16,6 +16,9 @@ robot-steps, several seeds, one observation per variant:
     Fg+geo  F+geo with the goal also drawn into the CNN's input (NNQLConfig.cnn_goal: one more image
           channel, the observation's goal at its place in the patch): the same observation
     Fge+geo  Fg+geo with the CNN's 800 features embedded in 64 before the head (NNQLConfig.cnn_embed)
+    Fgea+geo  Fge+geo with the action-local branch (NNQLConfig.action_local=3): one MLP shared by the
+          actions adds to each action's Q what it makes of the 7 readings around its heading and the
+          goal seen from it
     G, G+geo  B (and B+geo) with the recurrent Q (R2D2-style: LSTM, sequence replay with burn-in and
           stored state; agents/nnql/recurrent_learner.py, options RECURRENT below): memory, no planner
 
@@ -101,6 +104,7 @@ VARIANTS["F"] = NavConfig(sensors=SECTORS, observation=ObservationConfig(patch_s
 VARIANTS["F+geo"] = replace(VARIANTS["F"], rewards=GEODESIC)
 VARIANTS["Fg+geo"] = VARIANTS["F+geo"]
 VARIANTS["Fge+geo"] = VARIANTS["F+geo"]
+VARIANTS["Fgea+geo"] = VARIANTS["F+geo"]
 VARIANTS["G"] = VARIANTS["B"]
 VARIANTS["G+geo"] = VARIANTS["B+geo"]
 RECURRENT = {"recurrent": True, "utd_ratio": 0.04}
@@ -111,6 +115,7 @@ NNQL_OPTIONS: dict[str, dict] = {
     "G+geo": RECURRENT,
     "Fg+geo": {"cnn_goal": True},
     "Fge+geo": {"cnn_goal": True, "cnn_embed": 64},
+    "Fgea+geo": {"cnn_goal": True, "cnn_embed": 64, "action_local": 3},
 }
 PAIRED_WITH = ("A", "D+geo")
 """each run is compared (McNemar, same seed, same episodes) with the runs of these variants when present"""
