@@ -117,8 +117,9 @@ NNQL_OPTIONS: dict[str, dict] = {
     "Fge+geo": {"cnn_goal": True, "cnn_embed": 64},
     "Fgea+geo": {"cnn_goal": True, "cnn_embed": 64, "action_local": 3},
 }
-PAIRED_WITH = ("A", "D+geo")
-"""each run is compared (McNemar, same seed, same episodes) with the runs of these variants when present"""
+PAIRED_WITH = ("A", "D+geo", "Fge+geo")
+"""each run is compared (McNemar, same seed, same episodes) with the runs of these variants when present
+(Fge+geo: the no-planner variant each later one adds to)"""
 SETS = (("validation", "unseen", 1), ("test", "unseen", 0), ("test_dynamic", "dynamic", 0))
 
 

@@ -124,15 +124,15 @@ def register(subparsers) -> None:
         "--cnn-embed",
         type=int,
         default=defaults.cnn_embed,
-        help="with --patch: map the CNN's features to this many before the MLP head (0: as they are); "
-        "--patch 16 --no-subgoal --cnn-goal --cnn-embed 64 is bench/perception.py's best no-planner variant",
+        help="with --patch: map the CNN's features to this many before the MLP head (0: as they are)",
     )
     parser.add_argument(
         "--action-local",
         type=int,
         default=defaults.action_local,
         help="with --patch: K > 0 adds a branch shared by the actions that reads, for each action, the "
-        "2K+1 readings around its heading and the goal seen from it (0: off)",
+        "2K+1 readings around its heading and the goal seen from it (0: off); --patch 16 --no-subgoal "
+        "--cnn-goal --cnn-embed 64 --action-local 3 is bench/perception.py's best no-planner variant",
     )
     parser.add_argument(
         "--no-subgoal",
