@@ -38,6 +38,12 @@ directory whose training finished (summary.json) with the same settings is evalu
     python bench/perception.py --steps 200000 --seeds 0 1 2            # human lines, JSON last
     python bench/perception.py --variants A B --seeds 0 --steps 20000   # a smoke run
 
+``--bc`` adds behaviour cloning on the expert's demonstrations in each distinct observation of the
+variants (rows ``BC:<variant>``; does the observation carry what the expert acts on?), ``--expert``
+the expert itself (A* on the true map) on the same episodes:
+
+    python bench/perception.py --variants A B C D E F --seeds 0 1 2 --bc --expert --cached-only
+
 ``--screen`` trains and evaluates on the validation set only (seed 1; runs in ``OUT/screen``), so
 settings are chosen without looking at the test seed; use training seeds no reported run uses:
 
@@ -62,11 +68,15 @@ from agents.evaluation.compare import mcnemar_exact
 from agents.evaluation.metrics import wilson_interval
 from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
+from agents.imitation.config import ImitationConfig
+from agents.imitation.train import train_policy
 from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.recurrent_policy import RecurrentNNQLPolicy
 from agents.nnql.train_local import LocalTrainConfig, train_local
+from agents.planning.demonstrate import generate_demos
 from bench._common import parse_overrides
+from bench.planning import expert_outcomes
 from worlds.config import (
     LEARNING_NAV,
     LEGACY_OBSERVATION,
@@ -240,6 +250,76 @@ def heuristic(sets: dict, out: Path) -> dict:
     return record
 
 
+BC_EPISODES = 500
+"""expert episodes behaviour cloning learns from, per observation and seed (maps of seeds 10,000 + seed
+onwards, as bench/nirl.py's demonstrations: none of the evaluation sets' maps)"""
+BC_CONFIG = {"batch_size": 32, "patience": 30, "max_epochs": 400, "val_fraction": 0.25}
+"""ImitationConfig of the clones: bench/nirl.py's behaviour-cloning baseline"""
+
+
+def bc_variants(variants: list[str]) -> dict[str, str]:
+    """One behaviour-cloning run per distinct observation among ``variants``: name -> the variant
+    whose observation it clones (the first of VARIANTS' order with it; the reward plays no part)."""
+    seen: dict[str, str] = {}
+    for v in VARIANTS:
+        key = json.dumps(observation_settings(VARIANTS[v]), sort_keys=True)
+        if v in variants and key not in seen:
+            seen[key] = v
+    return {f"BC:{v}": v for v in seen.values()}
+
+
+def run_bc(name: str, variant: str, seed: int, out: Path, sets: dict) -> dict:
+    """Behaviour cloning on BC_EPISODES expert episodes recorded in ``variant``'s observation: does
+    the observation carry what the expert (planning on the true map) acts on? Cached in
+    OUT/<name>-s<seed>/result.json."""
+    cached = out / f"{name}-s{seed}" / "result.json"
+    if cached.is_file():
+        return json.loads(cached.read_text())
+    nav = VARIANTS[variant]
+    start = time.perf_counter()
+    demos, _ = generate_demos("mixed:16", BC_EPISODES, seed=10_000 + seed, config=nav)
+    trained = train_policy(
+        demos, ImitationConfig(seed=seed, **BC_CONFIG), n_actions=nav.robot.n_actions,
+        observation=observation_settings(nav),
+    )  # fmt: skip
+    wall = time.perf_counter() - start
+    record = {"variant": name, "seed": seed, "train_robot_steps": 0, "train_wall_s": round(wall, 1),
+              "demo_episodes": len(demos), "demo_steps": int(sum(len(d) for d in demos)),
+              "bc_epochs": len(trained.history), "to_90_validation": None}  # fmt: skip
+    record.update(scored(evaluate_sets(trained.policy(), nav, sets), sets))
+    cached.parent.mkdir(parents=True, exist_ok=True)
+    cached.write_text(json.dumps(record) + "\n")
+    return record
+
+
+def expert(sets: dict, out: Path) -> dict:
+    """The expert (A* on the true map, the demonstrations' source) on the same episodes, as a run
+    with seed None; cached in OUT/expert.json. SPL and path ratio are not measured for it."""
+    cached = out / "expert.json"
+    if cached.is_file():
+        return json.loads(cached.read_text())
+    record: dict = {"variant": "expert", "seed": None, "train_wall_s": None, "train_robot_steps": 0,
+                    "to_90_validation": None, "sets": {}, "episodes": {}}  # fmt: skip
+    for name, es in sets.items():
+        outcomes = np.array(expert_outcomes(es, VARIANTS["D+geo"]))
+        ok = outcomes == Outcome.GOAL
+        kinds = np.arange(len(ok)) % len(MIXED_FAMILIES)
+        record["episodes"][name] = ok.tolist()
+        record["sets"][name] = {
+            "success": float(ok.mean()),
+            "ci": list(wilson_interval(int(ok.sum()), len(ok))),
+            "per_family": {f: float(ok[kinds == k].mean()) for k, f in enumerate(MIXED_FAMILIES)},
+            "collision_static": float(np.mean(outcomes == Outcome.COLLISION_STATIC)),
+            "collision_dynamic": float(np.mean(outcomes == Outcome.COLLISION_DYNAMIC)),
+            "timeout": float(np.mean(outcomes == Outcome.TIMEOUT)),
+            "spl": None,
+            "path_ratio": None,
+        }
+    out.mkdir(parents=True, exist_ok=True)
+    cached.write_text(json.dumps(record) + "\n")
+    return record
+
+
 def reference(spec: str, sets: dict, out: Path) -> tuple[str, dict]:
     """``VARIANT=DIR``: a saved policy (e.g. pretrained/nnql for D+geo) evaluated on the same episodes,
     a run of VARIANT with seed None (compared with every seed's run); cached in OUT/ref-VARIANT.json."""
@@ -262,6 +342,7 @@ def pooled(records: list[dict], name: str) -> dict:
     wins = sum(int(np.sum(r["episodes"][name])) for r in records)
     n = sum(len(r["episodes"][name]) for r in records)
     low, high = wilson_interval(wins, n)
+    spl = [r["sets"][name]["spl"] for r in records if r["sets"][name]["spl"] is not None]  # none: the expert
     return {
         "success": wins / n,
         "ci": [low, high],
@@ -269,7 +350,7 @@ def pooled(records: list[dict], name: str) -> dict:
         "per_family": {
             f: float(np.mean([r["sets"][name]["per_family"][f] for r in records])) for f in MIXED_FAMILIES
         },
-        "spl": float(np.mean([r["sets"][name]["spl"] for r in records])),
+        "spl": float(np.mean(spl)) if spl else None,
     }
 
 
@@ -345,6 +426,13 @@ def main() -> None:
         "--screen", action="store_true",
         help="train and evaluate on the validation set only (OUT/screen): choose without the test seed",
     )  # fmt: skip
+    parser.add_argument(
+        "--bc", action="store_true",
+        help=f"add behaviour cloning on {BC_EPISODES} expert episodes per seed in each distinct observation "
+        "of --variants (rows BC:<variant>): does the observation carry what the expert acts on?",
+    )  # fmt: skip
+    parser.add_argument("--expert", action="store_true",
+                        help="add the expert (A* on the true map) on the same episodes")  # fmt: skip
     parser.add_argument("--nnql", nargs="+", default=[], metavar="KEY=VALUE",
                         help="with --screen: NNQLConfig overrides (JSON values), e.g. n_step=3")  # fmt: skip
     parser.add_argument("--rewards", nargs="+", default=[], metavar="KEY=VALUE",
@@ -367,6 +455,13 @@ def main() -> None:
         runs = {v: [run_one(v, s, args, sets) for s in seeds] for v, seeds in done.items() if seeds}
     else:
         runs = {v: [run_one(v, s, args, sets) for s in args.seeds] for v in args.variants}
+    for name, variant in (bc_variants(args.variants) if args.bc else {}).items():
+        seeds = [s for s in args.seeds if not args.cached_only
+                 or (Path(args.out) / f"{name}-s{s}" / "result.json").is_file()]  # fmt: skip
+        if seeds:
+            runs[name] = [run_bc(name, variant, s, Path(args.out), sets) for s in seeds]
+    if args.expert:
+        runs["expert"] = [expert(sets, Path(args.out))]
     for spec in args.reference:
         variant, record = reference(spec, sets, Path(args.out))
         runs.setdefault(variant, []).append(record)
@@ -392,7 +487,8 @@ def main() -> None:
             {k: r[k] for k in ("seed", "train_wall_s", "to_90_validation", "sets")} for r in records
         ]
         report["variants"][v] = entry
-    best = max(report["variants"], key=lambda v: report["variants"][v]["validation"]["success"])
+    learned = [v for v in report["variants"] if v in VARIANTS]  # NNQL's, not the clones or the expert
+    best = max(learned, key=lambda v: report["variants"][v]["validation"]["success"])
     report["best_by_validation"] = best
     report["learning_nav_is"] = next((v for v, nav in VARIANTS.items() if nav == LEARNING_NAV), None)
     report["wall_s"] = round(time.perf_counter() - start, 1)
@@ -416,11 +512,12 @@ def main() -> None:
             t = r["sets"]["test"]
             vs = "".join(f", vs {o} {t[f'mcnemar_vs_{o}']['p']:.3g}" for o in PAIRED_WITH
                          if f"mcnemar_vs_{o}" in t)  # fmt: skip
-            print(f"  {v} seed {r['seed']}: test {t['success']:.1%}, SPL {t['spl']:.2f}, collisions "
+            spl = "-" if t["spl"] is None else f"{t['spl']:.2f}"
+            print(f"  {v} seed {r['seed']}: test {t['success']:.1%}, SPL {spl}, collisions "
                   f"{t['collision_static']:.1%}, timeouts {t['timeout']:.1%}, McNemar p vs heuristic "
                   f"{t['mcnemar_vs_heuristic']['p']:.3g}" + vs
                   + (f"; train {r['train_wall_s']:.0f} s, to 90% val {r['to_90_validation']}"
-                     if r["seed"] is not None else " (saved policy, --reference)"))  # fmt: skip
+                     if r["seed"] is not None else " (not trained here)"))  # fmt: skip
     print(f"best by validation success: {best}; worlds.config.LEARNING_NAV is {report['learning_nav_is']}")
     Path(args.png).parent.mkdir(parents=True, exist_ok=True)
     plot(report, Path(args.png))
