@@ -164,11 +164,32 @@ def evaluate_sets(policy, nav: NavConfig, sets: dict) -> dict[str, EvalResult]:
 
 
 def scored(results: dict[str, EvalResult], sets: dict) -> dict:
-    """Summaries and per-episode successes of each evaluated set."""
+    """Summaries, per-episode successes and path ratios to A* (None where it failed) of each set."""
     return {
         "sets": {name: summary(results[name], es.family) for name, es in sets.items()},
         "episodes": {name: successes(results[name], es.family).tolist() for name, es in sets.items()},
+        "path_ratios": {
+            name: [
+                r.path_length / r.shortest if r.outcome == Outcome.GOAL else None
+                for r in results[name].episodes[es.family]
+            ]
+            for name, es in sets.items()
+        },
     }
+
+
+def joint_path_ratios(runs: dict[str, list[dict]], name: str) -> None:
+    """Path / A* of each learned run on the episodes of set ``name`` that every learned variant's run
+    of the same seed solved (the issue's "path ratio on jointly solved episodes"), into
+    ``sets[name]["path_ratio_joint"]`` with the number of those episodes."""
+    learned = [r for v, records in runs.items() if v in VARIANTS for r in records if "path_ratios" in r]
+    for seed in {r["seed"] for r in learned}:
+        same = [r for r in learned if r["seed"] == seed]
+        joint = np.logical_and.reduce([np.array(r["episodes"][name], dtype=bool) for r in same])
+        for r in same:
+            ratios = [x for x, ok in zip(r["path_ratios"][name], joint, strict=True) if ok]
+            r["sets"][name]["path_ratio_joint"] = float(np.mean(ratios)) if ratios else None
+            r["sets"][name]["jointly_solved"] = int(joint.sum())
 
 
 def to_90(curve: list[dict]) -> dict:
@@ -343,6 +364,7 @@ def pooled(records: list[dict], name: str) -> dict:
     n = sum(len(r["episodes"][name]) for r in records)
     low, high = wilson_interval(wins, n)
     spl = [r["sets"][name]["spl"] for r in records if r["sets"][name]["spl"] is not None]  # none: the expert
+    joint = [r["sets"][name].get("path_ratio_joint") for r in records]  # see joint_path_ratios
     return {
         "success": wins / n,
         "ci": [low, high],
@@ -351,6 +373,7 @@ def pooled(records: list[dict], name: str) -> dict:
             f: float(np.mean([r["sets"][name]["per_family"][f] for r in records])) for f in MIXED_FAMILIES
         },
         "spl": float(np.mean(spl)) if spl else None,
+        "path_ratio_joint": float(np.mean(joint)) if joint and None not in joint else None,
     }
 
 
@@ -465,6 +488,8 @@ def main() -> None:
     for spec in args.reference:
         variant, record = reference(spec, sets, Path(args.out))
         runs.setdefault(variant, []).append(record)
+    for name, _, _ in SETS:
+        joint_path_ratios(runs, name)
     report: dict = {"steps": args.steps, "seeds": args.seeds, "episodes": args.episodes, "variants": {}}
     report["heuristic"] = base["sets"]
     for v, records in runs.items():
@@ -513,6 +538,8 @@ def main() -> None:
             vs = "".join(f", vs {o} {t[f'mcnemar_vs_{o}']['p']:.3g}" for o in PAIRED_WITH
                          if f"mcnemar_vs_{o}" in t)  # fmt: skip
             spl = "-" if t["spl"] is None else f"{t['spl']:.2f}"
+            if t.get("path_ratio_joint") is not None:
+                spl += f", path/A* {t['path_ratio_joint']:.2f} on the {t['jointly_solved']} jointly solved"
             print(f"  {v} seed {r['seed']}: test {t['success']:.1%}, SPL {spl}, collisions "
                   f"{t['collision_static']:.1%}, timeouts {t['timeout']:.1%}, McNemar p vs heuristic "
                   f"{t['mcnemar_vs_heuristic']['p']:.3g}" + vs
