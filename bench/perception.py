@@ -220,13 +220,14 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
     )  # fmt: skip
     options = {"dueling": False, **NNQL_OPTIONS.get(variant, {}), **getattr(args, "nnql_overrides", {})}
     nnql = NNQLConfig(seed=seed, **options)  # a plain head unless overridden
-    trained = finished(out, run, nav)
+    policy_class = RecurrentNNQLPolicy if nnql.recurrent else NNQLPolicy
+    trained = finished(out, run, nav, policy_class)
     if trained is None:
         start = time.perf_counter()
         result = train_local(run, nnql, nav=nav)
         trained = {"env_steps": result.env_steps, "wall": time.perf_counter() - start,
                    "selected_version": result.selected_version, "curve": result.curve}  # fmt: skip
-    policy = (RecurrentNNQLPolicy if nnql.recurrent else NNQLPolicy).load(out).greedy()
+    policy = policy_class.load(out).greedy()
     results = evaluate_sets(policy, nav, sets)
     record = {
         "variant": label(variant, args),
@@ -241,10 +242,11 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
     return record
 
 
-def finished(out: Path, run: LocalTrainConfig, nav: NavConfig) -> dict | None:
+def finished(out: Path, run: LocalTrainConfig, nav: NavConfig, policy_class: type) -> dict | None:
     """The training record of a run directory whose training finished with these settings (its
     evaluation was cut, or it was trained by ``train_local`` elsewhere, e.g. bench/sb3_compare.py's
-    NNQL run): summary.json, curve.jsonl and the policy's observation; None if there is none.
+    NNQL run): summary.json, curve.jsonl and the policy's observation (the saved policy loaded with
+    ``policy_class``: NNQLPolicy, or RecurrentNNQLPolicy for G); None if there is none.
     Its wall time is ``train_local``'s own (without building the env)."""
     if not (out / "summary.json").is_file():
         return None
@@ -252,7 +254,7 @@ def finished(out: Path, run: LocalTrainConfig, nav: NavConfig) -> dict | None:
     same = {k: summary["run"][k] for k in ("steps", "envs", "seed", "eval_every", "eval_episodes", "maps")}
     want = {"steps": run.steps, "envs": run.envs, "seed": run.seed, "eval_every": run.eval_every,
             "eval_episodes": run.eval_episodes, "maps": run.maps}  # fmt: skip
-    if same != want or NNQLPolicy.load(out).observation != observation_settings(nav):
+    if same != want or policy_class.load(out).observation != observation_settings(nav):
         raise ValueError(f"{out} holds a run with other settings ({same}), not {want} in this variant")
     curve = [json.loads(line) for line in (out / "curve.jsonl").read_text().splitlines() if line.strip()]
     return {"env_steps": summary["env_steps"], "wall": summary["wall_time"],
@@ -272,8 +274,8 @@ def heuristic(sets: dict, out: Path) -> dict:
 
 
 BC_EPISODES = 500
-"""expert episodes behaviour cloning learns from, per observation and seed (maps of seeds 10,000 + seed
-onwards, as bench/nirl.py's demonstrations: none of the evaluation sets' maps)"""
+"""expert episodes behaviour cloning learns from, per observation and seed: episode seeds 10,000 + 1,000 x
+seed onwards, so each seed's demonstrations are its own (none of the evaluation sets' maps)"""
 BC_CONFIG = {"batch_size": 32, "patience": 30, "max_epochs": 400, "val_fraction": 0.25}
 """ImitationConfig of the clones: bench/nirl.py's behaviour-cloning baseline"""
 
@@ -298,7 +300,7 @@ def run_bc(name: str, variant: str, seed: int, out: Path, sets: dict) -> dict:
         return json.loads(cached.read_text())
     nav = VARIANTS[variant]
     start = time.perf_counter()
-    demos, _ = generate_demos("mixed:16", BC_EPISODES, seed=10_000 + seed, config=nav)
+    demos, _ = generate_demos("mixed:16", BC_EPISODES, seed=10_000 + 1_000 * seed, config=nav)
     trained = train_policy(
         demos, ImitationConfig(seed=seed, **BC_CONFIG), n_actions=nav.robot.n_actions,
         observation=observation_settings(nav),
