@@ -386,7 +386,9 @@ def plot(report: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     names = list(report["variants"])
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
+    fig, axes = plt.subplots(1, 3, figsize=(max(13.0, 1.2 * len(names)), 4.2), sharey=True)
+    lowest = min(report["variants"][v][s]["success"] for v in names for s, _, _ in SETS)
+    bottom = min(0.4, math.floor(10 * lowest) / 10 - 0.1)
     for ax, set_name in zip(axes, [s for s, _, _ in SETS], strict=True):
         for x, v in enumerate(names):
             p = report["variants"][v][set_name]
@@ -397,8 +399,13 @@ def plot(report: dict, path: Path) -> None:
         h = report["heuristic"][set_name]["success"]
         ax.axhline(h, color="tab:red", ls="--", label=f"heuristic {h:.0%}")
         ax.axhline(0.98 if set_name != "test_dynamic" else 0.90, color="tab:green", ls=":", label="target")
-        ax.set_xticks(range(len(names)), names)
-        ax.set(title=set_name.replace("_", " "), ylim=(0.4, 1.0))
+        ax.set_xticks(
+            range(len(names)),
+            names,
+            rotation=45 if len(names) > 6 else 0,
+            ha="right" if len(names) > 6 else "center",
+        )
+        ax.set(title=set_name.replace("_", " "), ylim=(bottom, 1.0))
         ax.grid(axis="y", alpha=0.3)
         ax.legend(loc="lower right", fontsize=8)
     axes[0].set_ylabel("success (bars: pooled, dots: seeds)")
