@@ -67,7 +67,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from agents.evaluation.compare import mcnemar_exact
 from agents.evaluation.metrics import wilson_interval
 from agents.evaluation.policies import load_policy
-from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
+from agents.evaluation.runner import EvalResult, EvalSet, evaluate, make_eval_set
 from agents.imitation.config import ImitationConfig
 from agents.imitation.train import train_policy
 from agents.nnql.config import NNQLConfig
@@ -143,14 +143,19 @@ def successes(result: EvalResult, family: str) -> np.ndarray:
     return np.array([r.outcome == Outcome.GOAL for r in result.episodes[family]])
 
 
-def summary(result: EvalResult, family: str) -> dict:
+def per_family(ok: np.ndarray, es: EvalSet) -> dict[str, float]:
+    """Success rate per map family (rects, discs, rooms) of per-episode successes ``ok`` on ``es``."""
+    families = np.array(es.map_families)
+    return {f: float(ok[families == f].mean()) for f in MIXED_FAMILIES}
+
+
+def summary(result: EvalResult, es: EvalSet) -> dict:
     """Success [Wilson], per map family, outcome rates, SPL and path ratio of one evaluated set."""
-    m, ok = result.metrics[family], successes(result, family)
-    kinds = np.arange(len(ok)) % len(MIXED_FAMILIES)
+    m, ok = result.metrics[es.family], successes(result, es.family)
     return {
         "success": m.success.value,
         "ci": [m.success.low, m.success.high],
-        "per_family": {f: float(ok[kinds == k].mean()) for k, f in enumerate(MIXED_FAMILIES)},
+        "per_family": per_family(ok, es),
         "collision_static": m.collision_static.value,
         "collision_dynamic": m.collision_dynamic.value,
         "timeout": m.timeout.value,
@@ -166,7 +171,7 @@ def evaluate_sets(policy, nav: NavConfig, sets: dict) -> dict[str, EvalResult]:
 def scored(results: dict[str, EvalResult], sets: dict) -> dict:
     """Summaries, per-episode successes and path ratios to A* (None where it failed) of each set."""
     return {
-        "sets": {name: summary(results[name], es.family) for name, es in sets.items()},
+        "sets": {name: summary(results[name], es) for name, es in sets.items()},
         "episodes": {name: successes(results[name], es.family).tolist() for name, es in sets.items()},
         "path_ratios": {
             name: [
@@ -206,8 +211,13 @@ def label(variant: str, args) -> str:
     return f"{variant}[{','.join(given)}]" if given else variant
 
 
+def run_dir(out: str | Path, name: str, seed: int) -> Path:
+    """A run's directory: its result.json, and for NNQL the trained policy and curve."""
+    return Path(out) / f"{name}-s{seed}"
+
+
 def run_one(variant: str, seed: int, args, sets: dict) -> dict:
-    out = Path(args.out) / f"{label(variant, args)}-s{seed}"
+    out = run_dir(args.out, label(variant, args), seed)
     cached = out / "result.json"
     if cached.is_file():
         return json.loads(cached.read_text())
@@ -293,9 +303,9 @@ def bc_variants(variants: list[str]) -> dict[str, str]:
 
 def run_bc(name: str, variant: str, seed: int, out: Path, sets: dict) -> dict:
     """Behaviour cloning on BC_EPISODES expert episodes recorded in ``variant``'s observation: does
-    the observation carry what the expert (planning on the true map) acts on? Cached in
-    OUT/<name>-s<seed>/result.json."""
-    cached = out / f"{name}-s{seed}" / "result.json"
+    the observation carry what the expert (planning on the true map) acts on? Its ``train_wall_s`` is
+    recording the demonstrations and training. Cached in OUT/<name>-s<seed>/result.json."""
+    cached = run_dir(out, name, seed) / "result.json"
     if cached.is_file():
         return json.loads(cached.read_text())
     nav = VARIANTS[variant]
@@ -326,12 +336,11 @@ def expert(sets: dict, out: Path) -> dict:
     for name, es in sets.items():
         outcomes = np.array(expert_outcomes(es, VARIANTS["D+geo"]))
         ok = outcomes == Outcome.GOAL
-        kinds = np.arange(len(ok)) % len(MIXED_FAMILIES)
         record["episodes"][name] = ok.tolist()
         record["sets"][name] = {
             "success": float(ok.mean()),
             "ci": list(wilson_interval(int(ok.sum()), len(ok))),
-            "per_family": {f: float(ok[kinds == k].mean()) for k, f in enumerate(MIXED_FAMILIES)},
+            "per_family": per_family(ok, es),
             "collision_static": float(np.mean(outcomes == Outcome.COLLISION_STATIC)),
             "collision_dynamic": float(np.mean(outcomes == Outcome.COLLISION_DYNAMIC)),
             "timeout": float(np.mean(outcomes == Outcome.TIMEOUT)),
@@ -399,12 +408,8 @@ def plot(report: dict, path: Path) -> None:
         h = report["heuristic"][set_name]["success"]
         ax.axhline(h, color="tab:red", ls="--", label=f"heuristic {h:.0%}")
         ax.axhline(0.98 if set_name != "test_dynamic" else 0.90, color="tab:green", ls=":", label="target")
-        ax.set_xticks(
-            range(len(names)),
-            names,
-            rotation=45 if len(names) > 6 else 0,
-            ha="right" if len(names) > 6 else "center",
-        )
+        slanted = {"rotation": 45, "ha": "right"} if len(names) > 6 else {}
+        ax.set_xticks(range(len(names)), names, **slanted)
         ax.set(title=set_name.replace("_", " "), ylim=(bottom, 1.0))
         ax.grid(axis="y", alpha=0.3)
         ax.legend(loc="lower right", fontsize=8)
@@ -482,14 +487,14 @@ def main() -> None:
     sets = {name: make_eval_set(family, args.episodes, seed=seed) for name, family, seed in SETS}
     base = heuristic(sets, Path(args.out))
     if args.cached_only:
-        done = {v: [s for s in args.seeds if (Path(args.out) / f"{v}-s{s}" / "result.json").is_file()]
+        done = {v: [s for s in args.seeds if (run_dir(args.out, v, s) / "result.json").is_file()]
                 for v in args.variants}  # fmt: skip
         runs = {v: [run_one(v, s, args, sets) for s in seeds] for v, seeds in done.items() if seeds}
     else:
         runs = {v: [run_one(v, s, args, sets) for s in args.seeds] for v in args.variants}
     for name, variant in (bc_variants(args.variants) if args.bc else {}).items():
         seeds = [s for s in args.seeds if not args.cached_only
-                 or (Path(args.out) / f"{name}-s{s}" / "result.json").is_file()]  # fmt: skip
+                 or (run_dir(args.out, name, s) / "result.json").is_file()]  # fmt: skip
         if seeds:
             runs[name] = [run_bc(name, variant, s, Path(args.out), sets) for s in seeds]
     if args.expert:
