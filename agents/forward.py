@@ -88,6 +88,6 @@ class TorchForward:
 
 def network_forward(weights: Mapping[str, np.ndarray], architecture: Mapping[str, Any]) -> Forward:
     """The forward pass of ``architecture`` with ``weights``; ValueError when they do not fit."""
-    if "patch" in architecture:
+    if "patch" in architecture or "local" in architecture:
         return TorchForward(weights, architecture)
     return MLPForward(weights, architecture)

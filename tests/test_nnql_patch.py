@@ -13,7 +13,8 @@ from agents.evaluation.runner import evaluate, make_eval_set
 from agents.forward import TorchForward
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
-from agents.nnql.patch_network import PatchQNetwork, build_q_network, goal_images
+from agents.nirl.config import NIRLConfig
+from agents.nnql.patch_network import LocalQNetwork, PatchQNetwork, build_q_network, goal_images
 from agents.nnql.policy import NNQLPolicy
 from services.cli import main
 from worlds.config import NavConfig, ObservationConfig, SensorConfig, observation_settings
@@ -158,8 +159,6 @@ def test_train_local_cli_patch_option(tmp_path, capsys):
     assert main(["train", "--local", "--patch", "-2"]) == 2
     assert "patch_size" in capsys.readouterr().err
     assert main(["train", "--local", "--cnn-goal"]) == 2
-    assert "add --patch" in capsys.readouterr().err
-    assert main(["train", "--local", "--action-local", "3"]) == 2
     assert "add --patch" in capsys.readouterr().err
     out = tmp_path / "f"
     argv = ["train", "--local", "--patch", "8", "--no-subgoal", "--steps", "600", "--envs", "4",
@@ -310,6 +309,39 @@ def test_action_local_bad_values_are_clear_errors():
     with pytest.raises(ValueError, match=r"action_local=4.*action_local <= 3"):
         build_q_network(too_wide, observation_dim(nav), 5, observation_settings(nav))
     plain = patch_nav(0)
-    with pytest.raises(ValueError, match=r"action_local=1.*patch_size"):
-        build_q_network(NNQLConfig(**{**SMALL.to_dict(), "action_local": 1}), observation_dim(plain), 5,
-                        observation_settings(plain))  # fmt: skip
+    with pytest.raises(ValueError, match=r"action_local=1.*observation"):  # no settings: no layout
+        build_q_network(NNQLConfig(**{**SMALL.to_dict(), "action_local": 1}), observation_dim(plain), 5)
+    with pytest.raises(ValueError, match=r"action_local=4.*action_local <= 3"):
+        build_q_network(too_wide, observation_dim(plain), 5, observation_settings(plain))
+    with pytest.raises(ValueError, match="does not fit frames"):  # a frame of 12 in 13 features
+        LocalQNetwork({"obs_dim": 13, "n_actions": 5, "hidden_sizes": [4], "activation": "relu", "frame_dim": 12,
+                       "local": {"readings_at": 0, "n_readings": 8, "headings": [2, 3, 4, 5, 6],
+                                 "turns": [0.0] * 5, "goal_at": 8, "window": 1}})  # fmt: skip
+
+
+@pytest.mark.parametrize("dueling", [False, True])
+def test_action_local_without_a_patch_adds_the_branch_to_the_flat_mlp(tmp_path, dueling):
+    """No patch (e.g. NIRL's learning_plan observation): Q = the flat MLP's (plain or dueling) + the
+    branch over the newest frame's readings and goal, the same turned-view equivariance as with the
+    patch; the policy runs that module in actors and files (torch forward), and NIRL builds it."""
+    nav = patch_nav(0, frame_stack=2, subgoal="own_map", plan_length=True)
+    config = NNQLConfig(**{**SMALL.to_dict(), "action_local": 1, "dueling": dueling})
+    learner = learner_for(nav, config)
+    net = learner.network
+    assert isinstance(net, LocalQNetwork) and net.architecture.get("dueling", False) is dueling
+    assert net.frame_dim == frame_dim(nav) and net.local.spec["goal_at"] == 8
+    obs = torch.as_tensor(env_observations(nav, n=4))
+    with torch.no_grad():
+        torch.testing.assert_close(net(obs), net.head(obs) + net.local(obs[:, : frame_dim(nav)]))
+        older = obs.clone()
+        older[:, frame_dim(nav) :] = 0.0  # the branch reads the newest frame only
+        torch.testing.assert_close(net.local(obs[:, : frame_dim(nav)]), net.local(older[:, : frame_dim(nav)]))
+        turned = obs[:, : frame_dim(nav)].clone()
+        turned[:, :8] = obs[:, :8].roll(-2, dims=1)
+        turned[:, 9], turned[:, 10] = -obs[:, 10], obs[:, 9]
+        torch.testing.assert_close(net.local(turned)[:, 2], net.local(obs[:, : frame_dim(nav)])[:, 4])
+    assert_travels_with_the_policy(learner, obs.numpy(), tmp_path)
+    nirl = NIRLConfig(hidden_sizes=(16,), action_local=1, dueling=dueling).nnql_config()
+    assert isinstance(learner_for(nav, nirl).network, LocalQNetwork)
+    with pytest.raises(ValueError, match="action_local=-2"):
+        NIRLConfig(action_local=-2)

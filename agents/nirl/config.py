@@ -39,6 +39,11 @@ class NIRLConfig:
     100 rounds with discs, 500 + 500 episodes, one seed) 94.2% / 82.8% against the plain head's 91.8% /
     81.4%; on the test seed at 200 rounds, 3 seeds, level with the plain head (bench/RESULTS.md, issue 15
     part 7). Saved configs without the field had the plain head"""
+    action_local: int = 0
+    """K > 0: the Q-network gets NNQL's action-local branch (``NNQLConfig.action_local``,
+    agents.nnql.patch_network.LocalQNetwork): one small MLP, shared by the actions, over the 2K+1
+    range readings around each action's heading and the goal turned to it, added to that action's Q -
+    a wall learned ahead of one action is learned ahead of all; 0: off"""
     reward_hidden_sizes: tuple[int, ...] = (64, 64)
     """widths of the reward network's hidden layers (input: state-action features)"""
     reward_scale: float = 2.0
@@ -196,6 +201,8 @@ class NIRLConfig:
             raise ValueError("NIRLConfig: need positive batch sizes and replay_capacity >= batch_size")
         if min(self.temperature_start, self.temperature_end) <= 0:
             raise ValueError("NIRLConfig: Boltzmann temperatures must be > 0")
+        if self.action_local < 0:
+            raise ValueError(f"NIRLConfig.action_local={self.action_local}: expected >= 0 (0: off)")
         if min(self.iterations, self.steps_per_iteration, self.reward_updates, self.q_updates) < 0:
             raise ValueError("NIRLConfig: iteration counts must be >= 0")
         if self.policy_steps < 0 or self.policy_utd < 0:
@@ -216,6 +223,7 @@ class NIRLConfig:
             hidden_sizes=self.hidden_sizes,
             activation=self.activation,
             dueling=self.dueling,
+            action_local=self.action_local,
             lr=self.lr,
             gamma=self.gamma,
             batch_size=self.batch_size,

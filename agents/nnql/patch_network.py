@@ -78,18 +78,27 @@ def goal_images(goal: torch.Tensor, size: int, max_range: float) -> torch.Tensor
 
 def patch_layout(observation: Mapping[str, Any] | None) -> dict[str, Any] | None:
     """Where the patch sits in an observation with these settings (``worlds.config.observation_settings``),
-    and where its goal part is (for :func:`goal_images`); None when there is no patch."""
+    and where its goal part and readings are (for :func:`goal_images` and :class:`ActionLocal`); None
+    when there is no patch."""
     if not observation or not observation.get("observation.patch_size"):
         return None
     nav = with_observation(NavConfig(), dict(observation))
-    layout = frame_layout(nav)
     return {
         "size": nav.observation.patch_size,
-        "start": layout["patch"][0],
-        "frame_dim": frame_dim(nav),
+        "start": frame_layout(nav)["patch"][0],
         "frames": nav.observation.frame_stack,
-        "goal_at": layout["goal"][0],
         "max_range": nav.sensors.max_range,
+        **view_layout(nav),
+    }
+
+
+def view_layout(nav: NavConfig) -> dict[str, Any]:
+    """Where a frame's readings and goal part sit and each action's heading among the readings: what
+    :class:`ActionLocal` needs of any observation (with or without a patch)."""
+    layout = frame_layout(nav)
+    return {
+        "frame_dim": frame_dim(nav),
+        "goal_at": layout["goal"][0],
         "readings_at": layout["readings"][0],
         "n_readings": layout["readings"][1] - layout["readings"][0],
         "headings": nearest_readings(nav),
@@ -239,22 +248,59 @@ class PatchQNetwork(nn.Module):
         return q.reshape(*obs.shape[:-1], q.shape[-1])
 
 
+class LocalQNetwork(nn.Module):
+    """Q(s, .) of an observation without a patch: the flat MLP's (plain or dueling, ``head``) plus
+    :class:`ActionLocal`'s over the newest frame (the first ``frame_dim`` features)."""
+
+    def __init__(self, architecture: Mapping[str, Any]):
+        super().__init__()
+        arch = dict(architecture)
+        local, self.frame_dim = arch.pop("local"), int(arch.pop("frame_dim"))
+        self.head = QNetwork.from_architecture(arch)
+        self.local = ActionLocal(local, ACTIVATIONS[arch["activation"]])
+        spec, obs_dim = self.local.spec, int(arch["obs_dim"])
+        fits = self.frame_dim >= 1 and obs_dim % self.frame_dim == 0 and 0 <= spec["goal_at"] <= self.frame_dim - 3
+        fits = fits and spec["readings_at"] + spec["n_readings"] <= self.frame_dim
+        if not fits or int(arch["n_actions"]) != len(spec["turns"]):
+            raise ValueError(
+                f"architecture['local']={local} does not fit frames of {self.frame_dim} in obs_dim={obs_dim}"
+                f" with {arch['n_actions']} actions"
+            )
+        self.architecture = {**self.head.architecture, "frame_dim": self.frame_dim, "local": spec}
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        flat = obs.reshape(-1, obs.shape[-1])
+        q = self.head(flat) + self.local(flat[:, : self.frame_dim])
+        return q.reshape(*obs.shape[:-1], q.shape[-1])
+
+
 def build_q_network(
     config: NNQLConfig, obs_dim: int, n_actions: int, observation: Mapping[str, Any] | None = None
 ) -> nn.Module:
     """The learner's Q-network: :class:`PatchQNetwork` when the observation has a patch and
     ``config.q_network`` is "auto" (a plain head: ``config.dueling`` is the MLP's), else the flat-MLP
-    :class:`agents.nnql.networks.QNetwork` (dueling or not, as the config says)."""
+    :class:`agents.nnql.networks.QNetwork` (dueling or not, as the config says), with the
+    action-local branch (:class:`LocalQNetwork`) when ``config.action_local`` is set."""
     layout = patch_layout(observation) if config.q_network == "auto" else None
     if layout is None:
-        if config.cnn_goal or config.cnn_embed or config.action_local:
+        if config.cnn_goal or config.cnn_embed:
             raise ValueError(
-                f"NNQLConfig.cnn_goal={config.cnn_goal}, cnn_embed={config.cnn_embed},"
-                f" action_local={config.action_local} shape the patch network:"
+                f"NNQLConfig.cnn_goal={config.cnn_goal}, cnn_embed={config.cnn_embed} shape the patch network:"
                 " they need an observation with a patch (observation.patch_size > 0) and q_network='auto'"
                 f" (got {config.q_network!r})"
             )
-        return QNetwork.from_config(config, obs_dim, n_actions)
+        if not config.action_local:
+            return QNetwork.from_config(config, obs_dim, n_actions)
+        if not observation:
+            raise ValueError(
+                f"NNQLConfig.action_local={config.action_local}: the branch reads the readings and the goal"
+                " where the observation's settings put them; build the learner with its observation"
+            )
+        view = view_layout(with_observation(NavConfig(), dict(observation)))
+        head = QNetwork.from_config(config, obs_dim, n_actions).architecture
+        local = {k: view[k] for k in ("readings_at", "n_readings", "headings", "turns", "goal_at")}
+        return LocalQNetwork({**head, "frame_dim": view["frame_dim"],
+                              "local": {**local, "window": config.action_local}})  # fmt: skip
     goal_at, max_range = layout.pop("goal_at"), layout.pop("max_range")
     local = {key: layout.pop(key) for key in ("readings_at", "n_readings", "headings", "turns")}
     extra = {"goal": {"at": goal_at, "max_range": max_range}} if config.cnn_goal else {}
@@ -274,4 +320,6 @@ def network_from_architecture(architecture: Mapping[str, Any]) -> nn.Module:
     """The module an architecture dict describes (a saved policy's, or a WeightsUpdate's)."""
     if "patch" in architecture:
         return PatchQNetwork(architecture)
+    if "local" in architecture:
+        return LocalQNetwork(architecture)
     return QNetwork.from_architecture(dict(architecture))

@@ -130,8 +130,8 @@ def register(subparsers) -> None:
         "--action-local",
         type=int,
         default=defaults.action_local,
-        help="with --patch: K > 0 adds a branch shared by the actions that reads, for each action, the "
-        "2K+1 readings around its heading and the goal seen from it (0: off); --patch 16 --no-subgoal "
+        help="K > 0 adds a branch shared by the actions that reads, for each action, the 2K+1 readings "
+        "around its heading and the goal seen from it (0: off; with or without --patch); --patch 16 --no-subgoal "
         "--cnn-goal --cnn-embed 64 --action-local 3 is bench/perception.py's best no-planner variant",
     )
     parser.add_argument(
@@ -209,10 +209,8 @@ def run(args: argparse.Namespace) -> int:
             sequences=args.sequences,
         )
         nav = observation_of(args)
-        if (args.cnn_goal or args.cnn_embed or args.action_local) and not args.patch:
-            raise ValueError(
-                "--cnn-goal, --cnn-embed and --action-local shape the patch network: add --patch (e.g. 16)"
-            )
+        if (args.cnn_goal or args.cnn_embed) and not args.patch:
+            raise ValueError("--cnn-goal and --cnn-embed shape the patch network: add --patch (e.g. 16)")
         if args.steps < 1 or args.envs < 1:
             raise ValueError("--steps and --envs must be positive")
         if args.moving_discs < 0 or args.eval_dynamic_episodes < 0:
