@@ -11,9 +11,9 @@ import torch
 from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import evaluate, make_eval_set
 from agents.forward import TorchForward
+from agents.nirl.config import NIRLConfig
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
-from agents.nirl.config import NIRLConfig
 from agents.nnql.patch_network import LocalQNetwork, PatchQNetwork, build_q_network, goal_images
 from agents.nnql.policy import NNQLPolicy
 from services.cli import main
@@ -314,9 +314,10 @@ def test_action_local_bad_values_are_clear_errors():
     with pytest.raises(ValueError, match=r"action_local=4.*action_local <= 3"):
         build_q_network(too_wide, observation_dim(plain), 5, observation_settings(plain))
     with pytest.raises(ValueError, match="does not fit frames"):  # a frame of 12 in 13 features
-        LocalQNetwork({"obs_dim": 13, "n_actions": 5, "hidden_sizes": [4], "activation": "relu", "frame_dim": 12,
-                       "local": {"readings_at": 0, "n_readings": 8, "headings": [2, 3, 4, 5, 6],
-                                 "turns": [0.0] * 5, "goal_at": 8, "window": 1}})  # fmt: skip
+        LocalQNetwork({"obs_dim": 13, "n_actions": 5, "hidden_sizes": [4], "activation": "relu",
+                       "frame_dim": 12, "local": {"readings_at": 0, "n_readings": 8, "goal_at": 8,
+                                                  "headings": [2, 3, 4, 5, 6], "turns": [0.0] * 5,
+                                                  "window": 1}})  # fmt: skip
 
 
 @pytest.mark.parametrize("dueling", [False, True])

@@ -259,7 +259,8 @@ class LocalQNetwork(nn.Module):
         self.head = QNetwork.from_architecture(arch)
         self.local = ActionLocal(local, ACTIVATIONS[arch["activation"]])
         spec, obs_dim = self.local.spec, int(arch["obs_dim"])
-        fits = self.frame_dim >= 1 and obs_dim % self.frame_dim == 0 and 0 <= spec["goal_at"] <= self.frame_dim - 3
+        fits = self.frame_dim >= 1 and obs_dim % self.frame_dim == 0
+        fits = fits and 0 <= spec["goal_at"] <= self.frame_dim - 3
         fits = fits and spec["readings_at"] + spec["n_readings"] <= self.frame_dim
         if not fits or int(arch["n_actions"]) != len(spec["turns"]):
             raise ValueError(
@@ -285,8 +286,9 @@ def build_q_network(
     if layout is None:
         if config.cnn_goal or config.cnn_embed:
             raise ValueError(
-                f"NNQLConfig.cnn_goal={config.cnn_goal}, cnn_embed={config.cnn_embed} shape the patch network:"
-                " they need an observation with a patch (observation.patch_size > 0) and q_network='auto'"
+                f"NNQLConfig.cnn_goal={config.cnn_goal}, cnn_embed={config.cnn_embed} shape the patch"
+                " network: they need an observation with a patch (observation.patch_size > 0) and"
+                " q_network='auto'"
                 f" (got {config.q_network!r})"
             )
         if not config.action_local:

@@ -131,8 +131,9 @@ def register(subparsers) -> None:
         type=int,
         default=defaults.action_local,
         help="K > 0 adds a branch shared by the actions that reads, for each action, the 2K+1 readings "
-        "around its heading and the goal seen from it (0: off; with or without --patch); --patch 16 --no-subgoal "
-        "--cnn-goal --cnn-embed 64 --action-local 3 is bench/perception.py's best no-planner variant",
+        "around its heading and the goal seen from it (0: off; with or without --patch); --patch 16 "
+        "--no-subgoal --cnn-goal --cnn-embed 64 --action-local 3 is bench/perception.py's best no-planner "
+        "variant",
     )
     parser.add_argument(
         "--no-subgoal",
