@@ -307,7 +307,7 @@ def run_one(
                              eval_episodes=args.val_episodes, keep_best=args.keep_best,
                              final_eval_episodes=0, out="", seed=seed, progress=False,
                              moving_discs=args.nnql_discs),
-            NNQLConfig(seed=seed, dueling=args.nnql_dueling),
+            NNQLConfig(**{"seed": seed, "dueling": args.nnql_dueling, **args.nnql_overrides}),
             nav=reward_nav,
         )  # fmt: skip
         kept = result.policy.greedy() if args.keep_best else result.learner.policy()  # the kept weights
@@ -392,6 +392,11 @@ def main() -> int:
         "--nirl", action="append", default=[], metavar="KEY=VALUE",
         help="override a NIRLConfig field of the nirl learner (repeatable; JSON values: 1024, true, 0.5)",
     )  # fmt: skip
+    parser.add_argument(
+        "--nnql", action="append", default=[], metavar="KEY=VALUE",
+        help="override an NNQLConfig field of NNQL from scratch (nnql, nnql_line; repeatable), e.g. "
+        "action_local=3",
+    )  # fmt: skip
     add_policy_options(parser)
     parser.add_argument(
         "--keep-best", action="store_true",
@@ -408,6 +413,7 @@ def main() -> int:
     args = parser.parse_args()
     runs = Path(args.runs or (VALIDATION_RUNS if args.split == "validation" else RUNS[args.nav]))
     args.nirl_overrides = parse_overrides(parser, args.nirl, NIRLConfig, "--nirl")
+    args.nnql_overrides = parse_overrides(parser, args.nnql, NNQLConfig, "--nnql")
     if args.keep_best and "nirl" in args.methods.split(",") and args.curve_iterations > args.iterations:
         parser.error("--keep-best keeps the best of the rounds tested: --curve-iterations <= --iterations")
     if args.report:
@@ -415,7 +421,8 @@ def main() -> int:
     nav = NAVS[args.nav]
     # which code, settings and observation made each line
     code = {"commit": code_version(), "argv": sys.argv[1:], "nav": args.nav, "split": args.split,
-            "observation": observation_settings(nav), "nirl_overrides": args.nirl_overrides}  # fmt: skip
+            "observation": observation_settings(nav), "nirl_overrides": args.nirl_overrides,
+            **({"nnql_overrides": args.nnql_overrides} if args.nnql_overrides else {})}  # fmt: skip
     test_seed = VALIDATION_SEED if args.split == "validation" else 0
     sets = [make_eval_set(f, args.episodes, seed=test_seed) for f in FAMILIES]
     methods = [m for m in args.methods.split(",") if m]
