@@ -171,6 +171,11 @@ class NNQLConfig:
             raise ValueError(f"NNQLConfig.burn_in={self.burn_in}: expected >= 0")
         if self.recurrent and (self.sarsa or self.prioritized):
             raise ValueError("NNQLConfig.recurrent: uniform sequence replay; no sarsa/prioritized")
+        if self.recurrent and (self.action_local or self.cnn_goal or self.cnn_embed):
+            raise ValueError(
+                "NNQLConfig.recurrent: its encoder is an MLP; action_local, cnn_goal and cnn_embed shape the"
+                " feed-forward Q-network (drop them or recurrent)"
+            )
         if self.recurrent and self.n_step > 1:
             raise ValueError("NNQLConfig.recurrent: one-step targets; use n_step=1 with recurrent")
         if self.sarsa and self.double_q:

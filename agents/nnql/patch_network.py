@@ -20,7 +20,8 @@ With ``action_local`` = k a branch (:class:`ActionLocal`) adds to each action's 
 small MLP, shared by the actions, makes of the newest frame seen from that action's heading: the
 2k+1 readings centred on it and the goal's distance and bearing turned to it. A wall ahead of an
 action is then the same input whichever action it is ahead of (weight sharing over the robot's
-rotations), so a collision learned for one action is learned for all.
+rotations), so a collision learned for one action is learned for all. Without a patch the same branch
+sits beside the flat MLP (:class:`LocalQNetwork`; NIRL's ``action_local``, issue 15 part 15).
 
 The architecture dict (saved in the policy's ``config.json`` and sent with the weights) records that
 layout and the CNN's shape, so actors and the evaluator rebuild the same module; they run this
@@ -45,6 +46,8 @@ from worlds.perception import frame_dim, frame_layout
 LOCAL_HIDDEN = 32
 """hidden width of the action-local branch's MLP"""
 PATCH_KEYS = ("size", "start", "frame_dim", "frames", "channels", "kernel_sizes", "strides")
+VIEW_KEYS = ("readings_at", "n_readings", "headings", "turns", "goal_at")
+"""what :class:`ActionLocal`'s spec takes of :func:`view_layout` (with its ``window``)"""
 GOAL_CELL_M = 1.0
 """metres per patch cell when the goal is drawn into the patch: the patch samples map cells, and the
 map generators' (``worlds.generators``) cells are 1 m; a map of other cells sees its goal scaled"""
@@ -300,15 +303,15 @@ def build_q_network(
             )
         view = view_layout(with_observation(NavConfig(), dict(observation)))
         head = QNetwork.from_config(config, obs_dim, n_actions).architecture
-        local = {k: view[k] for k in ("readings_at", "n_readings", "headings", "turns", "goal_at")}
+        local = {key: view[key] for key in VIEW_KEYS}
         return LocalQNetwork({**head, "frame_dim": view["frame_dim"],
                               "local": {**local, "window": config.action_local}})  # fmt: skip
-    goal_at, max_range = layout.pop("goal_at"), layout.pop("max_range")
-    local = {key: layout.pop(key) for key in ("readings_at", "n_readings", "headings", "turns")}
+    local = {key: layout.pop(key) for key in VIEW_KEYS}
+    goal_at, max_range = local["goal_at"], layout.pop("max_range")
     extra = {"goal": {"at": goal_at, "max_range": max_range}} if config.cnn_goal else {}
     if config.cnn_embed:
         extra["embed"] = config.cnn_embed
-    local = {**local, "window": config.action_local, "goal_at": goal_at}
+    local = {**local, "window": config.action_local}
     return PatchQNetwork({
         "obs_dim": obs_dim, "n_actions": n_actions, "hidden_sizes": config.hidden_sizes,
         "activation": config.activation,
