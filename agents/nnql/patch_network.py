@@ -141,6 +141,18 @@ class ActionLocal(nn.Module):
         self.mlp = MLP(in_features=2 * window + 4, out_features=1, num_cells=[self.spec["hidden"]],
                        activation_class=activation)  # fmt: skip
 
+    def check_fits(self, frame_dim: int, n_actions: int) -> None:
+        """ValueError unless the spec's readings and goal part lie inside a frame of ``frame_dim`` and it
+        has a turn per action (what both Q-networks with the branch check of their frames)."""
+        spec = self.spec
+        inside = (
+            0 <= spec["goal_at"] <= frame_dim - 3 and spec["readings_at"] + spec["n_readings"] <= frame_dim
+        )
+        if not inside or n_actions != len(spec["turns"]):
+            raise ValueError(
+                f"architecture['local']={spec} does not fit frames of {frame_dim} with {n_actions} actions"
+            )
+
     def forward(self, frame: torch.Tensor) -> torch.Tensor:
         near = frame[:, self.index.to(frame.device)]  # (B, A, 2w+1)
         cos, sin = self.turns.to(frame.device)
@@ -224,10 +236,7 @@ class PatchQNetwork(nn.Module):
         local = arch.get("local")  # the ActionLocal spec; absent: off
         self.local = None if local is None else ActionLocal(local, activation)
         if self.local is not None:
-            if not 0 <= self.local.spec["goal_at"] <= self.frame_dim - 3 or int(arch["n_actions"]) != len(
-                self.local.spec["turns"]
-            ):
-                raise ValueError(f"architecture['local']={local} does not fit a frame of {self.frame_dim}")
+            self.local.check_fits(self.frame_dim, int(arch["n_actions"]))
             self.architecture["local"] = self.local.spec
 
     def split(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -261,16 +270,13 @@ class LocalQNetwork(nn.Module):
         local, self.frame_dim = arch.pop("local"), int(arch.pop("frame_dim"))
         self.head = QNetwork.from_architecture(arch)
         self.local = ActionLocal(local, ACTIVATIONS[arch["activation"]])
-        spec, obs_dim = self.local.spec, int(arch["obs_dim"])
-        fits = self.frame_dim >= 1 and obs_dim % self.frame_dim == 0
-        fits = fits and 0 <= spec["goal_at"] <= self.frame_dim - 3
-        fits = fits and spec["readings_at"] + spec["n_readings"] <= self.frame_dim
-        if not fits or int(arch["n_actions"]) != len(spec["turns"]):
+        obs_dim = int(arch["obs_dim"])
+        if self.frame_dim < 1 or obs_dim % self.frame_dim:
             raise ValueError(
-                f"architecture['local']={local} does not fit frames of {self.frame_dim} in obs_dim={obs_dim}"
-                f" with {arch['n_actions']} actions"
+                f"architecture: frame_dim={self.frame_dim} does not fit frames in obs_dim={obs_dim}"
             )
-        self.architecture = {**self.head.architecture, "frame_dim": self.frame_dim, "local": spec}
+        self.local.check_fits(self.frame_dim, int(arch["n_actions"]))
+        self.architecture = {**self.head.architecture, "frame_dim": self.frame_dim, "local": self.local.spec}
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         flat = obs.reshape(-1, obs.shape[-1])
