@@ -9,6 +9,8 @@ key                        from -> to                  payload
 ``eval/<evaluator>``       evaluator -> learner        EvalReport
 ``status/learner``         queryable                   StatusReport
 ``status/actor:<actor>``   queryable (each actor)      StatusReport (the actor's figures)
+``status/drive:<id>``      queryable (navlearn drive)  StatusReport (robot: goal, distance, ...)
+``status/sim:<id>``        queryable (ros2-sim)        StatusReport (robot: pose, collision, ...)
 ``acks/<actor>``           learner -> actor            acknowledgements
 ``alive/<role>/<id>``      liveliness tokens           (none)
 =========================  ==========================  =================
@@ -91,6 +93,20 @@ ACTOR_STATUS_PREFIX = "actor:"
 
 def actor_status(run: str, actor: str) -> str:
     return _key(run, "status", ACTOR_STATUS_PREFIX + check_name(actor, "actor id"))
+
+
+DRIVE_STATUS_PREFIX = "drive:"
+"""``navlearn drive`` answers its status on ``status/drive:<id>``"""
+SIM_STATUS_PREFIX = "sim:"
+"""``navlearn ros2-sim`` answers its status on ``status/sim:<id>``"""
+
+
+def drive_status(run: str, ident: str) -> str:
+    return _key(run, "status", DRIVE_STATUS_PREFIX + check_name(ident, "drive id"))
+
+
+def sim_status(run: str, ident: str) -> str:
+    return _key(run, "status", SIM_STATUS_PREFIX + check_name(ident, "sim id"))
 
 
 def acks(run: str, actor: str) -> str:

@@ -404,6 +404,9 @@ class StatusReport(Message):
     observation: str | None = text(optional=True, default=None)
     """The learner's observation (``--observation``, a name of ``worlds.config.OBSERVATIONS``): what
     its networks take, and so what its actors and evaluator must run. None: not said (an actor)."""
+    robot: dict[str, Any] | None = json_map(optional=True, default=None)
+    """A process facing a robot: ``navlearn drive``'s state (goal, distance, last action, stale
+    inputs, ...) or ``navlearn ros2-sim``'s (pose, collision, path length); None for the others."""
 
 
 __all__ = [

@@ -13,6 +13,7 @@ import signal
 import sys
 import threading
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -40,11 +41,14 @@ def setup_logging(verbose: bool = False) -> None:
     zenoh.init_log_from_env_or("error")
 
 
-def stop_on_signals() -> threading.Event:
-    """An event set by SIGTERM or SIGINT (the main loop polls it and stops cleanly)."""
+def stop_on_signals(first: Callable[[], None] | None = None) -> threading.Event:
+    """An event set by SIGTERM or SIGINT (the main loop polls it and stops cleanly). ``first``, if
+    given, runs in the handler before anything else (``navlearn drive`` sends zero velocity there)."""
     stop = threading.Event()
 
     def handler(signum: int, _frame: Any) -> None:
+        if first is not None:
+            first()
         if not stop.is_set():
             log.info("received %s, stopping", signal.Signals(signum).name)
         stop.set()
