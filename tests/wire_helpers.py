@@ -152,6 +152,7 @@ def learner_statuses(draw) -> StatusReport:
         actors_last_seen=draw(floats),
         losses=draw(st.dictionaries(names, st.floats(), max_size=4)),
         last_eval=draw(st.none() | st.dictionaries(names, json_values, max_size=3)),
+        robot=draw(st.none() | st.dictionaries(names, json_values, max_size=3)),
         **{k: draw(v) for k, v in header.items()},
     )
 

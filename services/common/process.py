@@ -41,10 +41,13 @@ def setup_logging(verbose: bool = False) -> None:
     zenoh.init_log_from_env_or("error")
 
 
-def stop_on_signals(first: Callable[[], None] | None = None) -> threading.Event:
-    """An event set by SIGTERM or SIGINT (the main loop polls it and stops cleanly). ``first``, if
-    given, runs in the handler before anything else (``navlearn drive`` sends zero velocity there)."""
-    stop = threading.Event()
+def stop_on_signals(
+    first: Callable[[], None] | None = None, event: threading.Event | None = None
+) -> threading.Event:
+    """An event set by SIGTERM or SIGINT (the main loop polls it and stops cleanly): ``event``, or a
+    new one. ``first``, if given, runs in the handler before anything else (``navlearn drive`` sends
+    zero velocity there)."""
+    stop = threading.Event() if event is None else event
 
     def handler(signum: int, _frame: Any) -> None:
         if first is not None:

@@ -321,7 +321,7 @@ def run_drive(config, settings, stop: threading.Event) -> int:
             scan_yaw=config.scan_yaw,
         )
         driver.warm_up()
-        stop_on_signals(first=driver.halt)  # from here on a signal sends zero velocity first
+        stop_on_signals(first=driver.halt, event=stop)  # from here on a signal sends zero velocity first
 
         def on_odometry(message, _info) -> None:
             p = message.pose.pose
