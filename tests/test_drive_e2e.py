@@ -68,15 +68,36 @@ def stack():
         sim, sim_lines = start(
             [*cli, "ros2-sim", "--map", f"unseen:{EPISODE}", "--odom-rate", "100", *zenoh], env
         )
-        drive, drive_lines = start([*cli, "drive", "--policy", "pretrained/nnql", *FAST, "--stale-after",
-                                    str(STALE_AFTER), "--max-actions", "200", *zenoh], env)  # fmt: skip
+        drive, drive_lines = start(
+            [
+                *cli,
+                "drive",
+                "--policy",
+                "pretrained/nnql",
+                *FAST,
+                "--stale-after",
+                str(STALE_AFTER),
+                "--max-actions",
+                "200",
+                *zenoh,
+            ],
+            env,
+        )
         procs += [sim, drive]
         wait_for_line(sim_lines, "simulated robot", 25)
         wait_for_line(drive_lines, "driving", 25)
         session = open_session(ZenohSettings(connect=[endpoint], run="e2e", connect_timeout=10))
         with session, Trial(session, "e2e") as trial:
-            yield {"trial": trial, "session": session, "sim": sim, "drive": drive, "drive_lines": drive_lines,
-                   "commands": Commands(trial.node)}  # fmt: skip
+            yield {
+                "trial": trial,
+                "session": session,
+                "endpoint": endpoint,
+                "env": env,
+                "sim": sim,
+                "drive": drive,
+                "drive_lines": drive_lines,
+                "commands": Commands(trial.node),
+            }
     finally:
         for proc in reversed(procs):
             stop(proc)
@@ -106,6 +127,30 @@ def test_the_ros2_graph_sees_both_nodes_and_their_endpoints(stack):
     assert {t.get("topic") for t in tokens if t["node"] == "navlearn_drive"} >= {"/odom", "/goal_pose"}
     drive_zid = {t["zid"] for t in tokens if t["node"] == "navlearn_drive"}
     assert len(drive_zid) == 1 and all(t["namespace"] == "/" for t in tokens)
+
+
+def test_navlearn_status_shows_the_drive_and_the_sim(stack):
+    import json
+    import subprocess
+    import sys
+
+    argv = [
+        sys.executable,
+        "-m",
+        "services.cli",
+        "status",
+        "--drives",
+        "--json",
+        "--connect",
+        stack["endpoint"],
+        "--run",
+        "e2e",
+    ]
+    done = subprocess.run(argv, env=stack["env"], capture_output=True, text=True, timeout=20)
+    assert done.returncode == 0, done.stderr  # no learner here, but the drive and the sim answer
+    robots = json.loads(done.stdout)["robots"]
+    assert robots["drive:drive"]["state"] in ("reached", "driving") and robots["drive:drive"]["goal"]
+    assert robots["sim:sim"]["collided"] is False and len(robots["sim:sim"]["pose"]) == 3
 
 
 def test_zero_velocity_within_half_a_second_of_a_stale_scan(stack):

@@ -19,8 +19,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "evaluator), then print a table, or JSON with --json. With --actors, also ask every actor "
             "for its own status on navlearn/<run>/status/actor:<id> (outbox held/bound, unacknowledged "
             "and resent batches, time spent waiting for the learner and whether it is slowed by "
-            "back-pressure, robot-steps/s, weights version). Exit code 1 if the learner does not "
-            "answer, 2 if no router answers within --connect-timeout seconds (both name the endpoint "
+            "back-pressure, robot-steps/s, weights version). With --drives, also ask every navlearn drive "
+            "and navlearn ros2-sim on status/drive:<id> and status/sim:<id> (state, goal, distance, last "
+            "action, stale inputs; pose and collision). Exit code 1 if the learner does not "
+            "answer (with --drives: and no drive or sim answers either), 2 if no router answers within "
+            "--connect-timeout seconds (both name the endpoint "
             "and the run they asked)."
         ),
     )
@@ -30,6 +33,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also query each actor's own status (outbox, back-pressure, weights version); "
         "JSON key actor_status",
+    )
+    parser.add_argument(
+        "--drives",
+        action="store_true",
+        help="also query navlearn drive and navlearn ros2-sim processes (state, goal, distance, last "
+        "action, stale inputs); JSON key robots. Give the robot's router with --connect",
     )
     parser.add_argument(
         "--watch",
@@ -58,6 +67,8 @@ def main(args: argparse.Namespace) -> int:
         query_alive,
         query_status,
         render,
+        render_robots,
+        robot_statuses,
         status_dict,
     )
 
@@ -76,16 +87,21 @@ def main(args: argparse.Namespace) -> int:
 
             statuses = query_actor_statuses(session, settings.run, timeout=min(args.timeout, 2.0))
             view["actor_status"] = actor_status_dicts(statuses)
+        if args.drives:
+            view["robots"] = robot_statuses(session, settings.run, timeout=min(args.timeout, 2.0))
         return view
 
     def show(view: dict):
-        if "actor_status" not in view:
-            return render(view)
         from rich.console import Group
 
-        from services.actor.status import render_actor_statuses
+        parts = [render(view)]
+        if "actor_status" in view:
+            from services.actor.status import render_actor_statuses
 
-        return Group(render(view), render_actor_statuses(view["actor_status"]))
+            parts.append(render_actor_statuses(view["actor_status"]))
+        if "robots" in view:
+            parts.append(render_robots(view["robots"]))
+        return parts[0] if len(parts) == 1 else Group(*parts)
 
     with session:
         try:
@@ -97,7 +113,7 @@ def main(args: argparse.Namespace) -> int:
                     from rich.console import Console
 
                     Console().print(show(view))
-                if view["learner"] is None:
+                if view["learner"] is None and not view.get("robots"):
                     hint = no_learner_hint(
                         settings.run, learner_runs(session, timeout=min(args.timeout, 1.0))
                     )

@@ -51,6 +51,51 @@ def query_status(session, run: str, timeout: float = 3.0) -> StatusReport | None
     return next((message for _, message in status_replies(session, keys.status(run), timeout)), None)
 
 
+def robot_statuses(session, run: str, timeout: float = 2.0) -> dict[str, dict]:
+    """``drive:<id>`` / ``sim:<id>`` -> the ``robot`` part of each status answered under
+    ``status/`` by ``navlearn drive`` and ``navlearn ros2-sim`` (``navlearn status --drives``)."""
+    found = {}
+    prefixes = (keys.DRIVE_STATUS_PREFIX, keys.SIM_STATUS_PREFIX)
+    for name, message in status_replies(session, keys.everything(run, "status"), timeout):
+        if message.robot is not None and name.startswith(prefixes):
+            found[name] = message.robot
+    return dict(sorted(found.items()))
+
+
+def render_robots(robots: dict[str, dict]):
+    """A rich table of :func:`robot_statuses`: one row per drive or simulated robot."""
+    from rich.table import Table
+
+    table = Table(title="robots (navlearn drive, navlearn ros2-sim)")
+    for column in (
+        "name",
+        "state",
+        "goal",
+        "distance m",
+        "last action",
+        "actions",
+        "stale",
+        "pose",
+        "detail",
+    ):
+        table.add_column(column)
+    for name, robot in robots.items():
+        collided = robot.get("collided")
+        state = robot.get("state") or ("collided" if collided else "running")
+        table.add_row(
+            name,
+            state,
+            _fmt(robot.get("goal")),
+            _fmt(robot.get("distance")),
+            _fmt(robot.get("last_action")),
+            _fmt(robot.get("actions")),
+            ", ".join(robot.get("stale") or []) or "-",
+            _fmt(robot.get("pose")),
+            robot.get("detail") or "",
+        )
+    return table
+
+
 def query_alive(session, run: str, timeout: float = 2.0) -> list[tuple[str, str]]:
     """(role, id) of every process holding a liveliness token in ``run``, sorted."""
     found = set()

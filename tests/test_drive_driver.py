@@ -1,0 +1,137 @@
+"""services.drive.drive.Driver alone (no Zenoh, a fake clock and a unicycle): the watchdog, the
+refusals, reaching and giving up, each ending in zero velocity."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from services.drive import wire
+from services.drive.drive import Driver, Inputs
+from services.drive.motion import Limits
+from worlds.config import LEARNING_NAV
+
+
+class Straight:
+    """A policy that always drives straight ahead (action 2 of 5), counting its calls."""
+
+    calls = 0
+
+    def nav_config(self):
+        return LEARNING_NAV
+
+    def __call__(self, obs):
+        assert obs.shape == (1, 30) and np.isfinite(obs).all()
+        self.calls += 1
+        return np.array([2])
+
+
+def open_scan(beams: int = 360):
+    return wire.laser_scan(np.full(beams, np.inf), -math.pi, 2 * math.pi / beams, 0.1, 8.0, 0, "laser")
+
+
+class Rig:
+    """A Driver on a unicycle: ``run(seconds)`` ticks at 50 Hz, feeding odometry and a scan per tick."""
+
+    def __init__(self, scan=None, **kw):
+        self.sent: list[tuple[float, float, float]] = []
+        self.now, self.pose = 0.0, [0.0, 0.0, 0.0]
+        self.inputs = Inputs()
+        self.scan = open_scan() if scan is None else scan
+        options = {"stale_after": 0.3, "cell": 1.0, "margin": 4.0, "goal_tolerance": 0.0, "max_actions": 0}
+        self.driver = Driver(
+            Straight(), self.inputs, self.send, Limits(1.0, 3.0, 4.0, 12.0), **{**options, **kw}
+        )
+        self.scans_on = True
+
+    def send(self, v, w):
+        self.sent.append((self.now, v, w))
+        self.v, self.w = v, w
+
+    def run(self, seconds: float, dt: float = 0.02):
+        self.v = self.w = 0.0
+        for _ in range(int(seconds / dt)):
+            self.now += dt
+            self.pose[2] += self.w * dt
+            self.pose[0] += self.v * dt * math.cos(self.pose[2])
+            self.pose[1] += self.v * dt * math.sin(self.pose[2])
+            self.inputs.on_odometry(tuple(self.pose), "odom", self.now)
+            if self.scans_on:
+                self.inputs.on_scan(self.scan, self.now)
+            self.driver.tick(self.now)
+
+
+def test_reaches_a_goal_ahead_and_stops():
+    rig = Rig()
+    rig.run(0.1)
+    rig.inputs.on_goal((3.0, 0.0), "odom")
+    rig.run(12.0)
+    status = rig.driver.status(rig.now)
+    assert status["state"] == "reached" and status["goals_reached"] == 1
+    assert status["distance"] <= 0.5 and 4 <= status["actions"] <= 6
+    assert rig.sent[-1][1:] == (0.0, 0.0) and max(v for _, v, _ in rig.sent) <= 1.0
+
+
+def test_watchdog_stops_within_a_tick_of_the_scan_going_stale_and_drives_on():
+    rig = Rig()
+    rig.run(0.1)
+    rig.inputs.on_goal((6.0, 0.0), "odom")
+    rig.run(1.0)
+    assert any(v > 0 for _, v, _ in rig.sent)
+    rig.scans_on, off = False, rig.now
+    rig.run(1.0)
+    zero = next(t for t, v, w in rig.sent if t > off + 0.3 and v == 0.0 and w == 0.0)
+    assert zero - off <= 0.3 + 0.021  # stale after 0.3 s, the next 50 Hz tick sends zero
+    assert all(v == 0.0 and w == 0.0 for t, v, w in rig.sent if t >= zero)
+    assert rig.driver.status(rig.now)["stale"] == ["scan"] and rig.driver.state == "stale"
+    rig.scans_on = True
+    rig.run(0.5)
+    assert rig.driver.state == "driving" and rig.sent[-1][1] > 0
+
+
+def test_a_scan_the_policy_cannot_use_is_refused_in_one_sentence_and_the_robot_stays():
+    sparse = wire.laser_scan(np.full(8, 2.0), -math.pi, math.pi / 4, 0.1, 8.0, 0, "laser")
+    rig = Rig(scan=sparse)
+    rig.inputs.on_goal((3.0, 0.0), "odom")
+    rig.run(1.0)
+    status = rig.driver.status(rig.now)
+    assert status["scans_refused"] >= 1 and "cannot feed this policy" in status["detail"]
+    assert status["detail"].endswith(".") and status["detail"].count(". ") == 0
+    assert all(v == 0.0 and w == 0.0 for _, v, w in rig.sent) and rig.pose == [0.0, 0.0, 0.0]
+
+
+def test_a_goal_in_another_frame_is_refused():
+    rig = Rig()
+    rig.run(0.1)
+    rig.inputs.on_goal((3.0, 0.0), "map")
+    rig.run(0.5)
+    status = rig.driver.status(rig.now)
+    assert status["state"] == "goal refused" and "'map'" in status["detail"] and "TF" in status["detail"]
+    assert not any(v for _, v, _ in rig.sent)
+
+
+def test_gives_up_after_max_actions():
+    rig = Rig(max_actions=2)
+    rig.run(0.1)
+    rig.inputs.on_goal((9.0, 0.0), "odom")
+    rig.run(6.0)
+    status = rig.driver.status(rig.now)
+    assert status["state"] == "gave up" and status["actions"] == 2 and rig.sent[-1][1:] == (0.0, 0.0)
+
+
+def test_halt_sends_zero_at_once():
+    rig = Rig()
+    rig.run(0.1)
+    rig.inputs.on_goal((6.0, 0.0), "odom")
+    rig.run(1.0)
+    rig.driver.halt()
+    assert rig.sent[-1][1:] == (0.0, 0.0)
+
+
+def test_status_lists_input_ages():
+    rig = Rig()
+    rig.run(0.2)
+    ages = rig.driver.status(rig.now + 1.0)["input_age_s"]
+    assert ages["scan"] == pytest.approx(1.0, abs=0.03) and ages["odometry"] == pytest.approx(1.0, abs=0.03)
