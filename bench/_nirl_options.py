@@ -39,7 +39,7 @@ def cached(directory: str | None, name: str, make, *args):
 
 POLICY_RUNS = "runs/nirl_out"
 """where bench runs with ``policy_steps`` or ``--save-runs`` save NIRL's files: <split>-<set>-<seed>
-(bench/nirl_refine.py)"""
+(results/nirl/scripts/nirl_refine.py)"""
 
 
 def add_policy_options(parser: argparse.ArgumentParser) -> None:
@@ -57,8 +57,8 @@ def add_policy_options(parser: argparse.ArgumentParser) -> None:
                         help="... and validation episodes with 4 moving discs beside")  # fmt: skip
     parser.add_argument("--save-runs", action="store_true",
                         help=f"save every NIRL run's files (policy, reward, potential) to {POLICY_RUNS}/"
-                        "<split>-<set>-<seed>, as runs with policy_steps always do (bench/nirl_refine.py "
-                        "reads them)")  # fmt: skip
+                        "<split>-<set>-<seed>, as runs with policy_steps always do (results/nirl/scripts/"
+                        "nirl_refine.py reads them)")  # fmt: skip
 
 
 def policy_run(args: argparse.Namespace, set_name: str, seed: int) -> dict:

@@ -35,8 +35,8 @@ goal, ``ObservationConfig.plan_length``) or ``default`` (``NavConfig()``: 8 beam
 table's). The expert acts on the true map either way; its demonstrations are recorded in the
 chosen observation, and its own success on the same test episodes is measured beside (``--methods expert``).
 
-Runs append one JSON line each to ``--runs`` (default ``bench/nirl_runs_learning.jsonl`` for
-``--nav learning``, ``bench/nirl_runs.jsonl``, the first table's, for ``--nav default``; so the grid
+Runs append one JSON line each to ``--runs`` (default ``results/nirl/nirl_runs_learning.jsonl`` for
+``--nav learning``, ``results/nirl/nirl_runs.jsonl``, the first table's, for ``--nav default``; so the grid
 can be run in pieces, in the background); each line records its observation. ``--report`` reads them
 and prints the table (``bench/_nirl_report.py``), then one JSON object on the last line.
 
@@ -116,9 +116,9 @@ NAVS = {
 NO_DEMOS = ("nnql", "nnql_line")
 """learners that take no demonstrations (one run per seed)"""
 RUNS = {
-    "learning": "bench/nirl_runs_learning.jsonl",
-    "learning_plan": "bench/nirl_runs_learning_plan.jsonl",
-    "default": "bench/nirl_runs.jsonl",
+    "learning": "results/nirl/nirl_runs_learning.jsonl",
+    "learning_plan": "results/nirl/nirl_runs_learning_plan.jsonl",
+    "default": "results/nirl/nirl_runs.jsonl",
 }
 
 

@@ -451,7 +451,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=500, help="episodes per evaluation set")
     parser.add_argument("--val-episodes", type=int, default=100, help="episodes of the periodic validations")
     parser.add_argument("--out", default="runs/perception", help="run directories and result files")
-    parser.add_argument("--png", default="bench/plots/perception.png")
+    parser.add_argument("--png", default="results/perception/perception.png")
     parser.add_argument(
         "--reference", nargs="*", default=[], metavar="VARIANT=DIR",
         help="saved policies evaluated on the same episodes as runs of VARIANT (e.g. D+geo=pretrained/nnql)",

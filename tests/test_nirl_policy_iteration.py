@@ -255,7 +255,7 @@ def test_keep_best_keeps_the_own_round_that_validated_best(tmp_path):
     for name, value in last.learner.get_weights().items():
         assert np.array_equal(value, last.history.snapshots[f"policy/{name}"][-1])
     # validating reads the greedy policy only: the same rounds as a run that never validates
-    # (bench/nirl_last_round.py tests a keep-best run's last round as that run's result)
+    # (results/nirl/scripts/nirl_last_round.py tests a keep-best run's last round as that run's result)
     silent = train_nirl(demos, config, NIRLRun(envs=4, out="", eval_every=0, final_eval_episodes=0,
                                                progress=False))  # fmt: skip
     for name, stack in silent.history.snapshots.items():

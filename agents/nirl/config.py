@@ -77,8 +77,7 @@ class NIRLConfig:
     after the range readings, in LEARNING_NAV the goal's and the subgoal's distance and bearing, in
     LEARNING_PLAN_NAV also the own map's plan length; one frame, no patch: agents.nirl.learner checks)
     or observation (every feature). Goal: on 40 held-out expert episodes a steps-to-go error of 3.9
-    against 5.0 steps, 3.5 with the plan length (bench/nirl_potential.py), and the test figures of
-    bench/RESULTS.md, issue 15 parts 5-11, were measured with it"""
+    against 5.0 steps, 3.5 with the plan length (results/nirl/scripts/nirl_potential.py)"""
     policy_steps: int = 0
     """iq with fixed_reward=progress: robot-steps of NNQL's own local trainer (many robots, its utd,
     dueling head, moving-disc mix, keep-best) on the fixed learned reward once IQ-Learn's

@@ -67,8 +67,8 @@ RANGE_MARGIN = 0.1
 
 @dataclass(frozen=True)
 class HindsightSettings:
-    """Knobs of the hindsight refinement (chosen by bench/nirl_hindsight.py --tune on a noisy set no
-    reported run uses; bench/RESULTS.md, issue 15 part 10)."""
+    """Knobs of the hindsight refinement (chosen by results/nirl/scripts/nirl_hindsight.py
+    --tune on a noisy set no reported run uses)."""
 
     temperature: float = 0.2
     """Boltzmann temperature of the prior over the actions' cost-to-go (m)"""

@@ -37,10 +37,10 @@ from agents.nirl.progress import ProgressPotential, potential_loss, shaped_progr
 
 @dataclass
 class ProgressRefine:
-    """Settings of the refinement, chosen by bench/nirl_refine.py --tune on noisy demo seed 3 (no reported
-    run uses it) under the rule "most injected steps relabelled with >= 99% of clean steps kept":
-    1.4% relabelled, 99.3% kept (bench/RESULTS.md, issue 15 part 4) - the progress evidence barely
-    tells the injected steps from clean ones (median shaped progress -0.08 against 0.03)."""
+    """Settings of the refinement, chosen by results/nirl/scripts/nirl_refine.py --tune on noisy demo
+    seed 3 (no reported run uses it) under the rule "most injected steps relabelled with >= 99% of
+    clean steps kept": 1.4% relabelled, 99.3% kept - the progress evidence barely tells the injected
+    steps from clean ones (median shaped progress -0.08 against 0.03)."""
 
     temperature: float = 0.01
     """prior softmax(Q / temperature) over the NNQL phase's Q-values (its reward's units: a step

@@ -16,8 +16,11 @@ Two uses:
 
 Prints one JSON object on its last line.
 
-    python -m bench.nirl_refine --tune runs/nirl_out/test-20noisy-0 --demo-cache runs/democache
-    python -m bench.nirl_refine --measure runs/nirl_out/test-20noisy-{0,1,2} --demo-cache runs/democache
+    python nirl_refine.py --tune runs/nirl_out/test-20noisy-0 --demo-cache runs/democache
+    python nirl_refine.py --measure runs/nirl_out/test-20noisy-{0,1,2} --demo-cache runs/democache
+
+Archived with the runs it made (results/nirl/); run it from the repository root with
+``PYTHONPATH=. python results/nirl/scripts/nirl_refine.py``.
 """
 
 from __future__ import annotations

@@ -4,15 +4,18 @@ steps kept as recorded - beside the same refinement with the true map's costs (w
 map would give; the true map is read here only, by the bench).
 
 * ``--tune``: choose the temperature and threshold on a noisy demonstration set no reported run uses
-  (seed 20000 + ``--demo-seed``, default 3; the bench's sets are seeds 0-2). Rule (bench/nirl_refine.py's):
+  (seed 20000 + ``--demo-seed``, default 3; the bench's sets are seeds 0-2). Rule (nirl_refine.py's):
   the most injected actions relabelled to the expert's with at least 99% of clean steps kept.
 * ``--measure``: the rates on the 20 noisy demonstrations of the bench's test seeds (``--seeds``, the
   sets bench/nirl.py trains on), with the given settings.
 
 Prints one JSON object on its last line.
 
-    python -m bench.nirl_hindsight --tune --demo-cache runs/democache
-    python -m bench.nirl_hindsight --measure --seeds 0 1 2 --demo-cache runs/democache
+    python nirl_hindsight.py --tune --demo-cache runs/democache
+    python nirl_hindsight.py --measure --seeds 0 1 2 --demo-cache runs/democache
+
+Archived with the runs it made (results/nirl/); run it from the repository root with
+``PYTHONPATH=. python results/nirl/scripts/nirl_hindsight.py``.
 """
 
 from __future__ import annotations
@@ -25,12 +28,12 @@ import time
 
 import numpy as np
 import torch
+from nirl_refine import noisy_set  # its sibling in this folder
 
 from agents.nirl.hindsight import HindsightSettings, costs_along, demo_costs, hindsight_prior, seen_map
 from agents.nirl.losses import map_posterior, refine_steps
 from bench._nirl_options import cached, rates
 from bench.nirl import demo_sets
-from bench.nirl_refine import noisy_set
 from worlds.config import LEARNING_NAV
 
 TEMPERATURES = (0.05, 0.1, 0.2, 0.3, 0.5)

@@ -5,7 +5,11 @@ exact test per demonstration set and episode family, the seeds both files ran po
 a new setting's NIRL lines against an earlier part's (the same test episodes: seed 0's sets of
 ``--episodes`` per family, whatever the training did).
 
-    python -m bench.nirl_paired --a bench/nirl_runs_part8.jsonl --b bench/nirl_runs_part7.jsonl
+    python nirl_paired.py --a results/nirl/nirl_runs_part8.jsonl \\
+        --b results/nirl/nirl_runs_part7.jsonl
+
+Archived with the runs it made (results/nirl/); run it from the repository root with
+``PYTHONPATH=. python results/nirl/scripts/nirl_paired.py``.
 """
 
 from __future__ import annotations

@@ -8,8 +8,11 @@ expert episodes (seed 30001 + seed, other maps): root-mean-square error of the s
 fitted discounted value inverted) and its correlation with them, mean of ``--fits`` fitting seeds.
 CPU seconds; prints a table, then one JSON object on the last line.
 
-    python -m bench.nirl_potential                       # seed 0, 3 fits, LEARNING_NAV
-    python -m bench.nirl_potential --nav learning_plan   # with the own map's plan length observed
+    python nirl_potential.py                       # seed 0, 3 fits, LEARNING_NAV
+    python nirl_potential.py --nav learning_plan   # with the own map's plan length observed
+
+Archived with the runs it made (results/nirl/); run it from the repository root with
+``PYTHONPATH=. python results/nirl/scripts/nirl_potential.py``.
 """
 
 from __future__ import annotations

@@ -11,7 +11,11 @@ rounds at the end (``NIRLRun.average_last``; ``averaged_rounds`` on the line). `
 evaluates on the validation seed's episodes instead of the run's test episodes (how part 7 chose
 ``--average-last``; the lines then say ``"split": "validation"``).
 
-    python -m bench.nirl_last_round --runs runs11/own200k_0.jsonl [...] --out bench/nirl_runs_part7.jsonl
+    python nirl_last_round.py --runs runs11/own200k_0.jsonl [...] \\
+        --out results/nirl/nirl_runs_part7.jsonl
+
+Archived with the runs it made (results/nirl/); run it from the repository root with
+``PYTHONPATH=. python results/nirl/scripts/nirl_last_round.py``.
 """
 
 from __future__ import annotations
