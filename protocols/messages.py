@@ -32,6 +32,8 @@ from protocols.limits import Limits
 from protocols.schema import Schema, column, count, custom, inside, json_map, number_map, text
 
 DEMO_SOURCES = ("astar", "human", "file")
+OWN_WORLD = "navlearn"
+"""``TransitionBatch.env`` of navlearn's own robot world (``worlds.own_env.EnvConfig.signature``)"""
 KINDS: dict[str, type[Message]] = {}
 
 
@@ -99,6 +101,9 @@ class TransitionBatch(Message):
     actor: str = text()
     model: str = text()
     """Name of the model whose policy acted (e.g. ``nnql``)."""
+    env: str = text(default=OWN_WORLD)
+    """The env the actor runs (``worlds.own_env.EnvConfig.signature``: a Gymnasium id and its kwargs,
+    or ``navlearn``); the learner refuses batches of another env than its own, naming both."""
     policy_version: int = count()
     env_ids: np.ndarray = column("<i4")
     """int32 (N,): index of the robot in the actor's vector env."""
@@ -412,6 +417,7 @@ class StatusReport(Message):
 __all__ = [
     "DEMO_SOURCES",
     "KINDS",
+    "OWN_WORLD",
     "DemoBatch",
     "EpisodeMeta",
     "EvalReport",

@@ -244,15 +244,16 @@ def test_bad_header_values(overrides: dict) -> None:
         (Limits(max_batch=3), {"n": 4}, False),
         (Limits(max_obs_dim=2), {"dim": 2}, True),
         (Limits(max_obs_dim=2), {"dim": 3}, False),
-        (Limits(max_string=4), {"actor": "abcd", "model": "efgh", "sender": "ijkl"}, True),
+        (Limits(max_string=4), {"actor": "abcd", "model": "efgh", "sender": "ijkl", "env": "mnop"}, True),
         (Limits(max_string=4), {"actor": "𝄞𝄞𝄞𝄞", "model": "é", "sender": ""}, True),  # 4 x 4 bytes
         (Limits(max_string=4), {"actor": "abcde"}, False),
+        (Limits(max_string=4), {"env": "abcde"}, False),
         (Limits(max_string=4), {"model": "abcde"}, False),
         (Limits(max_string=4), {"sender": "abcde"}, False),
         (Limits(max_string=3), {}, False),  # msgpack's max_str_len (4 x 3 bytes) binds "policy_version" too
         (Limits(), {"actor": ""}, False),
-        (Limits(max_items=10), {}, True),
-        (Limits(max_items=9), {}, False),
+        (Limits(max_items=11), {}, True),
+        (Limits(max_items=10), {}, False),
         (Limits(n_actions=5), {"action": [4, 0, 1]}, True),
         (Limits(n_actions=5), {"action": [0, 5, 1]}, False),
         (Limits(), {"action": [2**63 - 1, 0, 0]}, True),
@@ -261,7 +262,7 @@ def test_bad_header_values(overrides: dict) -> None:
     ],
 )
 def test_limits_at_their_bounds(limits: Limits, fields: dict, accepted: bool) -> None:
-    fields = {"n": 3, "dim": 2, "actor": "a", "model": "m", "sender": "s"} | fields
+    fields = {"n": 3, "dim": 2, "actor": "a", "model": "m", "sender": "s", "env": "e"} | fields
     wire = encode(small_transitions(**fields))
     assert (agree(wire, limits) is not None) == accepted
     assert isinstance(general(wire, limits), TransitionBatch) == accepted

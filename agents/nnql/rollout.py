@@ -29,6 +29,8 @@ class EpisodeEnd:
     outcome: int | None
     """``worlds.outcomes.Outcome`` code from the terminal info, None if the env gives none"""
     path_length: float | None
+    success: bool | None = None
+    """the terminal ``info["is_success"]`` (the gymnasium-robotics / SB3 convention), None if the env gives none"""
 
 
 def _row(info: dict[str, Any], key: str, index: int) -> Any:
@@ -91,6 +93,7 @@ class VectorRollout:
                 true_next[i] = final_obs[i]
                 outcome = _row(final_info, "outcome", i)
                 path_length = _row(final_info, "path_length", i)
+                success = _row(final_info, "is_success", i)
                 episodes.append(
                     EpisodeEnd(
                         env_id=int(i),
@@ -98,6 +101,7 @@ class VectorRollout:
                         length=int(self.lengths[i]),
                         outcome=None if outcome is None else int(outcome),
                         path_length=None if path_length is None else float(path_length),
+                        success=None if success is None else bool(success),
                     )
                 )
             self.returns[done] = 0.0
