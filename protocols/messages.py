@@ -280,6 +280,11 @@ def _read_observation(value: object, what: str, limits: Limits) -> dict[str, Any
     return dict(value)
 
 
+def _read_env(value: object, what: str, limits: Limits) -> str:
+    """An env signature (``architecture["env"]``): a printable string."""
+    return check_string(value, what, limits)
+
+
 EXPLORATIONS = ("boltzmann", "epsilon")
 
 
@@ -359,6 +364,10 @@ class WeightsUpdate(Message):
     """What the network takes as input (``worlds.config.observation_settings``: setting -> value);
     actors and evaluators of another observation refuse the weights naming the setting (on the wire:
     ``architecture["observation"]``; None: not said)."""
+    env: str | None = inside("architecture", "env", _read_env, str, default=None)
+    """The env the network was trained on (``TransitionBatch.env``'s signature); actors and evaluators
+    running another env refuse the weights naming both (on the wire: ``architecture["env"]``; None:
+    not said, navlearn's world)."""
 
     def __post_init__(self) -> None:
         self.tensors = {name: np.asarray(value) for name, value in self.tensors.items()}

@@ -35,7 +35,10 @@ from typing import Any
 import numpy as np
 
 from protocols.messages import OWN_WORLD
+
 VECTORS = ("sync", "async")
+ENV_TITLE = "environment (default navlearn's robot world; --env: any Gymnasium env with discrete actions)"
+"""the --help group title of EnvConfig's flags, the same in every command"""
 
 
 class EnvError(ValueError):

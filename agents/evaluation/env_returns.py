@@ -4,11 +4,11 @@ episode length.
 navlearn's world has outcomes, A* paths and SPL (:mod:`agents.evaluation.runner`); a user's env has only
 what Gymnasium defines, so this reports what the Gymnasium and SB3 literature does: the mean episode
 return over a fixed number of greedy episodes with a 95% confidence interval (normal approximation,
-``1.96 * std / sqrt(n)``) compared with the env's registered ``reward_threshold`` (gymnasium's "solved"),
-the mean episode length, and the success rate (Wilson interval) from the terminal ``info["is_success"]`` where the env gives it (the
-gymnasium-robotics / SB3 convention). The episodes are fixed by ``seed``: copy ``j`` of the vector env
-is reset with ``seed + j`` and runs episodes ``j, j + n, ...`` (each copy its own quota, so short
-episodes are not over-counted).
+``1.96 * std / sqrt(n)``) compared with the env's registered ``reward_threshold`` (gymnasium's
+"solved"), the mean episode length, and the success rate (Wilson interval) from the terminal
+``info["is_success"]`` where the env gives it (the gymnasium-robotics / SB3 convention). The episodes
+are fixed by ``seed``: copy ``j`` of the vector env is reset with ``seed + j`` and runs episodes
+``j, j + n, ...`` (each copy its own quota, so short episodes are not over-counted).
 """
 
 from __future__ import annotations
@@ -92,7 +92,8 @@ def table(metrics: dict[str, dict[str, Any]]) -> str:
     lines = []
     for name, m in metrics.items():
         r = m["return"]
-        line = f"{name}: return {r['mean']:.1f} [{r['low']:.1f}, {r['high']:.1f}] over {m['episodes']} episodes"
+        line = f"{name}: return {r['mean']:.1f} [{r['low']:.1f}, {r['high']:.1f}]"
+        line += f" over {m['episodes']} episodes"
         line += f", length {m['length']:.0f}"
         if "success" in m:
             s = m["success"]

@@ -136,6 +136,16 @@ REFERENCE = "reference"
 """model field of points that evaluate a fixed saved policy (the imitation policy) once"""
 
 
+def _headline(metrics: dict[str, Any]) -> tuple[float, float, float]:
+    """(value, low, high) of the curve's top row: the success rate where there is one, else the mean
+    return (a Gymnasium env without ``is_success``)."""
+    if "success" in metrics:
+        s = metrics["success"]
+        return s["value"], s["low"], s["high"]
+    r = metrics["return"]
+    return r["mean"], r["low"], r["high"]
+
+
 def plot_evaluations(points: list[dict[str, Any]], path: Path) -> Path:
     """The evaluator's learning curve (:func:`evaluations_figure`) written to ``path``."""
     import matplotlib.pyplot as plt
@@ -165,6 +175,10 @@ def evaluations_figure(points: list[dict[str, Any]]):
     models = sorted({p.get("model", "") for p in points if p.get("model") != REFERENCE})
     series = [(m, f) for m in models for f in families]
     references = [p for p in points if p.get("model") == REFERENCE]
+    gym = any("return" in m for p in points for m in p["metrics"].values())
+    """a Gymnasium --env (agents.evaluation.env_returns): episode length below, not path ratio"""
+    returns = gym and any("success" not in m for p in points for m in p["metrics"].values())
+    """such an env that says no success: the curve shows the mean return"""
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), sharey="row")
     for col, (xlabel, xof) in enumerate(
         (
@@ -187,15 +201,14 @@ def evaluations_figure(points: list[dict[str, Any]]):
                 name = f"{model} {family}".strip() if len(models) > 1 else family
                 label = name if color is None else None
                 xs = [x for x, _ in rows]
-                success = [m["success"] for _, m in rows]
-                (line,) = axes[0, col].plot(
-                    xs, [s["value"] for s in success], "o-", ms=3, label=label, color=color
-                )
+                top = [_headline(m) for _, m in rows]
+                (line,) = axes[0, col].plot(xs, [t[0] for t in top], "o-", ms=3, label=label, color=color)
                 color = line.get_color()
                 axes[0, col].fill_between(
-                    xs, [s["low"] for s in success], [s["high"] for s in success], color=color, alpha=0.2
+                    xs, [t[1] for t in top], [t[2] for t in top], color=color, alpha=0.2
                 )
-                ratio = [(x, m["path_ratio"]) for x, m in rows if m.get("path_ratio") is not None]
+                second = "length" if gym else "path_ratio"
+                ratio = [(x, m[second]) for x, m in rows if m.get(second) is not None]
                 if ratio:
                     axes[1, col].plot(*zip(*ratio, strict=True), "o-", ms=3, color=color, label=label)
         for reference in references:  # a fixed policy (imitation): one horizontal line per family
@@ -215,11 +228,16 @@ def evaluations_figure(points: list[dict[str, Any]]):
                     xytext=(2, 0),
                     textcoords="offset points",
                 )
-        axes[0, col].set(ylim=(0, 1.02), ylabel="success rate" if col == 0 else None)
-        axes[1, col].set(xlabel=xlabel, ylabel="path length / A*" if col == 0 else None)
+        if returns:  # a Gymnasium --env without is_success: mean return (95% CI)
+            axes[0, col].set(ylabel="mean return" if col == 0 else None)
+        else:
+            axes[0, col].set(ylim=(0, 1.02), ylabel="success rate" if col == 0 else None)
+        below = "episode length" if gym else "path length / A*"
+        axes[1, col].set(xlabel=xlabel, ylabel=below if col == 0 else None)
         for ax in axes[:, col]:
             ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=8, loc="upper left")
-    fig.suptitle(f"{', '.join(models).upper() or 'policies'} on held-out maps (greedy policy)")
+    where = ", ".join(families) if gym else "held-out maps"
+    fig.suptitle(f"{', '.join(models).upper() or 'policies'} on {where} (greedy policy)")
     fig.tight_layout()
     return fig

@@ -12,7 +12,9 @@ A policy directory holds two files (written atomically, temp + rename):
   metadata. ``observation`` holds the settings that fix what the policy observes
   (:data:`worlds.config.OBSERVATION_FIELDS`); a policy saved without it observes
   :data:`worlds.config.LEGACY_OBSERVATION` (8 beams and the goal, one frame), and a setting it lacks
-  (added after it was saved) its legacy value (:func:`worlds.config.saved_observation`).
+  (added after it was saved) its legacy value (:func:`worlds.config.saved_observation`). A policy
+  trained on a user's Gymnasium env records ``env`` (``{"id", "kwargs", "module"}``,
+  :meth:`worlds.own_env.EnvConfig.record`) instead, and ``navlearn evaluate --policy`` rebuilds that env.
 
 An NNQL policy whose ``architecture`` also has ``lstm_size`` is recurrent (encoder, LSTM, Q head;
 agents/nnql/recurrent_policy.py): ``load_policy`` gives a :class:`GreedyRecurrentPolicy`, which
@@ -69,6 +71,12 @@ class GreedyMLPPolicy:
         self.model = str(config.get("model", ""))
         self.kind = str(config["kind"])
         self.version = int(config.get("version", 0))
+        self.env = config.get("env")
+        """the Gymnasium env it was trained on (``worlds.own_env.EnvConfig.record``); None: our world"""
+        if self.env is not None:  # a user's env: its spaces, not navlearn's observation, size the input
+            self.observation = None
+            self._load(weights)
+            return
         self.observation = saved_observation(config.get("observation"))
         try:
             nav = self.nav_config()
@@ -79,6 +87,9 @@ class GreedyMLPPolicy:
                 f"observation settings {self.observation} give {observation_dim(nav)} inputs, the network "
                 f"takes obs_dim={self.architecture['obs_dim']}"
             )
+        self._load(weights)
+
+    def _load(self, weights: dict[str, np.ndarray]) -> None:
         try:
             self._set_weights(weights)
         except (KeyError, ValueError) as exc:

@@ -64,6 +64,9 @@ class LearnerOutputs:
     config: NNQLConfig
     network: torch.nn.Module
     observation: dict[str, Any] | None
+    env: dict[str, Any] | None = None
+    """the Gymnasium env trained on (``worlds.own_env.EnvConfig.record``), recorded in saved policies so
+    ``navlearn evaluate --policy`` rebuilds it; None: navlearn's world"""
     updates: int
     device: torch.device
 
@@ -82,6 +85,8 @@ class LearnerOutputs:
         metadata.setdefault("nnql_config", self.config.to_dict())
         if self.observation is not None:
             metadata.setdefault("observation", self.observation)
+        if self.env is not None:
+            metadata.setdefault("env", self.env)
         return save_policy_dir(path, self.get_weights(), self.architecture, self.version, **metadata)
 
     def save_checkpoint(self, path: str | Path) -> Path:

@@ -30,7 +30,7 @@ class EpisodeEnd:
     """``worlds.outcomes.Outcome`` code from the terminal info, None if the env gives none"""
     path_length: float | None
     success: bool | None = None
-    """the terminal ``info["is_success"]`` (the gymnasium-robotics / SB3 convention), None if the env gives none"""
+    """the terminal ``info["is_success"]`` (gymnasium-robotics / SB3 convention); None: not given"""
 
 
 def _row(info: dict[str, Any], key: str, index: int) -> Any:

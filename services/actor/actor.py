@@ -45,6 +45,7 @@ from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.common.warmup import COMPILE_NOTE
 from services.common.weights import WeightsReceiver
 from worlds.config import OBSERVATIONS, with_moving_discs
+from worlds.own_env import EnvConfig, make_vector_env
 from worlds.vector_env import NavigationVectorEnv
 
 log = logging.getLogger("navlearn.actor")
@@ -73,12 +74,23 @@ class Actor:
     """Steps a VectorRollout, publishes TransitionBatches through an Outbox, swaps in new weights."""
 
     def __init__(
-        self, config: ActorConfig, env, session, run: str, seed: int, limits: Limits, where: str = ""
+        self,
+        config: ActorConfig,
+        env,
+        session,
+        run: str,
+        seed: int,
+        limits: Limits,
+        where: str = "",
+        env_config: EnvConfig | None = None,
     ) -> None:
-        """``where``: the router endpoints, named in the actor's warnings."""
+        """``where``: the router endpoints, named in the actor's warnings; ``env_config``: which env
+        ``env`` is (announced in every batch; default navlearn's world)."""
         import zenoh
 
         self.config = config
+        self.env_config = env_config or EnvConfig()
+        self.env_signature = self.env_config.signature()
         self.run_name = run
         self.seed = seed
         self.rng = np.random.default_rng(seed)
@@ -95,7 +107,16 @@ class Actor:
         self._declared = contextlib.ExitStack()
         """everything declared on the session, undeclared by close() in reverse order"""
         self.receiver = self._declared.enter_context(
-            contextlib.closing(WeightsReceiver(session, run, config.model, limits, config.observation))
+            contextlib.closing(
+                WeightsReceiver(
+                    session,
+                    run,
+                    config.model,
+                    limits,
+                    config.observation if self.env_config.own_world else None,
+                    self.env_signature,
+                )
+            )
         )
         self.publisher = self._declared.enter_context(
             session.declare_publisher(
@@ -128,6 +149,9 @@ class Actor:
         """this incarnation: the learner de-duplicates by (sender, seq), and seq restarts with the process"""
         self.weights_applied = 0
         self.episodes: deque[int] = deque(maxlen=100)
+        """1 per recent episode that succeeded (the world's goal outcome, or the env's is_success)"""
+        self.returns: deque[float] = deque(maxlen=100)
+        """the returns of the recent episodes"""
         self.episodes_done = 0
         self.reachable = True
 
@@ -206,7 +230,9 @@ class Actor:
             batch, ended = self.rollout.step()
             pieces.append(batch)
             for episode in ended:
-                self.episodes.append(int(episode.outcome == SUCCESS))
+                success = episode.outcome == SUCCESS if episode.success is None else episode.success
+                self.episodes.append(int(success))
+                self.returns.append(episode.episode_return)
             self.episodes_done += len(ended)
         flat = concat_batches(pieces, self.rollout.num_envs)
         self.seq += 1
@@ -216,6 +242,7 @@ class Actor:
             seq=self.seq,
             actor=self.config.id,
             model=self.config.model,
+            env=self.env_signature,
             policy_version=self.version,
             **flat,
         )
@@ -262,8 +289,10 @@ class Actor:
 
     def _log_progress(self, rate: float, reachable: bool) -> None:
         success = np.mean(self.episodes) if self.episodes else float("nan")
+        mean_return = np.mean(self.returns) if self.returns else float("nan")
         log.info(
-            "%.0f robot-steps/s | version %d (learner %d, lag %d) | episodes %d, success %.0f%% (last %d) | "
+            "%.0f robot-steps/s | version %d (learner %d, lag %d) | episodes %d, success %.0f%%, return %.1f "
+            "(last %d) | "
             "sent %d, outbox %d (unacknowledged %d, resent %d)%s%s",
             rate,
             self.version,
@@ -271,6 +300,7 @@ class Actor:
             max(self.learner_version - self.version, 0),
             self.episodes_done,
             100 * success,
+            mean_return,
             len(self.episodes),
             self.outbox.sent,
             len(self.outbox),
@@ -292,16 +322,33 @@ class Actor:
         self.close()
 
 
-def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
-    """Process set-up: env (from the config), Zenoh session (retried until a router answers), loop."""
+def build_env(config: ActorConfig, env_config: EnvConfig, seed: int):
+    """The actor's vector env: navlearn's compiled world on ``config.maps``, or ``config.envs`` copies
+    of a Gymnasium ``--env`` (worlds.own_env), and the wire limits that follow from its spaces."""
+    if env_config.own_world:
+        log.info("actor %s: building %d robots on %s (%s)", config.id, config.envs, config.maps, COMPILE_NOTE)
+        nav = with_moving_discs(OBSERVATIONS[config.observation], config.moving_discs)
+        env = NavigationVectorEnv(config.envs, config=nav, maps=config.maps, seed=seed)
+    else:
+        log.info("actor %s: building %d copies of %s (%s)", config.id, config.envs, env_config.signature(),
+                 env_config.env_vector)  # fmt: skip
+        env = make_vector_env(env_config, config.envs)
+    obs_dim = int(np.prod(env.single_observation_space.shape))
+    limits = Limits(n_actions=int(env.single_action_space.n), max_obs_dim=max(Limits.max_obs_dim, obs_dim))
+    return env, limits
+
+
+def run_actor(
+    config: ActorConfig, settings: ZenohSettings, stop: threading.Event, env_config: EnvConfig | None = None
+) -> int:
+    """Process set-up: env (from the config; ``env_config``: a Gymnasium env instead of navlearn's
+    world), Zenoh session (retried until a router answers), loop."""
+    env_config = env_config or EnvConfig()
     if not config.id:
         config.id = default_actor_id()
     keys.check_name(config.id, "actor id")
     seed = config.seed if config.seed is not None else seed_for(config.id)
-    log.info("actor %s: building %d robots on %s (%s)", config.id, config.envs, config.maps, COMPILE_NOTE)
-    nav = with_moving_discs(OBSERVATIONS[config.observation], config.moving_discs)
-    env = NavigationVectorEnv(config.envs, config=nav, maps=config.maps, seed=seed)
-    limits = Limits(n_actions=int(env.single_action_space.n))
+    env, limits = build_env(config, env_config, seed)
     with contextlib.closing(env):
         session = open_session(settings, stop=stop)
         if session is None:
@@ -309,14 +356,14 @@ def run_actor(config: ActorConfig, settings: ZenohSettings, stop: threading.Even
         where = settings.where()
         with (
             session,
-            Actor(config, env, session, settings.run, seed, limits, where) as actor,
+            Actor(config, env, session, settings.run, seed, limits, where, env_config) as actor,
             declare_alive(session, settings.run, "actor", config.id),
         ):
             log.info(
                 "actor %s up: %d robots on %s, seed %d, run %s via %s",
                 config.id,
                 config.envs,
-                config.maps,
+                config.maps if env_config.own_world else env_config.signature(),
                 seed,
                 settings.run,
                 where,

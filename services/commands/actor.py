@@ -7,6 +7,7 @@ import argparse
 from services.actor.config import ActorConfig
 from services.common.options import add_options
 from services.common.transport import add_zenoh_args
+from worlds.own_env import ENV_TITLE, EnvConfig
 
 DESCRIPTION = """\
 Run an actor: it steps --envs robots (a vectorised navigation env on --maps) with the newest
@@ -32,6 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_options(parser, ActorConfig, "NAVLEARN_ACTOR", "actor")
+    add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE)
     parser.add_argument("--verbose", action="store_true", help="debug logging")
     add_zenoh_args(parser, default_mode="client")
     parser.set_defaults(func=main)
@@ -47,6 +49,7 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         config = options_from_args(ActorConfig, args, "NAVLEARN_ACTOR")
+        env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
         settings = settings_from_args(args)
     except (OptionError, TransportError) as exc:
         print(f"navlearn actor: {exc}", file=sys.stderr)
@@ -54,7 +57,7 @@ def main(args: argparse.Namespace) -> int:
     setup_logging(args.verbose)
     stop = stop_on_signals()
     try:
-        return run_actor(config, settings, stop)
+        return run_actor(config, settings, stop, env)
     except (TransportError, ValueError) as exc:
         print(f"navlearn actor: {exc}", file=sys.stderr)
         return 2

@@ -7,6 +7,7 @@ import argparse
 from services.common.options import add_options
 from services.common.transport import add_zenoh_args
 from services.evaluator.config import EvaluatorConfig
+from worlds.own_env import ENV_TITLE, EnvConfig
 
 DESCRIPTION = """\
 Run the evaluator: it follows the learner's weights (navlearn/<run>/weights/<model>, asking
@@ -28,6 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_options(parser, EvaluatorConfig, "NAVLEARN_EVALUATOR", "evaluator")
+    add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE)
     parser.add_argument("--verbose", action="store_true", help="debug logging")
     add_zenoh_args(parser, default_mode="client")
     parser.set_defaults(func=main)
@@ -43,6 +45,7 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         config = options_from_args(EvaluatorConfig, args, "NAVLEARN_EVALUATOR")
+        env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
         settings = settings_from_args(args)
     except (OptionError, TransportError) as exc:
         print(f"navlearn evaluator: {exc}", file=sys.stderr)
@@ -50,7 +53,7 @@ def main(args: argparse.Namespace) -> int:
     setup_logging(args.verbose)
     stop = stop_on_signals()
     try:
-        return run_evaluator(config, settings, stop)
+        return run_evaluator(config, settings, stop, env)
     except (TransportError, ValueError) as exc:
         print(f"navlearn evaluator: {exc}", file=sys.stderr)
         return 2

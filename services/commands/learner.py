@@ -8,6 +8,7 @@ from agents.nnql.config import NNQLConfig
 from services.common.options import add_options
 from services.common.transport import add_zenoh_args
 from services.learner.config import LearnerConfig
+from worlds.own_env import ENV_TITLE, EnvConfig
 
 DESCRIPTION = """\
 Run the learner: it takes transition batches from actors (navlearn/<run>/transitions/*) and
@@ -40,6 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_options(parser, LearnerConfig, "NAVLEARN_LEARNER", "learner service")
+    add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE)
     add_options(parser, NNQLConfig, "NAVLEARN_NNQL", "NNQL hyper-parameters", skip=("sarsa",))
     parser.add_argument(
         "--nirl-config",
@@ -63,6 +65,7 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         config = options_from_args(LearnerConfig, args, "NAVLEARN_LEARNER")
+        env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
         resolve_device(config.device)  # cuda without a GPU: one sentence, before anything starts
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL")
         if nnql.sarsa:
@@ -79,7 +82,7 @@ def main(args: argparse.Namespace) -> int:
     setup_logging(args.verbose)
     stop = stop_on_signals()
     try:
-        return run_learner(config, nnql, settings, stop, nirl=nirl)
+        return run_learner(config, nnql, settings, stop, nirl=nirl, env=env)
     except (TransportError, ValueError) as exc:
         print(f"navlearn learner: {exc}", file=sys.stderr)
         return 2

@@ -8,6 +8,7 @@ from agents.nnql.config import NNQLConfig
 from services.commands.learner import SARSA_LOCAL_ONLY
 from services.common.options import add_options
 from services.ops.up_config import UpConfig
+from worlds.own_env import ENV_TITLE, EnvConfig
 
 DESCRIPTION = """\
 Train NNQL the distributed way on one machine: check the arguments (maps included), compile the
@@ -43,6 +44,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "NNQL hyper-parameters (passed to the learner)",
         skip=("seed", "sarsa"),
     )
+    add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE)
     parser.set_defaults(func=main)
 
 
@@ -56,6 +58,7 @@ def main(args: argparse.Namespace) -> int:
     from rich.live import Live
     from rich.text import Text
 
+    from agents.evaluation.env_returns import table
     from services.common.options import OptionError, options_from_args
     from services.common.process import stop_on_signals
     from services.common.warmup import compile_world
@@ -68,13 +71,14 @@ def main(args: argparse.Namespace) -> int:
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=config.seed)
         if nnql.sarsa:
             raise OptionError(SARSA_LOCAL_ONLY)
-        check_config(config)
+        env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
+        check_config(config, env)
     except (OptionError, ValueError) as exc:
         print(f"navlearn up: {exc}", file=sys.stderr)
         return 2
     logging.basicConfig(level=logging.WARNING, format="%(name)s %(levelname)s %(message)s")
     console = Console()
-    up = Up(config, nnql)
+    up = Up(config, nnql, env)
     limits = [
         f"{config.duration:.0f} s" * bool(config.duration),
         f"{config.updates} updates" * bool(config.updates),
@@ -83,28 +87,32 @@ def main(args: argparse.Namespace) -> int:
     demonstrator = ""
     if config.nirl:
         demonstrator = f" + demonstrator ({config.demos or config.demonstrator})"
+    runs = f"observation {config.observation}" if env.own_world else f"env {env.signature()}"
     console.print(
         f"navlearn up: run [bold]{config.run}[/bold], learner{' (NNQL + NIRL)' * config.nirl} + "
         f"{config.actors} actors x {config.envs} robots{demonstrator} + evaluator on {up.endpoint}; "
-        f"observation {config.observation}; "
+        f"{runs}; "
         f"budget {budget} from the first transition; "
         f"outputs in {up.out}/",
         soft_wrap=True,
     )
     # Compiled once here, before the processes start, rather than by each of them at once.
     with (
-        console.status("compiling the robot world (first run only)...")
+        nullcontext()
+        if not env.own_world  # a Gymnasium --env: nothing of the robot world runs
+        else console.status("compiling the robot world (first run only)...")
         if console.is_terminal
         else nullcontext()
     ):
-        if not console.is_terminal:
-            console.print("compiling the robot world (first run only)...")
-        seconds, compiled = compile_world(config.maps)
-    console.print(
-        f"robot world compiled in {seconds:.0f} s (cached for later runs)"
-        if compiled
-        else f"robot world loaded from the compile cache in {seconds:.1f} s"
-    )
+        if env.own_world:
+            if not console.is_terminal:
+                console.print("compiling the robot world (first run only)...")
+            seconds, compiled = compile_world(config.maps)
+            console.print(
+                f"robot world compiled in {seconds:.0f} s (cached for later runs)"
+                if compiled
+                else f"robot world loaded from the compile cache in {seconds:.1f} s"
+            )
     stop = stop_on_signals()
     resumed_version = up.final_version()  # the checkpoint's: the learner's first status is past it already
     up.start()
@@ -162,6 +170,9 @@ def main(args: argparse.Namespace) -> int:
     )
     for model, final in summary["last_evaluations"].items():
         for family, m in final["metrics"].items():
+            if "return" in m:  # a Gymnasium --env
+                console.print(f"  {model} {table({family: m})} (version {final['policy_version']})")
+                continue
             console.print(
                 f"  {model} {family}: success {100 * m['success']['value']:.0f}% "
                 f"[{100 * m['success']['low']:.0f}, {100 * m['success']['high']:.0f}], SPL {m['spl']:.2f} "

@@ -22,7 +22,7 @@ from protocols import keys
 from protocols.codec import decode, encode
 from protocols.errors import ProtocolError
 from protocols.limits import DEFAULT_LIMITS, Limits
-from protocols.messages import ExplorationSchedule, WeightsUpdate
+from protocols.messages import OWN_WORLD, ExplorationSchedule, WeightsUpdate
 from worlds.config import OBSERVATIONS, observation_differences, observation_name
 
 log = logging.getLogger("navlearn.weights")
@@ -52,10 +52,11 @@ class WeightsBroadcaster:
         architecture: dict[str, Any],
         exploration: ExplorationSchedule | None = None,
         observation: dict[str, Any] | None = None,
+        env: str | None = None,
     ) -> int:
         """Broadcast ``weights`` as ``version`` (actors explore as ``exploration`` says; the network
-        observes ``observation``, ``worlds.config.observation_settings``); returns the encoded size
-        in bytes."""
+        observes ``observation``, ``worlds.config.observation_settings``, of env ``env``, a
+        ``worlds.own_env.EnvConfig.signature``); returns the encoded size in bytes."""
         self.seq += 1
         message = WeightsUpdate(
             sender=self.sender,
@@ -66,6 +67,7 @@ class WeightsBroadcaster:
             architecture=architecture,
             exploration=exploration,
             observation=observation,
+            env=env,
         )
         payload = encode(message)
         self._latest = payload  # one reference swap: the query callback reads it without a lock
@@ -100,13 +102,22 @@ class WeightsReceiver:
     """
 
     def __init__(
-        self, session, run: str, model: str, limits: Limits = DEFAULT_LIMITS, observation: str | None = None
+        self,
+        session,
+        run: str,
+        model: str,
+        limits: Limits = DEFAULT_LIMITS,
+        observation: str | None = None,
+        env: str = OWN_WORLD,
     ) -> None:
-        """``observation``: the owner's ``--observation`` (worlds.config.OBSERVATIONS); updates whose
-        network observes something else are refused (counted as ``observation``, said once per sender)."""
+        """``observation``: the owner's ``--observation`` (worlds.config.OBSERVATIONS); ``env``: the
+        signature of the env it runs (worlds.own_env.EnvConfig.signature). Updates whose network
+        observes something else, or was trained on another env, are refused (counted as ``observation``
+        or ``env``, said once per sender)."""
         self.key = keys.weights(run, model)
         self.limits = limits
         self.observation = observation
+        self.env = env
         self._warned: set[str] = set()
         self.rejected: Counter[str] = Counter()
         self.received = 0
@@ -135,9 +146,10 @@ class WeightsReceiver:
                 self.rejected[exc.reason] += 1
             log.warning("rejected weights on %s: %s", self.key, exc)
             return
-        if (wrong := self.wrong_observation(message)) is not None:
+        wrong_env = self.wrong_env(message)
+        if (wrong := wrong_env or self.wrong_observation(message)) is not None:
             with self._lock:
-                self.rejected["observation"] += 1
+                self.rejected["env" if wrong_env else "observation"] += 1
                 first = message.sender not in self._warned
                 self._warned.add(message.sender)
             if first:
@@ -151,6 +163,16 @@ class WeightsReceiver:
                 return
             self._current = stamp
             self._pending = ReceivedWeights(message, arrived)
+
+    def wrong_env(self, message: WeightsUpdate) -> str | None:
+        """Why ``message``'s network cannot act in this process's env (None: it can): both envs named."""
+        theirs = message.env or OWN_WORLD
+        if theirs == self.env:
+            return None
+        fix = "no --env (navlearn's world)" if theirs == OWN_WORLD else f"--env {theirs}"
+        return (
+            f"the learner trains on env {theirs!r}; this process runs env {self.env!r}: start it with {fix}"
+        )
 
     def wrong_observation(self, message: WeightsUpdate) -> str | None:
         """Why ``message``'s network cannot act on this process's observation (None: it can, or

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation.env_returns import evaluate_env, table
 from agents.evaluation.plots import REFERENCE, plot_evaluations
 from agents.evaluation.policies import load_policy
 from agents.nnql.policy import NNQLPolicy
@@ -36,6 +37,7 @@ from services.common.warmup import COMPILE_NOTE
 from services.common.weights import WeightsReceiver
 from services.evaluator.config import EvaluatorConfig
 from worlds.config import OBSERVATIONS, NavConfig
+from worlds.own_env import EnvConfig, env_spaces
 
 log = logging.getLogger("navlearn.evaluator")
 CURVE_FILE = "learning_curve.png"
@@ -46,6 +48,9 @@ def summary_scalars(metrics: dict[str, Any]) -> dict[str, float]:
     """TensorBoard scalars from EvalResult.to_dict()["metrics"]: eval/<family>/<figure>."""
     scalars = {}
     for family, m in metrics.items():
+        if isinstance(m.get("return"), dict):  # a Gymnasium --env (agents.evaluation.env_returns)
+            scalars[f"eval/{family}/return"] = m["return"]["mean"]
+            scalars[f"eval/{family}/length"] = m["length"]
         for name in ("success", "collision_static", "collision_dynamic", "timeout"):
             if isinstance(m.get(name), dict):
                 scalars[f"eval/{family}/{name}"] = m[name]["value"]
@@ -59,15 +64,25 @@ class Evaluator:
     """Takes the newest weights, evaluates them, reports, records and plots."""
 
     def __init__(
-        self, config: EvaluatorConfig, session, run: str, eval_sets: list, limits: Limits, where: str = ""
+        self,
+        config: EvaluatorConfig,
+        session,
+        run: str,
+        eval_sets: list,
+        limits: Limits,
+        where: str = "",
+        env: EnvConfig | None = None,
     ) -> None:
-        """``where``: the router endpoints, named while waiting for the first weights."""
+        """``where``: the router endpoints, named while waiting for the first weights; ``env``: a
+        Gymnasium env evaluated instead of navlearn's held-out maps (``eval_sets`` then unused)."""
         self.config = config
+        self.env = env or EnvConfig()
+        observation = config.observation if self.env.own_world else None
         self.nav = OBSERVATIONS[config.observation]
         self.session = session
         self.run_name = run
         self.eval_sets = eval_sets
-        self.receiver = WeightsReceiver(session, run, config.model, limits, config.observation)
+        self.receiver = WeightsReceiver(session, run, config.model, limits, observation, self.env.signature())
         self.receivers = {config.model: self.receiver}
         self.first_weights = WaitLog(
             log,
@@ -78,7 +93,9 @@ class Evaluator:
         )
         for model in config.compare:
             if model not in self.receivers:
-                self.receivers[model] = WeightsReceiver(session, run, model, limits, config.observation)
+                self.receivers[model] = WeightsReceiver(
+                    session, run, model, limits, observation, self.env.signature()
+                )
         self.lasts: dict[str, tuple[str, int]] = {}  # model -> (learner sender, version) last evaluated
         self.key = keys.evaluation(run, config.id)
         self.out = Path(config.out)
@@ -106,6 +123,11 @@ class Evaluator:
         kind = RecurrentNNQLPolicy if is_recurrent(architecture) else NNQLPolicy  # memory reset per episode
         policy = kind(weights, architecture, mode="greedy", version=version)
         start = time.perf_counter()
+        if not self.env.own_world:
+            metrics = evaluate_env(policy, self.env, self.config.episodes, seed=self.config.eval_seed)
+            seconds = time.perf_counter() - start
+            log.info("version %d evaluated in %.1f s: %s", version, seconds, table(metrics))
+            return metrics
         result = evaluate(policy, self.eval_sets, config=self.nav)  # what the actors observe
         metrics = result.to_dict(with_episodes=False)["metrics"]
         log.info("version %d evaluated in %.1f s\n%s", version, time.perf_counter() - start, result.table())
@@ -184,20 +206,36 @@ class Evaluator:
         self.scalars.close()
 
 
-def run_evaluator(config: EvaluatorConfig, settings: ZenohSettings, stop: threading.Event) -> int:
-    """Process set-up: the fixed evaluation sets, the Zenoh session, the loop."""
-    start = time.perf_counter()
-    log.info("evaluator %s: building the evaluation sets (%s)", config.id, COMPILE_NOTE)
-    eval_sets = [make_eval_set(family, config.episodes, seed=config.eval_seed) for family in config.families]
-    log.info("evaluation sets %s ready in %.1f s", ", ".join(config.families), time.perf_counter() - start)
+def run_evaluator(
+    config: EvaluatorConfig, settings: ZenohSettings, stop: threading.Event, env: EnvConfig | None = None
+) -> int:
+    """Process set-up: the fixed evaluation sets (or a Gymnasium ``env``'s seeded episodes), the Zenoh
+    session, the loop."""
+    env = env or EnvConfig()
+    if env.own_world:
+        start = time.perf_counter()
+        log.info("evaluator %s: building the evaluation sets (%s)", config.id, COMPILE_NOTE)
+        eval_sets = [make_eval_set(f, config.episodes, seed=config.eval_seed) for f in config.families]
+        seconds = time.perf_counter() - start
+        log.info("evaluation sets %s ready in %.1f s", ", ".join(config.families), seconds)
+        limits = Limits(n_actions=NavConfig().robot.n_actions)
+    else:
+        if config.imitation:
+            raise ValueError(f"--imitation is a policy of navlearn's world; with --env {env.env} drop it")
+        eval_sets = []
+        obs_dim, n_actions = env_spaces(env)
+        limits = Limits(n_actions=n_actions, max_obs_dim=max(obs_dim, Limits.max_obs_dim))
+        what = env.signature()
+        log.info("evaluator %s: %d greedy episodes of %s per version", config.id, config.episodes, what)
     session = open_session(settings, stop=stop)
     if session is None:
         return 0
     where = settings.where()
-    limits = Limits(n_actions=NavConfig().robot.n_actions)
     with (
         session,
-        contextlib.closing(Evaluator(config, session, settings.run, eval_sets, limits, where)) as evaluator,
+        contextlib.closing(
+            Evaluator(config, session, settings.run, eval_sets, limits, where, env)
+        ) as evaluator,
         declare_alive(session, settings.run, "evaluator", config.id),
     ):
         log.info(

@@ -23,6 +23,7 @@ from services.learner.service import LearnerService
 from services.ops.router import exposure_warning
 from worlds.config import OBSERVATIONS, observation_settings
 from worlds.env import observation_space
+from worlds.own_env import EnvConfig, env_spaces
 
 log = logging.getLogger("navlearn.learner")
 
@@ -33,16 +34,30 @@ def run_learner(
     settings: ZenohSettings,
     stop: threading.Event,
     nirl: NIRLConfig | None = None,
+    env: EnvConfig | None = None,
 ) -> int:
     """Process set-up around the learner loop; returns the exit code. ``nirl`` configures NIRL
-    when ``config.nirl`` is on (its defaults otherwise)."""
+    when ``config.nirl`` is on (its defaults otherwise); ``env``: a Gymnasium env the actors run
+    instead of navlearn's world (its spaces size the networks and the wire's limits)."""
+    env = env or EnvConfig()
     nav = OBSERVATIONS[config.observation]  # what the actors observe
-    obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
+    if env.own_world:
+        obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
+        observation = observation_settings(nav)
+    else:
+        if config.nirl:
+            raise ValueError(
+                f"--nirl learns from navlearn's world and its expert; with --env {env.env} train NNQL only "
+                "(drop --nirl)"
+            )
+        obs_dim, n_actions = env_spaces(env)  # one copy built: the env's own spaces, flattened
+        observation = None  # no navlearn observation settings: the env record says what it is
+        log.info("learner: env %s, %d inputs, %d actions", env.signature(), obs_dim, n_actions)
     if nnql.recurrent:  # R2D2-style: sequence replay in RAM, SequenceBatches from --recurrent actors
         if config.replay_dir:
             raise ValueError("--recurrent keeps its sequence replay in RAM; drop --replay-dir")
         learner = RecurrentNNQLLearner(
-            nnql, obs_dim, n_actions, device=config.device, observation=observation_settings(nav)
+            nnql, obs_dim, n_actions, device=config.device, observation=observation
         )
     else:
         learner = NNQLLearner(
@@ -51,11 +66,12 @@ def run_learner(
             n_actions,
             device=config.device,
             replay_dir=config.replay_dir,
-            observation=observation_settings(nav),
+            observation=observation,
         )
+    learner.env = env.record()
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     widest = max(obs_dim, nnql.lstm_size) if nnql.recurrent else obs_dim  # LSTM states are columns too
-    limits = Limits(n_actions=n_actions, max_obs_dim=widest)
+    limits = Limits(n_actions=n_actions, max_obs_dim=max(widest, Limits.max_obs_dim))
     inbox = learner_inbox(config, nnql, limits, settings.run, (config.acl_names, settings.acl_file))
     if settings.mode == "router" and (warning := exposure_warning(settings)):
         log.warning("%s", warning)  # the learner hosts the router
@@ -80,7 +96,9 @@ def run_learner(
     # process alive.
     with (
         session,
-        LearnerService(config, learner, session, settings.run, inbox, demos, sender, trainer) as service,
+        LearnerService(
+            config, learner, session, settings.run, inbox, demos, sender, trainer, env.signature()
+        ) as service,
     ):
         latest = service.checkpoints.newest_intact() if config.resume and service.checkpoints else None
         if latest is not None:

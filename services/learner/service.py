@@ -30,6 +30,7 @@ from protocols import keys
 from protocols.codec import encode
 from protocols.flow import Ack
 from protocols.messages import (
+    OWN_WORLD,
     DemoBatch,
     EvalReport,
     ExplorationSchedule,
@@ -72,8 +73,12 @@ class LearnerService:
         demos: DemoBuffer,
         sender: str,
         nirl: NIRLTrainer | None = None,
+        env: str = OWN_WORLD,
     ):
+        """``env``: the signature of the env this run trains on (worlds.own_env.EnvConfig.signature);
+        transition batches of another env are refused, naming both."""
         self.config = config
+        self.env = env
         self.learner = learner
         self.session = session
         self.run_name = run
@@ -232,6 +237,15 @@ class LearnerService:
     def _insert(self, item: Received) -> None:
         """A transition or demonstration batch: checked, logged, then stored and acknowledged at the
         next ``_commit`` (at once when there is no log, or when it comes from the log's replay)."""
+        message = item.message
+        if isinstance(message, TransitionBatch) and message.env != self.env:
+            self.inbox.reject(
+                "env",
+                f"refused transitions from actor {item.name}: it runs env {message.env!r}, this learner "
+                f"trains on env {self.env!r} (start the actor with the learner's --env, or give another "
+                "--run)",
+            )
+            return
         obs_dim, obs = self.learner.architecture["obs_dim"], item.message.obs
         if obs.shape[1] != obs_dim:
             self.inbox.reject(
@@ -372,14 +386,22 @@ class LearnerService:
             "eval report from %s for version %d: %s",
             item.name,
             item.message.policy_version,
-            ", ".join(f"{f} success {s['success']}" for f, s in families.items()),
+            ", ".join(
+                f"{f} success {s['success']}" if s.get("return") is None else f"{f} return {s['return']:.1f}"
+                for f, s in families.items()
+            ),
         )
 
     def broadcast(self) -> None:
         exploration = ExplorationSchedule.of(self.learner.config)
         learner = self.learner
         self.weights.publish(
-            learner.get_weights(), learner.version, learner.architecture, exploration, learner.observation
+            learner.get_weights(),
+            learner.version,
+            learner.architecture,
+            exploration,
+            learner.observation,
+            self.env,
         )
         self._count("weights_broadcast")
         if self.nirl is not None:

@@ -13,17 +13,30 @@ from protocols.errors import ProtocolError
 from protocols.messages import EvalReport, StatusReport
 
 
+def _eval_part(family: str, fam: dict[str, Any]) -> str:
+    """A family's figure in the progress line: ``u75%`` (first letter, success), or for a Gymnasium
+    --env ``return 212.3`` (and its success where it says one)."""
+    if fam.get("return") is None:
+        return f"{family[0]}{100 * fam['success']:.0f}%"
+    success = "" if fam.get("success") is None else f" {100 * fam['success']:.0f}%"
+    return f"return {fam['return']:.1f}{success}"
+
+
 def eval_summary(evaluator: str, report: EvalReport, arrived: float) -> dict[str, Any]:
-    """The part of an EvalReport the learner keeps for its status: per family success, SPL, path ratio."""
+    """The part of an EvalReport the learner keeps for its status: per family success, SPL, path ratio
+    (navlearn's world) or mean return (a Gymnasium --env: the family is the env id)."""
     families = {}
     for family, metrics in report.metrics.items():
         success = metrics.get("success")
+        returns = metrics.get("return")
         families[family] = {
             "success": success.get("value") if isinstance(success, dict) else success,
             "spl": metrics.get("spl"),
             "path_ratio": metrics.get("path_ratio"),
             "episodes": metrics.get("episodes"),
         }
+        if isinstance(returns, dict):
+            families[family]["return"] = returns.get("mean")
     return {
         "evaluator": evaluator,
         "model": report.model,
@@ -225,9 +238,9 @@ def progress_line(view: dict, actors_expected: int | None = None, width: int = 6
     evaluation = learner.get("last_eval")
     if evaluation:
         success = " ".join(
-            f"{family[0]}{100 * fam['success']:.0f}%"
+            _eval_part(family, fam)
             for family, fam in evaluation.get("families", {}).items()
-            if fam.get("success") is not None
+            if fam.get("success") is not None or fam.get("return") is not None
         )
         model = evaluation.get("model", "")
         parts.append(f"eval{' ' + model if model and model != 'nnql' else ''} {success}")

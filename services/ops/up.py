@@ -34,6 +34,7 @@ from services.common.transport import TransportError, ZenohSettings, free_port, 
 from services.learner.checkpoint import CheckpointDir
 from services.ops.status import query_alive, query_status, status_dict
 from services.ops.up_config import UpConfig
+from worlds.own_env import EnvConfig
 
 log = logging.getLogger("navlearn.up")
 PR_SET_PDEATHSIG = 1
@@ -122,8 +123,10 @@ def nnql_environment(nnql) -> dict[str, str]:
 class Up:
     """Starts, watches and stops the processes of one run."""
 
-    def __init__(self, config: UpConfig, nnql) -> None:
+    def __init__(self, config: UpConfig, nnql, env: EnvConfig | None = None) -> None:
+        """``env``: a Gymnasium env every process runs instead of navlearn's world (its flags passed on)."""
         self.config = config
+        self.env = env or EnvConfig()
         self.out = Path(config.out or f"runs/{config.run}")
         port = config.port or free_port()
         self.endpoint = f"tcp/127.0.0.1:{port}"
@@ -166,6 +169,7 @@ class Up:
                 cfg.observation,
                 *(["--nirl"] if cfg.nirl else []),
                 *(["--nirl-config", cfg.nirl_config] if cfg.nirl_config else []),
+                *self.env.flags(),
             ],
             learner_env,
         )
@@ -193,6 +197,7 @@ class Up:
                     "--observation",
                     cfg.observation,
                     *self._recurrent_actor(),
+                    *self.env.flags(),
                 ],
                 base,
             )
@@ -216,6 +221,7 @@ class Up:
                 cfg.observation,
                 *(["--compare", "nirl"] if cfg.nirl else []),
                 *(["--imitation", cfg.imitation] if cfg.imitation else []),
+                *self.env.flags(),
             ],
             base,
         )

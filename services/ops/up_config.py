@@ -9,6 +9,7 @@ from pathlib import Path
 
 from protocols import keys
 from worlds.config import OBSERVATIONS, TRAINING_DISCS, observation_field
+from worlds.own_env import EnvConfig, env_spaces
 
 
 @dataclass
@@ -64,9 +65,10 @@ class UpConfig:
     with --connect tcp/<this host>:<port> (give --port); default: 127.0.0.1 only"""
 
 
-def check_config(config: UpConfig) -> None:
+def check_config(config: UpConfig, env: EnvConfig | None = None) -> None:
     """Raise ValueError, naming the value and the fix, for anything wrong that is cheap to see
-    before a process starts (counts, durations, port, the map spec, the output directory)."""
+    before a process starts (counts, durations, port, the map spec, the output directory, and a
+    Gymnasium ``env`` that cannot be built or has no discrete actions: one copy is built here)."""
     from worlds.tasks import parse_map_spec
 
     positive = {"actors": config.actors, "envs": config.envs, "eval_episodes": config.eval_episodes}
@@ -95,6 +97,13 @@ def check_config(config: UpConfig) -> None:
     except (ValueError, OSError) as exc:
         raise ValueError(f"--maps: {exc}") from None
     check_nirl(config)
+    if env is not None and not env.own_world:
+        if config.nirl or config.imitation:
+            flag = "--nirl" if config.nirl else "--imitation"
+            raise ValueError(
+                f"{flag} works on navlearn's world (its expert and maps); with --env {env.env} drop it"
+            )
+        env_spaces(env)  # a bad id, kwargs or action space: refused now, with its sentence
     out = Path(config.out or f"runs/{config.run}")
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out}: is a file; give a directory")
