@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from services.common.options import add_options
+from worlds.own_env import ENV_TITLE, EnvConfig
+
 HEADLINE_HELP = "500, agents.evaluation.HEADLINE_EPISODES"
 """what --help says the default episode count is (not imported: agents.evaluation takes 2 s to load)"""
 
@@ -59,6 +62,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--out", help="directory for eval.json and the path plots (with --compare: compare.json)"
     )
+    add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE + "; default: the env the policy records")
     parser.set_defaults(func=run)
 
 
@@ -85,6 +89,9 @@ def run(args: argparse.Namespace) -> int:
         except PolicyFormatError as exc:
             print(f"navlearn evaluate: {exc}", file=sys.stderr)
             return 2
+        if getattr(policy, "env", None) is not None or args.opt_env:
+            policies.append(policy)
+            continue
         if isinstance(policy, GreedyMLPPolicy) and policy.architecture["n_actions"] != config.robot.n_actions:
             print(
                 f"navlearn evaluate: {spec}: the policy takes {policy.architecture['n_actions']} actions; "
@@ -95,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
         policies.append(policy)
         # a saved policy's env observes what it was trained to (the observation in its config.json)
         configs.append(policy.nav_config(config) if isinstance(policy, GreedyMLPPolicy) else config)
+    if len(configs) < len(policies):  # a Gymnasium env: its own episodes, not navlearn's map sets
+        return evaluate_on_env(args, specs, policies)
     try:
         sets = [
             make_eval_set(
@@ -146,4 +155,49 @@ def run(args: argparse.Namespace) -> int:
         (out / "eval.json").write_text(json.dumps(report, indent=1) + "\n")
         for family in args.maps:
             print(f"wrote {plot_paths(result, family, out / f'paths_{family}.png')}")
+    return 0
+
+
+def evaluate_on_env(args: argparse.Namespace, specs: list[str], policies: list) -> int:
+    """``navlearn evaluate`` of policies trained on a Gymnasium env: the env each records (or --env),
+    ``--episodes`` greedy episodes seeded ``--seed``; return with its 95% interval, length, success where
+    the env gives ``is_success`` (agents.evaluation.env_returns). ``--out``: eval.json."""
+    import json
+    import sys
+    from pathlib import Path
+
+    from agents.evaluation.env_returns import evaluate_env, table
+    from services.common.options import OptionError, options_from_args
+    from worlds.own_env import EnvError, env_spaces
+
+    reports = {}
+    for spec, policy in zip(specs, policies, strict=True):
+        try:
+            given = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
+            env = given if given.env else EnvConfig.from_record(getattr(policy, "env", None))
+            if env.own_world:
+                raise EnvError(
+                    f"{spec}: trained on navlearn's world; evaluate it without --env, or give the env"
+                )
+            obs_dim, n_actions = env_spaces(env)
+            takes = policy.obs_dim, policy.architecture["n_actions"]
+            if takes != (obs_dim, n_actions):
+                raise EnvError(
+                    f"{spec}: the policy takes {takes[0]} inputs and {takes[1]} actions; --env "
+                    f"{env.signature()} has {obs_dim} and {n_actions}: give the env it was trained on"
+                )
+            metrics = evaluate_env(policy, env, args.episodes, seed=args.seed)
+        except (OptionError, EnvError) as exc:
+            print(f"navlearn evaluate: {exc}", file=sys.stderr)
+            return 2
+        print(f"{policy!r} ({spec}), {args.episodes} greedy episodes, seed {args.seed}")
+        print(table(metrics))
+        reports[spec] = {"policy": spec, "model": policy.model, "version": policy.version, "seed": args.seed,
+                         "env": env.record(), "metrics": metrics}  # fmt: skip
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        name = "compare.json" if args.compare else "eval.json"
+        (out / name).write_text(json.dumps(reports if args.compare else reports[specs[0]], indent=1) + "\n")
+        print(f"wrote {out / name}")
     return 0

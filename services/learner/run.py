@@ -71,7 +71,7 @@ def run_learner(
     learner.env = env.record()
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     widest = max(obs_dim, nnql.lstm_size) if nnql.recurrent else obs_dim  # LSTM states are columns too
-    limits = Limits(n_actions=n_actions, max_obs_dim=max(widest, Limits.max_obs_dim))
+    limits = Limits(n_actions=n_actions, max_obs_dim=widest)
     inbox = learner_inbox(config, nnql, limits, settings.run, (config.acl_names, settings.acl_file))
     if settings.mode == "router" and (warning := exposure_warning(settings)):
         log.warning("%s", warning)  # the learner hosts the router

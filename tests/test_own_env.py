@@ -1,0 +1,267 @@
+"""A user's own Gymnasium env (``--env``): naming and building it, NNQL's space rules, the evaluation
+on it, and `navlearn up --env` through the real processes (learner, actor, evaluator) with tiny envs
+defined here - Box and Dict observations - plus the refusals: an actor of another env than its
+learner's, and an env with continuous actions."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import free_port
+from wire_helpers import start, stop, wait_for_line
+
+from agents.evaluation.env_returns import evaluate_env, summarize_episodes
+from agents.evaluation.policies import load_policy
+from protocols.codec import decode, encode
+from protocols.messages import OWN_WORLD, WeightsUpdate
+from worlds.own_env import EnvConfig, EnvError, env_spaces, make_env, make_vector_env
+
+REPO = Path(__file__).resolve().parents[1]
+
+# The user's file: a corridor of 5 cells, start in the middle, actions 0 (left) / 1 (right), the goal
+# at the right end (+1, terminated, is_success) and a pit at the left end (-1, terminated); 20 steps
+# at most (truncated). Three observation spaces and one continuous-action variant of it.
+TINY_ENVS = textwrap.dedent(
+    '''
+    import gymnasium as gym
+    import numpy as np
+    from gymnasium import spaces
+
+
+    class Corridor(gym.Env):
+        """A 5-cell corridor; observation in the shape the subclass says."""
+
+        LENGTH, LIMIT = 5, 20
+
+        def __init__(self, limit=LIMIT):
+            self.limit = int(limit)
+            self.action_space = spaces.Discrete(2)
+            self.observation_space = spaces.Box(0.0, 1.0, (2, 3), np.float32)
+
+        def observe(self):
+            grid = np.zeros((2, 3), np.float32)
+            grid[0, 0] = self.pos / (self.LENGTH - 1)
+            grid[1, 2] = self.t / self.limit
+            return grid
+
+        def reset(self, *, seed=None, options=None):
+            super().reset(seed=seed)
+            self.pos, self.t = 2, 0
+            return self.observe(), {}
+
+        def step(self, action):
+            self.pos += 1 if int(action) == 1 else -1
+            self.t += 1
+            goal, pit = self.pos == self.LENGTH - 1, self.pos == 0
+            reward = 1.0 if goal else -1.0 if pit else -0.01
+            terminated = goal or pit
+            truncated = not terminated and self.t >= self.limit
+            info = {"is_success": goal} if terminated or truncated else {}
+            return self.observe(), reward, terminated, truncated, info
+
+
+    class DictCorridor(Corridor):
+        def __init__(self, limit=Corridor.LIMIT):
+            super().__init__(limit)
+            self.observation_space = spaces.Dict(
+                {"cell": spaces.Discrete(self.LENGTH), "time": spaces.Box(0.0, 1.0, (1,), np.float32)}
+            )
+
+        def observe(self):
+            return {"cell": self.pos, "time": np.array([self.t / self.limit], np.float32)}
+
+
+    class SteeredCorridor(Corridor):
+        def __init__(self, limit=Corridor.LIMIT):
+            super().__init__(limit)
+            self.action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+
+    def make_box(limit=Corridor.LIMIT):
+        return Corridor(limit)
+    '''
+)
+
+
+@pytest.fixture
+def user_module(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> str:
+    """The tiny envs as a user's module on the path (this process's and its subprocesses')."""
+    name = f"tiny_envs_{os.getpid()}"
+    (tmp_path / f"{name}.py").write_text(TINY_ENVS)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(tmp_path), str(REPO), os.environ.get("PYTHONPATH", "")])
+    )
+    return name
+
+
+def test_the_env_is_named_by_id_module_id_or_callable_and_bad_names_say_the_fix(user_module: str) -> None:
+    assert env_spaces(EnvConfig(env="CartPole-v1")) == (4, 2)
+    assert env_spaces(EnvConfig(env=f"{user_module}:make_box", env_kwargs='{"limit": 7}')) == (6, 2)
+    assert make_env(EnvConfig(env=f"{user_module}:make_box", env_kwargs='{"limit": 7}')).unwrapped.limit == 7
+    with pytest.raises(EnvError, match="not a registered Gymnasium id; give --env-module"):
+        make_env(EnvConfig(env="NoSuchEnv-v0"))
+    with pytest.raises(EnvError, match="cannot import module 'no_such_module_xyz'"):
+        make_env(EnvConfig(env="no_such_module_xyz:make"))
+    with pytest.raises(EnvError, match=f"module '{user_module}' has no 'nothing'"):
+        make_env(EnvConfig(env=f"{user_module}:nothing"))
+    with pytest.raises(EnvError, match="not valid JSON"):
+        EnvConfig(env="CartPole-v1", env_kwargs="{limit: 3}")
+    with pytest.raises(EnvError, match="a JSON object is needed"):
+        EnvConfig(env="CartPole-v1", env_kwargs="[3]")
+    with pytest.raises(EnvError, match="give --env too"):
+        EnvConfig(env_kwargs='{"a": 1}')
+    with pytest.raises(EnvError, match=r"building it failed .*unexpected keyword"):
+        make_env(EnvConfig(env=f"{user_module}:make_box", env_kwargs='{"bogus": 1}'))
+
+
+def test_dict_observations_are_flattened_and_continuous_actions_refused_with_the_reason(
+    user_module: str,
+) -> None:
+    env = make_env(EnvConfig(env=f"{user_module}:DictCorridor"))
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (6,) and obs[2] == 1.0  # one-hot cell 2 (of 5), then the time
+    with pytest.raises(EnvError, match=r"NNQL learns one Q-value per discrete action.*discretise"):
+        make_env(EnvConfig(env=f"{user_module}:SteeredCorridor"))
+    with pytest.raises(EnvError, match="Box"):
+        make_env(EnvConfig(env="Pendulum-v1"))
+
+
+def test_signature_and_record_round_trip_and_name_kwargs() -> None:
+    config = EnvConfig(env="CartPole-v1", env_kwargs='{"max_episode_steps": 50}')
+    assert config.signature() == 'CartPole-v1 {"max_episode_steps":50}'
+    assert EnvConfig.from_record(config.record()).signature() == config.signature()
+    assert EnvConfig().signature() == OWN_WORLD and EnvConfig().record() is None
+    long = EnvConfig(env="CartPole-v1", env_kwargs=json.dumps({"x" * 300: 1}))
+    assert len(long.signature()) <= 200 and "kwargs-sha1:" in long.signature()
+    assert config.flags() == ["--env", "CartPole-v1", "--env-kwargs", '{"max_episode_steps": 50}']
+    update = decode(encode(WeightsUpdate(model="nnql", version=1, tensors={}, env=config.signature())))
+    assert update.env == config.signature() and "env" not in update.architecture
+
+
+def test_vector_env_keeps_terminal_observations_and_truncation_apart(user_module: str) -> None:
+    env = make_vector_env(EnvConfig(env=f"{user_module}:make_box", env_kwargs='{"limit": 3}'), 2)
+    env.reset(seed=0)
+    # copy 0 walks right: goal after 2 steps (terminated); copy 1 bounces: truncated at step 3
+    for actions in ([1, 1], [1, 0]):
+        _, _, terminated, truncated, info = env.step(np.array(actions))
+    assert terminated.tolist() == [True, False] and "final_obs" in info
+    assert info["final_obs"][0][0] == 1.0  # the terminal observation (flattened), at the goal
+    _, _, terminated, truncated, info = env.step(np.array([1, 1]))
+    assert truncated.tolist() == [False, True] and terminated.tolist() == [False, False]
+    assert info["final_info"]["_is_success"][1] and not info["final_info"]["is_success"][1]
+    env.close()
+
+
+def test_evaluation_reports_return_interval_success_and_length(user_module: str) -> None:
+    config = EnvConfig(env=f"{user_module}:make_box")
+    right = evaluate_env(lambda obs: np.ones(len(obs), np.int64), config, episodes=7, num_envs=3)
+    metrics = right[config.env]
+    assert metrics["episodes"] == 7 and metrics["length"] == 2.0
+    assert metrics["success"]["value"] == 1.0 and abs(metrics["return"]["mean"] - 0.99) < 1e-6
+    left = evaluate_env(lambda obs: np.zeros(len(obs), np.int64), config, episodes=5)[config.env]
+    assert left["success"]["value"] == 0.0 and left["return"]["mean"] == pytest.approx(-1.01)
+    m = summarize_episodes([1.0, 3.0], [2, 4], [None, None], threshold=2.5)
+    assert "success" not in m and m["solved"] is False and m["return"]["low"] < 2.0 < m["return"]["high"]
+
+
+def navlearn(*argv: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "services.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=REPO,
+    )
+
+
+@pytest.mark.parametrize("factory", ["make_box", "DictCorridor"])
+def test_up_trains_and_evaluates_a_users_env_through_the_real_processes(
+    user_module: str, tmp_path: Path, factory: str
+) -> None:
+    out = tmp_path / "run"
+    done = navlearn(
+        "up", "--env", f"{user_module}:{factory}", "--env-kwargs", '{"limit": 12}', "--run", f"tiny{factory}",
+        "--out", str(out), "--actors", "1", "--envs", "4", "--duration", "8", "--eval-episodes", "10",
+        "--hidden-sizes", "16", "--learning-starts", "200", "--checkpoint-every", "30",
+    )  # fmt: skip
+    assert done.returncode == 0, (done.stdout, done.stderr)
+    assert f"env {user_module}:{factory}" in done.stdout and "over 10 episodes" in done.stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["final_version"] > 0
+    last = summary["last_evaluation"]["metrics"][f"{user_module}:{factory}"]
+    assert last["episodes"] == 10 and set(last) >= {"return", "length", "success"}
+    assert (out / "eval" / "learning_curve.png").stat().st_size > 0
+    policy = load_policy(out / "policy")
+    assert policy.env == {"id": f"{user_module}:{factory}", "kwargs": {"limit": 12}, "module": ""}
+    assert policy.obs_dim == 6
+    shown = navlearn("evaluate", "--policy", str(out / "policy"), "--episodes", "4")
+    assert shown.returncode == 0, shown.stderr
+    assert f"{user_module}:{factory}: return" in shown.stdout and "over 4 episodes" in shown.stdout
+
+
+def test_an_actor_of_another_env_is_refused_by_the_learner_naming_both(
+    user_module: str, tmp_path: Path
+) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    mine, theirs = f"{user_module}:make_box", f"{user_module}:DictCorridor"
+    learner, lines = start(
+        [
+            "-m",
+            "services.cli",
+            "learner",
+            "--listen",
+            endpoint,
+            "--run",
+            "mixed",
+            "--env",
+            mine,
+            "--checkpoint-dir",
+            "",
+            "--hidden-sizes",
+            "16",
+        ]
+    )
+    actor = None
+    try:
+        wait_for_line(lines, "learner learner up", timeout=120)
+        actor, _ = start(
+            [
+                "-m",
+                "services.cli",
+                "actor",
+                "--connect",
+                endpoint,
+                "--run",
+                "mixed",
+                "--id",
+                "other",
+                "--env",
+                theirs,
+                "--envs",
+                "2",
+                "--batch-steps",
+                "4",
+            ]
+        )
+        line = wait_for_line(lines, "refused transitions from actor other", timeout=60)
+        assert f"it runs env '{theirs}', this learner trains on env '{mine}'" in line, line
+    finally:
+        if actor is not None:
+            stop(actor)
+        stop(learner, timeout=30)
+
+
+def test_a_continuous_env_is_refused_before_anything_starts(user_module: str, tmp_path: Path) -> None:
+    for command in (["up", "--out", str(tmp_path / "never")], ["actor"], ["learner", "--checkpoint-dir", ""]):
+        done = navlearn(*command, "--env", f"{user_module}:SteeredCorridor", timeout=60)
+        assert done.returncode == 2, (command, done.stdout, done.stderr)
+        assert "NNQL learns one Q-value per discrete action" in done.stderr, done.stderr
+    assert not (tmp_path / "never").exists()
