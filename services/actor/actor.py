@@ -291,10 +291,11 @@ class Actor:
         success = np.mean(self.episodes) if self.episodes else float("nan")
         mean_return = np.mean(self.returns) if self.returns else float("nan")
         log.info(
-            "%.0f robot-steps/s | version %d (learner %d, lag %d) | episodes %d, success %.0f%%, return %.1f "
-            "(last %d) | "
+            "%.0f robot-steps/s (%d in all) | version %d (learner %d, lag %d) | episodes %d, success %.0f%%, "
+            "return %.1f (last %d) | "
             "sent %d, outbox %d (unacknowledged %d, resent %d)%s%s",
             rate,
+            self.rollout.steps,
             self.version,
             self.learner_version,
             max(self.learner_version - self.version, 0),
