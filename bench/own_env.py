@@ -31,6 +31,7 @@ import argparse
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -134,6 +135,7 @@ def run_navlearn(env: EnvConfig, seed: int, args, out: Path, threshold, success)
             break
     proc.wait()
     log.close()
+    shutil.rmtree(run_dir / "checkpoints", ignore_errors=True)  # replay and networks: tens of MB, kept out
     return {
         "reached": hit is not None,
         "to_target": hit,

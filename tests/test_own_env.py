@@ -265,3 +265,16 @@ def test_a_continuous_env_is_refused_before_anything_starts(user_module: str, tm
         assert done.returncode == 2, (command, done.stdout, done.stderr)
         assert "NNQL learns one Q-value per discrete action" in done.stderr, done.stderr
     assert not (tmp_path / "never").exists()
+
+
+def test_the_documented_example_env_passes_gymnasiums_checks_and_both_of_its_names_work() -> None:
+    from gymnasium.utils.env_checker import check_env
+
+    from examples.own_env.warehouse import WarehouseAisle
+
+    check_env(WarehouseAisle(length=6), skip_render_check=True)
+    by_class = EnvConfig(env="examples.own_env.warehouse:WarehouseAisle", env_kwargs='{"length": 6}')
+    by_id = EnvConfig(env_module="examples.own_env.warehouse", env="navlearn-example/WarehouseAisle-v0")
+    assert env_spaces(by_class) == env_spaces(by_id) == (4, 3)
+    forward = evaluate_env(lambda obs: np.ones(len(obs), np.int64), by_class, episodes=8)[by_class.env]
+    assert 0.0 <= forward["success"]["value"] <= 1.0 and forward["length"] <= 24
