@@ -9,7 +9,7 @@ At the end the learner is stopped with SIGTERM and its final checkpoint is read 
 every acknowledged id must be stored exactly once.
 
 Then the flood and large-batch phases (issue #19): a fresh learner, one normal traced actor
-offering 25 batches/s (``--normal-rate``), and bench/flooder.py in its own process, in
+offering 25 batches/s (``--normal-rate``), and services/actor/flooder.py in its own process, in
 interleaved rounds: alone; with valid batches of the largest accepted size (1000 rows) on the
 flooder's own key; with ~60 MB valid batches on 4 more keys; with both. Reported:
 the normal actor's acknowledged batches/s per phase, its slowdown under each, the learner's
@@ -34,8 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from bench import ingest
-from bench.flooder import launch as launch_flooder
 from protocols.codec import encode
+from services.actor.flooder import launch as launch_flooder
 from services.common.transport import ZenohSettings, free_port, open_session
 from services.learner.checkpoint import CheckpointDir
 from services.ops.status import query_status
@@ -244,7 +244,7 @@ FLOOD_PHASES = {
     "large": ["--rows", "0", "--big-mb", "60", "--big-keys", "4"],
     "flood": ["--rows", "1000", "--big-mb", "60", "--big-keys", "4"],
 }
-"""flooder.py arguments per phase (1000 rows: the learner's default row limit, 1% of its 100k replay)"""
+"""The flooder's arguments per phase (1000 rows: the learner's default row limit, 1% of its 100k replay)"""
 
 
 def flood(args, root: Path) -> dict:

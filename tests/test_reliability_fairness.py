@@ -21,9 +21,9 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from bench.flooder import launch, make_batch
 from protocols import keys
 from protocols.codec import encode
+from services.actor.flooder import launch, make_batch
 from services.common.transport import ZenohSettings, open_session
 from services.ops.status import query_status
 from tests.conftest import free_port

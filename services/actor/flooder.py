@@ -1,4 +1,5 @@
-"""A flooding actor in its own process, for bench/chaos.py and tests/test_reliability_fairness.py.
+"""A flooding actor in its own process: the load a misbehaving actor puts on the learner, for
+bench/chaos.py and tests/test_reliability_fairness.py.
 
 It publishes, as fast as Zenoh takes them and never waiting for an acknowledgement, valid
 TransitionBatches of ``--rows`` rows on its own key ``transitions/<id>`` (a new seq each, so
@@ -7,7 +8,7 @@ on one of ``--big-keys`` more keys (``<id>-big0``, ...). Prints ``flooding`` onc
 up and one JSON line when stopped (SIGTERM or ``--seconds``): what it published. :func:`launch`
 starts it and returns once it floods.
 
-    python -m bench.flooder --connect tcp/127.0.0.1:7447 --run r --id flood --rows 1000 --big-mb 60
+    python -m services.actor.flooder --connect tcp/127.0.0.1:7447 --run r --id flood --rows 1000 --big-mb 60
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import zenoh
@@ -35,7 +35,7 @@ from worlds.perception import observation_dim
 OBS_DIM, N_ACTIONS = (
     observation_dim(LEARNING_NAV),
     5,
-)  # what the learner takes (run as a script: no bench._common)
+)  # what the learner takes
 
 
 READY = "flooding"
@@ -47,7 +47,8 @@ def launch(args: list[str], nice: int = 0, timeout: float = 120.0) -> subprocess
     once it prints :data:`READY`: a phase timed from then on is flooded, however slowly the process
     started on a busy machine. Its stdout (text) then holds the summary line it prints when stopped.
     RuntimeError if it does not get there within ``timeout`` seconds (it is killed)."""
-    command = [*(["nice", "-n", str(nice)] if nice > 0 else []), sys.executable, str(Path(__file__)), *args]
+    niced = ["nice", "-n", str(nice)] if nice > 0 else []
+    command = [*niced, sys.executable, "-m", "services.actor.flooder", *args]
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     deadline = time.monotonic() + timeout
     while True:
@@ -59,7 +60,7 @@ def launch(args: list[str], nice: int = 0, timeout: float = 120.0) -> subprocess
             proc.kill()
             proc.wait()
             raise RuntimeError(
-                f"flooder.py did not start flooding within {timeout:.0f} s (exit {proc.returncode})"
+                f"the flooder did not start flooding within {timeout:.0f} s (exit {proc.returncode})"
             )
 
 
