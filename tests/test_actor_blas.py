@@ -1,7 +1,7 @@
 """The actor runs its loop with numpy's BLAS on one thread (threadpoolctl, as agents.evaluation).
 
 OpenBLAS splits the policy's small matrix products over every core and spins between calls:
-an actor of 64 robots spent 18x its CPU per robot-step that way (bench/RESULTS.md, capacity).
+an actor of 64 robots spent 18x its CPU per robot-step that way (bench/capacity.py measures it).
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 A real `navlearn learner` with a 10 M-transition memory-mapped replay checkpoints every second
 while 4 actors publish through the real Outbox; the longest wait between two
 acknowledgements that overlaps a checkpoint must stay under the bound (bench/checkpoint_stall.py
-measures the same, with its figures in bench/RESULTS.md).
+measures the same).
 """
 
 from __future__ import annotations

@@ -350,13 +350,13 @@ LEARNING_NAV = NavConfig(
 """the task as learned policies see it by default (``navlearn train --local``, the actors, learner,
 evaluator and demonstrator of ``navlearn up``): 24 sector minima of 96 rays, the goal, the subgoal
 from the robot's own map, trained with the geodesic progress reward - the winner on validation
-success of the observation ablation (``bench/perception.py``, variant "D+geo"; bench/RESULTS.md)"""
+success of the observation ablation (``bench/perception.py``, variant "D+geo")"""
 
 LEARNING_PLAN_NAV = replace(LEARNING_NAV, observation=replace(LEARNING_NAV.observation, plan_length=True))
 """LEARNING_NAV with the length of the own map's plan to the goal observed (``plan_length``): NIRL's
 observation (``navlearn demos generate / nirl train --observation learning_plan``) - its progress
 potential, fitted on the demonstrations' steps to go, reads how far the goal is round the walls the
-robot has seen (bench/RESULTS.md, "issue 15, part 11")"""
+robot has seen"""
 
 OBSERVATIONS = {
     "learning": LEARNING_NAV,
@@ -392,8 +392,7 @@ def observation_field():
 TRAINING_DISCS = 6
 """moving discs per training episode by default (``navlearn train --local``, the actors of ``navlearn
 up``): 0..6, uniform per episode, so training sees static maps, the dynamic test set's crowds of 4
-and denser ones - the shipped policy's recipe, chosen on validation over 0..4 (bench/RESULTS.md,
-"Issue 14: NNQL with moving discs")"""
+and denser ones - the shipped policy's recipe, chosen on validation over 0..4"""
 
 
 def with_moving_discs(nav: NavConfig, count: int) -> NavConfig:

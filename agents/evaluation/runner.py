@@ -30,8 +30,8 @@ changes the speed, not the results (tested).
 
 Speed: the policy is called on one ``(max_batch, obs_dim)`` batch per step with BLAS held to
 one thread. Matrix products this small gain nothing from more threads, and on a machine whose
-cores are busy OpenBLAS's waiting threads made each call of a 128x128 MLP 4-190 times slower
-(0.2-0.3 ms on one thread, 1.4-38 ms on two; bench/RESULTS.md, "issue 14: evaluation"). The limit is
+cores are busy OpenBLAS's waiting threads made each call of a 128x128 MLP many times slower
+(``bench/evaluation.py`` times the policy call both ways; results/evaluation/). The limit is
 process-wide (threadpoolctl) and lifted when ``evaluate`` returns, so a thread training with
 torch's BLAS at the same moment in the same process runs on one BLAS thread meanwhile.
 

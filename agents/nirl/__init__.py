@@ -27,9 +27,9 @@ is one step of soft policy iteration: policy evaluation under the reward the Q-f
 currently holds, policy improvement by the softmax over the new Q.
 
 Why this core: (1) the reward really is learned from the demonstrations and drives the policy
-through policy iteration - issue 15 found the earlier max-margin learner was in effect an
+through policy iteration - the earlier max-margin learner (``--core max_margin``) was in effect an
 action scorer plus behaviour cloning; (2) IQ-Learn is non-adversarial (no discriminator that
-never stops, which issue 15 also found) and off-policy, so it reuses NNQL's replay and takes few
+never stops) and off-policy, so it reuses NNQL's replay and takes few
 environment steps; (3) it has a recovery guarantee for the reward in the tabular case, which we
 check where the true reward is known (``gridcheck``: the MDP toolkit's grid world, the expert's
 optimal policy recovered on 100% of states by re-planning under the learned reward alone);
@@ -41,9 +41,9 @@ reward. The reward network (``networks.RewardNetwork`` over state-action feature
 explicit, transferable model of IQ-Learn's reward: fitted by regression on the Q-function's
 implicit reward, logged, and drawn over maps (``reward_map``, `navlearn nirl reward`).
 
-Policy iteration on the fixed learned reward (issue 15, part 3; the defaults)
----------------------------------------------------------------------------
-Diagnosis on the validation seed (bench/nirl.py --split validation --diagnose, bench/RESULTS.md):
+Policy iteration on the fixed learned reward (the defaults)
+-----------------------------------------------------------
+Why, from a diagnosis on the validation seed (``bench/nirl.py --split validation --diagnose``):
 with 256 Q updates per 2,048 robot-steps policy evaluation was cut short (1,024: +8 points on 20
 clean demos); the learner's own crash steps earned an implicit reward of +79..+99 against about
 -0.3 per demonstrated step (the absorbing target -100 is far from where the Q of crash steps sits);
@@ -70,14 +70,14 @@ What NIRL now does, each part from the literature:
 The environment's reward is never read: the potential's targets are the demonstrations' own step
 counts to their end at the goal.
 
-Policy iteration at NNQL's speed (issue 15, part 4; ``policy_steps``, ``policy_iteration.py``)
+Policy iteration at NNQL's speed (``policy_steps``, ``policy_iteration.py``)
     With ``policy_steps > 0`` the soft Q-learning rounds after ``fix_reward_after`` are replaced by
     NNQL's own local trainer (``agents.nnql.train_local``: 16 robots, NNQL's update-to-data ratio,
     dueling head, the 0..6 moving-disc mix, keep-best on the validation seed) on the fixed reward;
     ``policy_iteration.FixedReward`` computes it where the transitions are made (``train_local``'s
     ``reward`` hook overwrites the env's reward before the replay sees it). Its policy is NIRL's
-    (``NIRLResult.policy()``; files in ``<out>/policy_iteration``). ``policy_warm_start = N`` (issue 15,
-    part 5) keeps the demonstrations' head start: NIRL's own rounds go on N rounds on the fixed
+    (``NIRLResult.policy()``; files in ``<out>/policy_iteration``). ``policy_warm_start = N``
+    keeps the demonstrations' head start: NIRL's own rounds go on N rounds on the fixed
     reward (demonstrations in every batch), then NNQL's network starts from that Q-network (output
     times ``1 - gamma``, the same greedy policy in the phase's reward units; ``warm_weights``) at a
     constant Boltzmann temperature ``policy_temperature`` - the warm start of DQfD's pre-training
@@ -93,15 +93,15 @@ MAP refinement after policy iteration (``refine_progress.py``)
     the recorded step's progress under the potential (a random action rarely makes the expert's
     progress); relabelled steps are left out of the steps to go and the potential is re-fitted on them.
 
-The policy (issue 15, part 7; ``NIRLRun.average_last``, ``train_local``)
+The policy (``NIRLRun.average_last``, ``train_local``)
     NIRL's own rounds end with the Q-network's weights averaged over their last quarter (stochastic
     weight averaging, Izmailov et al., UAI 2018, along the rounds rather than along SGD steps): the
     greedy policy's validation success swings 83-94% from round to round around a flat level, and the
-    average beat the last round on the validation seed (and 94.4% against 93.3% on the test seed).
+    average beat the last round on the validation seed.
     Keep-best on 100 validation episodes (``keep_best``, off) chose worse rounds than the last.
 
-Discount: gamma = 0.99, a 100-step horizon for demonstrated paths of about 31 steps (issue 15:
-with 0.95 a long path and a crash were valued alike). Logged beside it, per update:
+Discount: gamma = 0.99, a 100-step horizon for demonstrated paths of about 31 steps (with
+0.95 a long path and a crash were valued alike). Logged beside it, per update:
 ``nirl/learned_reward`` (per demonstrated step), ``nirl/path_length`` and ``nirl/path_return``
 (what a demonstrated path earns at that rate), ``nirl/collision_value`` (Q of a step that crashed:
 its whole learned value) and ``nirl/expert_value``.

@@ -14,7 +14,7 @@ FIXED_REWARDS = ("network", "progress")
 POTENTIAL_INPUTS = ("observation", "goal")
 REFINE_PRIORS = ("policy", "hindsight")
 FORMAT_VERSION = 2
-"""saved-state format: 1 = issue 8's max-margin learner (no ``core`` field, gamma 0.95), 2 = cores"""
+"""saved-state format: 1 = the first, max-margin learner (no ``core`` field, gamma 0.95), 2 = cores"""
 
 
 @dataclass
@@ -35,24 +35,21 @@ class NIRLConfig:
     """hidden activation of both networks: relu, tanh or elu"""
     dueling: bool = True
     """dueling head on the Q-network (NNQL's default, Wang et al. 2016): V(s) + A(s, a) - mean A, so the
-    state's value and the ranking of its actions are fitted apart. On the validation seed (20 clean demos,
-    100 rounds with discs, 500 + 500 episodes, one seed) 94.2% / 82.8% against the plain head's 91.8% /
-    81.4%; on the test seed at 200 rounds, 3 seeds, level with the plain head (bench/RESULTS.md, issue 15
-    part 7). Saved configs without the field had the plain head"""
+    state's value and the ranking of its actions are fitted apart; ahead of the plain head on validation,
+    level with it on the test seed. Saved configs without the field had the plain head"""
     action_local: int = 0
     """K > 0: the Q-network gets NNQL's action-local branch (``NNQLConfig.action_local``,
     agents.nnql.patch_network.LocalQNetwork): one small MLP, shared by the actions, over the 2K+1
     range readings around each action's heading and the goal turned to it, added to that action's Q -
-    a wall learned ahead of one action is learned ahead of all; 0: off. With gamma 0.98 and part 14's
-    setting, 90% validation at a median 81,920 robot-steps against 143,360 (bench/RESULTS.md, issue 15
-    part 15)"""
+    a wall learned ahead of one action is learned ahead of all, so NIRL reaches a given success with
+    fewer robot-steps (with gamma 0.98); 0: off"""
     reward_hidden_sizes: tuple[int, ...] = (64, 64)
     """widths of the reward network's hidden layers (input: state-action features)"""
     reward_scale: float = 2.0
     """max_margin: the learned reward is a cost in (-reward_scale, 0); iq/sqil: unused"""
     gamma: float = 0.99
     """discount factor (0.99: a 100-step horizon, three times the ~31-step demonstrated paths; NNQL's
-    0.98, a 50-step horizon, with action_local 3 reached 90% validation sooner: issue 15 part 15)"""
+    0.98, a 50-step horizon, learns faster together with action_local)"""
     alpha: float = 0.01
     """iq/sqil: entropy temperature of the soft Q-function; V = alpha logsumexp(Q / alpha)"""
     chi2_alpha: float = 0.5
@@ -76,8 +73,8 @@ class NIRLConfig:
     """fixed_reward=progress: what the progress potential regresses on - goal (the default: the features
     after the range readings, in LEARNING_NAV the goal's and the subgoal's distance and bearing, in
     LEARNING_PLAN_NAV also the own map's plan length; one frame, no patch: agents.nirl.learner checks)
-    or observation (every feature). Goal: on 40 held-out expert episodes a steps-to-go error of 3.9
-    against 5.0 steps, 3.5 with the plan length (results/nirl/scripts/nirl_potential.py)"""
+    or observation (every feature). Goal predicts an unseen expert's steps to go better than every
+    feature does (fewer inputs to overfit 20 demonstrations; results/nirl/scripts/nirl_potential.py)"""
     policy_steps: int = 0
     """iq with fixed_reward=progress: robot-steps of NNQL's own local trainer (many robots, its utd,
     dueling head, moving-disc mix, keep-best) on the fixed learned reward once IQ-Learn's
@@ -123,9 +120,9 @@ class NIRLConfig:
     noisy steps; the settings above) or hindsight (agents.nirl.hindsight: the lattice A* on the map the
     demonstration's own range readings drew, settings ``HindsightSettings``; computed once per episode
     when it is added; needs ``agents.demos.Demo`` episodes with poses, so not the distributed learner's).
-    On the bench's 20 noisy sets: policy 0-1.4% of injected steps relabelled to the expert's action,
-    hindsight 31-42% (80% of those costing a detour), 98.7-99.4% of clean steps kept (bench/RESULTS.md,
-    issue 15 part 10)"""
+    The policy prior, fitted beside the noisy steps, is rarely sure enough to relabel; hindsight
+    catches far more of the injected actions while keeping the clean ones
+    (results/nirl/nirl_hindsight_measure.json)"""
     batch_size: int = 128
     """transitions per Q update (demonstrated plus own)"""
     demo_fraction: float = 0.5
@@ -145,8 +142,8 @@ class NIRLConfig:
     reward_updates: int = 50
     """reward-network updates per iteration (iq/sqil: regression on the Q-function's implicit reward)"""
     q_updates: int = 1_024
-    """Q-network updates per iteration (1,024 per 2,048 robot-steps; 256 left policy evaluation short:
-    77.3% against 85.7% validation success, 20 clean demos, seed 0, bench/RESULTS.md issue 15 part 3)"""
+    """Q-network updates per iteration (1,024 per 2,048 robot-steps; fewer leave policy evaluation
+    short of the current reward, and validation success drops)"""
     temperature_start: float = 0.02
     """Boltzmann temperature of the behaviour policy at iteration 0"""
     temperature_end: float = 0.005
@@ -298,15 +295,14 @@ class NIRLRun:
     keep_best: bool = False
     """NIRL's own rounds: the policy is the Q-network that scored best on the periodic evaluations (the
     last round's included; ties go to the later) instead of the last one - NNQL's keep_best. Off by
-    default: on validation episodes it did not choose on, the round it kept from 100 static episodes every
-    10 rounds did worse than the last (92.7% / 81.9% against 94.3% / 83.9%, 20 clean demos, 3 seeds:
-    bench/RESULTS.md, issue 15 part 7). Needs eval_every > 0; the policy_steps phase keeps its own best"""
+    default: on episodes it did not choose on, the round it kept from 100 static episodes every 10
+    rounds did worse than the last (a winner's curse of small evaluations). Needs eval_every > 0; the
+    policy_steps phase keeps its own best"""
     average_last: float = 0.25
     """NIRL's own rounds: the policy is the Q-network's weights averaged over this fraction of the rounds
     at the end (stochastic weight averaging along the rounds, Izmailov et al. 2018; 200 rounds: the last
-    50), against the round-to-round swing of the greedy policy; 0: the last round's. On the validation
-    seed (3 seeds, 20 clean and 20 noisy demos, 200 rounds) 91.1% / 83.2% pooled against the last
-    round's 90.5% / 81.3% (bench/RESULTS.md, issue 15 part 7). keep_best, when on, wins"""
+    50), against the round-to-round swing of the greedy policy; 0: the last round's. keep_best, when
+    on, wins"""
     final_eval_episodes: int = 100
     """episodes of the final evaluation ("unseen" family, seed 0: the reported set)"""
     tensorboard: str = ""

@@ -3,12 +3,12 @@
 The thesis' refinement (``losses.map_posterior``) asks which action the demonstrator meant, ``a*``,
 given the recorded one: with probability ``noise`` the recorded action is a random one. Its answer
 is only as good as its prior ``P(a* | s)``. A prior taken from the learner's own policy has to be
-learned from the same noisy steps it should judge, and spreads their noise over every action
-(bench/RESULTS.md, issue 15 parts 4-9: 0-12% of injected steps relabelled at 99% of clean ones
-kept). A demonstration holds more than its actions, though: the robot's poses and, at every pose,
-its range readings. Offline, after the episode, they show the part of the map the demonstrator
-drove through - the same hindsight that experience replay's relabelling uses (Andrychowicz et al.
-2017) - and on that map a planner can say how much each action would have cost.
+learned from the same noisy steps it should judge, and spreads their noise over every action, so it
+relabels few injected steps once the clean ones must be kept. A demonstration holds more than its
+actions, though: the robot's poses and, at every pose, its range readings. Offline, after the
+episode, they show the part of the map the demonstrator drove through - the same hindsight that
+experience replay's relabelling uses (Andrychowicz et al. 2017) - and on that map a planner can say
+how much each action would have cost.
 
 Here:
 

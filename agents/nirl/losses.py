@@ -87,7 +87,7 @@ def crash_absorbing_value(chi2_alpha: float, gamma: float) -> float:
     ``V - gamma V`` (value term) and ``r^2 / (4 chi2_alpha)`` with ``r = (1 - gamma) V`` (regulariser)
     and no expert term, minimised at ``r = -2 chi2_alpha``: ``V = -2 chi2_alpha / (1 - gamma)``.
     Treating a crash as "nothing follows" (value 0) instead made it about as good as a demonstrated
-    path at IQ-Learn's reward scale (issue 15: collision values near 0 and above)."""
+    path at IQ-Learn's reward scale (collision values near 0 and above)."""
     return -2.0 * chi2_alpha / (1.0 - gamma)
 
 
@@ -101,7 +101,7 @@ def crash_clip_loss(
     """Squared hinge that keeps the learner's crash steps from out-earning demonstrated ones:
     ``sum_crash relu(r_crash - mean(r_expert))^2 / N`` with ``r_crash = Q(s, a) - gamma V_abs`` (the
     implicit reward of a step into the collision's absorbing state) and the batch's demonstrated
-    rewards detached (a ceiling, not a target). Issue 15 measured crash steps at +47..+84 against
+    rewards detached (a ceiling, not a target). Without it crash steps earned +47..+84 against
     about -1 per demonstrated step after few updates: the absorbing target alone is reached slowly."""
     crashed = crashed.reshape(-1).bool()
     if not bool(crashed.any()) or expert_rewards.numel() == 0:

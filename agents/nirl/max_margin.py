@@ -12,7 +12,7 @@ A reward network fitted by model-free maximum margin planning (Ratliff, Bagnell 
   replaced by the learned cost, collisions leading to an absorbing state of value
   ``-scale / (1 - gamma)``, plus a large-margin term on the Q-values at demo states.
 
-What issue 15 measured on it: an action scorer (the hinge) plus a discriminator that never
+What it turned out to be when measured: an action scorer (the hinge) plus a discriminator that never
 stops (the ranking term), 49-50% success from 5-20 demonstrations. It is kept so the
 thesis' formulation stays runnable and comparable; the default core is IQ-Learn
 (``agents.nirl.learner``).

@@ -42,8 +42,8 @@ class FixedReward:
 
     The factor ``1 - gamma`` (the same optimal policy) puts it in the units of NNQL's own rewards - a
     step costs 0.01, a collision about 1 - which NNQL's Huber loss and Boltzmann temperatures (0.2 to
-    0.01) are tuned for: unscaled (a collision about -90) the first screening run reached 77% on
-    validation (bench/RESULTS.md, issue 15 part 4), its exploration all but greedy."""
+    0.01) are tuned for: unscaled (a collision about -90) those temperatures make exploration all but
+    greedy and validation success falls."""
 
     def __init__(self, potential: ProgressPotential, gamma: float, n_beams: int, goal_tolerance: float,
                  max_range: float):  # fmt: skip

@@ -6,7 +6,7 @@ as fast as it can, the premise of every shortest-path demonstrator), its discoun
 ``-(1 - gamma^k) / (1 - gamma)``. ``ProgressPotential`` regresses that value on the observation, so
 it generalises to states and maps no demonstration visited - it is a function of what the robot
 perceives (goal distance and bearing, the subgoal from its own map, free space), never of the
-true map. Issue 15's diagnosis (bench/nirl.py --diagnose): IQ-Learn's implicit reward does not
+true map. Why (``bench/nirl.py --diagnose``): IQ-Learn's implicit reward does not
 transfer - held-out expert steps earn less (-0.67) than the learner's own (-0.31).
 
 How it is used (``NIRLConfig.fixed_reward = "progress"``, the default): once the reward is fixed

@@ -3,8 +3,8 @@
 The thesis' posterior over the action the demonstrator meant, ``a*``, given the recorded one
 (``losses.map_posterior``: with probability ``noise`` the recorded action is a uniformly random
 one) needs a prior ``P(a* | s)`` that has not fitted the noisy labels - a policy fitted to them
-spreads the noise over every action and explains it away (issue 15: 0-2% of the injected actions
-relabelled). Here the prior is the policy NNQL learned on the fixed reward
+spreads the noise over every action and explains it away (it relabels almost none of the
+injected actions). Here the prior is the policy NNQL learned on the fixed reward
 (``agents.nirl.policy_iteration``): it saw the demonstrations only through the progress potential,
 never their actions. The evidence is the recorded step itself: the robot executed the recorded
 action, and a random action rarely makes the expert's progress. With ``d`` the step's shaped
@@ -39,8 +39,8 @@ from agents.nirl.progress import ProgressPotential, potential_loss, shaped_progr
 class ProgressRefine:
     """Settings of the refinement, chosen by results/nirl/scripts/nirl_refine.py --tune on noisy demo
     seed 3 (no reported run uses it) under the rule "most injected steps relabelled with >= 99% of
-    clean steps kept": 1.4% relabelled, 99.3% kept - the progress evidence barely tells the injected
-    steps from clean ones (median shaped progress -0.08 against 0.03)."""
+    clean steps kept"; the progress evidence barely tells the injected steps from clean ones, so it
+    relabels few."""
 
     temperature: float = 0.01
     """prior softmax(Q / temperature) over the NNQL phase's Q-values (its reward's units: a step

@@ -62,7 +62,7 @@ class NNQLConfig:
     dueling: bool = True
     """dueling head of the MLP Q-network: Q = V(s) + A(s, a) - mean_a A(s, a) over the last hidden layer
     (Wang et al. 2016), saved folded into one linear layer, so actors run the plain MLP forward; on by
-    default (the shipped policy's recipe, bench/RESULTS.md); the LSTM and patch-CNN Q-networks keep a
+    default (the shipped policy's recipe, chosen on validation); the LSTM and patch-CNN Q-networks keep a
     plain head whatever this says"""
     double_q: bool = True
     """double Q-learning: the online network picks the next action, the target network values it"""

@@ -21,7 +21,7 @@ small MLP, shared by the actions, makes of the newest frame seen from that actio
 2k+1 readings centred on it and the goal's distance and bearing turned to it. A wall ahead of an
 action is then the same input whichever action it is ahead of (weight sharing over the robot's
 rotations), so a collision learned for one action is learned for all. Without a patch the same branch
-sits beside the flat MLP (:class:`LocalQNetwork`; NIRL's ``action_local``, issue 15 part 15).
+sits beside the flat MLP (:class:`LocalQNetwork`; NIRL's ``action_local``).
 
 The architecture dict (saved in the policy's ``config.json`` and sent with the weights) records that
 layout and the CNN's shape, so actors and the evaluator rebuild the same module; they run this

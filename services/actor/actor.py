@@ -370,8 +370,8 @@ def run_actor(
                 where,
             )
             # The policy multiplies a few dozen rows per step: OpenBLAS split that over every core
-            # and its threads spun between calls, 15-18x the CPU per robot-step at 64-256 robots on
-            # a busy machine (bench/RESULTS.md, capacity model). One BLAS thread, as
+            # and its threads spun between calls, many times the CPU per robot-step on a busy
+            # machine (bench/capacity.py measures it). One BLAS thread, as
             # agents.evaluation does.
             with threadpool_limits(limits=1, user_api="blas"):
                 return actor.run(stop)

@@ -31,11 +31,10 @@ The progress potential is fitted on the goal and subgoal features only (--potent
 the default: it generalises better from 20 paths; observation: every feature); --moving-discs N
 adds 0..N moving discs to the rounds' episodes. --observation learning_plan (demonstrations
 generated with the same flag) adds the length of the own map's plan to the goal, which the
-potential then reads: NIRL's best observation (97% static / 90% with discs from 20 clean
-demonstrations with --iterations 400 --q-updates 512 --moving-discs 6; bench/RESULTS.md part 11).
-Adding --fix-reward-after 1 --temperature-start 0.05 --temperature-end 0.01 --action-local 3
---gamma 0.98 (NNQL's action-local branch and discount) reaches 90% validation in a median 81,920
-robot-steps and the same test figures by --iterations 100 (bench/RESULTS.md part 15).
+potential then reads: NIRL's best observation (with --iterations 400 --q-updates 512
+--moving-discs 6). Adding --fix-reward-after 1 --temperature-start 0.05 --temperature-end 0.01
+--action-local 3 --gamma 0.98 (NNQL's action-local branch and discount) reaches the same success
+in about a quarter of the robot-steps (--iterations 100).
 MAP refinement's prior is the policy's own softmax by default; --refine-prior hindsight judges each
 demonstrated action instead by the lattice A* on the map the demonstration's own range readings
 drew (its recorded poses and readings, never the true map; agents/nirl/hindsight.py): on 20

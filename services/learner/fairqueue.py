@@ -31,7 +31,7 @@ MESSAGE_WORK = 256
 """fixed work charged per message, in bytes of payload (about 2.5 transitions of 11 floats). A
 training learner's binding cost is per transition (one update per 1/utd_ratio transitions; an update
 of the default network took ~6 ms on one core here) and a message's own (a 20-26 us
-decode, bench/RESULTS.md, a log record, an ack) is a fraction of one transition's; the charge
+decode, a log record, an ack) is a fraction of one transition's; the charge
 keeps a sender of tiny batches from taking a larger share of the messages."""
 
 

@@ -30,7 +30,7 @@ class UpConfig:
     """each actor episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
     observation: str = observation_field()
     """what every process of the run observes (worlds.config.OBSERVATIONS): learning (NNQL's default)
-    or learning_plan (and the own map's plan length to the goal: NIRL's best, bench/RESULTS.md)"""
+    or learning_plan (and the own map's plan length to the goal: what NIRL's progress potential needs)"""
     seed: int = 0
     """seed of the learner (network, replay sampling); actor i uses seed + i"""
     duration: float = 90.0
