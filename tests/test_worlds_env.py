@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 
 import gymnasium as gym
 import numpy as np
@@ -11,7 +12,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import worlds  # noqa: F401  (registers the env)
-from worlds.config import NavConfig, ObstacleConfig, RewardConfig, RobotConfig, SensorConfig
+from agents.planning.astar import astar
+from worlds.config import NavConfig, ObstacleConfig, RewardConfig, RobotConfig, SensorConfig, step_limit
 from worlds.env import NavigationEnv
 from worlds.maps import Task, parse_ascii
 from worlds.obstacles import DiscObstacles
@@ -109,12 +111,32 @@ def test_static_collision_ends_the_episode_in_place():
 
 
 def test_truncation_at_the_step_limit():
-    config = NavConfig(robot=EXACT.robot, sensors=EXACT.sensors, max_steps=3, pool_size=8)
+    config = NavConfig(robot=EXACT.robot, sensors=EXACT.sensors, max_steps=3, step_factor=0.0, pool_size=8)
     env = NavigationEnv(config, maps="rooms:16")
     env.reset(seed=0, options={"task": task((1, 1), (2, 8))})
     results = [env.step(EAST)[2:4] for _ in range(3)]
     assert results == [(False, False), (False, False), (False, True)]
     assert env.batch.outcome[0] == Outcome.TIMEOUT
+
+
+def test_step_limit_grows_with_the_a_star_path():
+    """The limit is max(max_steps, ceil(step_factor * L / step)), L the grid A* length: 4 * 8 m / 0.5 m
+    = 64 steps on this task with a floor of 3; the robot circles a 0.5 m square (turning 90 degrees
+    every step) near its start, and its 64th step times out, not its 63rd."""
+    config = NavConfig(robot=EXACT.robot, sensors=EXACT.sensors, max_steps=3, pool_size=8)
+    env = NavigationEnv(config, maps="rooms:16")
+    hall = parse_ascii("\n".join(["#" * 14] + ["#" + "." * 12 + "#"] * 12 + ["#" * 14]))[0]
+    the_task = Task(hall, (7, 3), (7, 11))
+    _, info = env.reset(seed=0, options={"task": the_task})
+    length = astar(hall, the_task.start, the_task.goal).length
+    assert length == 8.0
+    assert info["step_limit"] == step_limit(config, length) == 64
+    circle = 4  # turn +90 degrees, then drive
+    for _ in range(63):
+        _, _, terminated, truncated, _ = env.step(circle)
+        assert not (terminated or truncated)
+    assert env.step(circle)[3] and env.batch.outcome[0] == Outcome.TIMEOUT
+    assert step_limit(replace(config, max_steps=200), length) == 200  # the floor keeps short episodes
 
 
 def test_reward_settings_apply():

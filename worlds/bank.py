@@ -24,11 +24,18 @@ from worlds.maps import GridMap, Task, components
 from worlds.tasks import TaskSampler
 
 # columns of MapBank.etab, one row per entry (kept together: one cache line per reset)
-E_MAP, E_SR, E_SC, E_GR, E_GC, E_COFF, E_CN, E_RESAMPLE, E_MIN_D2 = range(9)
-"""E_MIN_D2: least squared start-goal distance of resampled endpoints, in cells^2, rounded up"""
+E_MAP, E_SR, E_SC, E_GR, E_GC, E_COFF, E_CN, E_RESAMPLE, E_MIN_D2, E_LIMIT = range(10)
+"""E_MIN_D2: least squared start-goal distance of resampled endpoints, in cells^2, rounded up;
+E_LIMIT: the entry's step limit once the kernel has computed it (-1 before, and always for
+resampled entries, whose endpoints change every episode; see :func:`worlds.config.step_limit`)"""
 
 MAX_EXTRA_ENTRIES = 4096
 """explicit tasks kept before unused ones are dropped"""
+
+
+def _min_d2(distance: float, cell_size: float) -> int:
+    """E_MIN_D2 of a least distance in metres: squared cells, rounded up."""
+    return math.ceil((distance / cell_size) ** 2 - 1e-9)
 
 
 class MapBank:
@@ -41,7 +48,7 @@ class MapBank:
         self.n_pool = 0
         self.pool_tasks: list[Task] = []
         self.pool_resample = False
-        self.pool_min_distance = 0.0
+        self.pool_min_distance = 0.0  # metres, or a function of the task
         self.source: TaskSampler | None = None
         self._field: list[np.ndarray] = []
         self._cand: list[np.ndarray] = []
@@ -51,13 +58,14 @@ class MapBank:
         self._entries: list[tuple[int, int, int, int, int, int, int, float, int]] = []
         self.tasks: list[Task] = []  # the task of each entry, as given
 
-    def add_pool(self, tasks: list[Task], resample: bool, min_distance: float) -> tuple[int, int]:
-        """Append a task pool (before any explicit task); returns its (first entry, size)."""
+    def add_pool(self, tasks: list[Task], resample: bool, min_distance) -> tuple[int, int]:
+        """Append a task pool (before any explicit task); returns its (first entry, size).
+        ``min_distance``: metres, or a function of the task (pools mixing map sizes)."""
         if len(self._entries) != self.n_pool:
             raise RuntimeError("pools must be added before explicit tasks")
         first = len(self._entries)
         for task in tasks:
-            self._add_entry(task, resample, min_distance)
+            self._add_entry(task, resample, min_distance(task) if callable(min_distance) else min_distance)
         self.n_pool = len(self._entries)
         self._pack()
         return first, len(tasks)
@@ -106,9 +114,9 @@ class MapBank:
         self.mw = np.asarray([g.width for g in self.grids], dtype=np.int64)
         self.mcell = np.asarray([g.cell_size for g in self.grids], dtype=np.float64)
         self.cand = np.concatenate(self._cand)
-        rows = [(m, sr, sc, gr, gc, coff, cn, res, math.ceil((mind / self.grids[m].cell_size) ** 2 - 1e-9))
+        rows = [(m, sr, sc, gr, gc, coff, cn, res, _min_d2(mind, self.grids[m].cell_size), -1)
                 for m, sr, sc, gr, gc, coff, cn, mind, res in self._entries]  # fmt: skip
-        self.etab = np.asarray(rows, dtype=np.int32).reshape(-1, 9)
+        self.etab = np.asarray(rows, dtype=np.int32).reshape(-1, 10)
         self.emap = self.etab[:, 0].astype(np.int64)
 
     # ------------------------------------------------------------------ use
@@ -140,6 +148,11 @@ class MapBank:
             return task
         return Task(task.grid, start, goal, task.map_id)
 
+    @property
+    def max_cells(self) -> int:
+        """Padded cells of the largest map (the size of the kernel's A* work arrays)."""
+        return max((g.height + 2) * (g.width + 2) for g in self.grids)
+
     def kernel_maps(self) -> tuple:
         return (self.field, self.moff, self.mh, self.mw, self.mcell)
 
@@ -160,13 +173,18 @@ def pool_bank(sampler: TaskSampler, size: int, seed: int) -> MapBank:
     if cached is not None and (sampler.cache_key is not None or cached.source is sampler):
         _POOLS.move_to_end(key)
         return cached
-    tasks = list(sampler.tasks or [sampler(np.random.default_rng([seed, k])) for k in range(size)])
+    if sampler.tasks:
+        tasks = list(sampler.tasks)
+    elif sampler.draw_pool is not None:
+        tasks = sampler.draw_pool(size, seed)
+    else:
+        tasks = [sampler(np.random.default_rng([seed, k])) for k in range(size)]
     bank = MapBank()
-    bank.add_pool(tasks, sampler.resample, sampler.min_distance)
+    bank.add_pool(tasks, sampler.resample, sampler.min_distance_of)
     bank.pool_tasks, bank.pool_resample, bank.pool_min_distance = (
         tasks,
         sampler.resample,
-        sampler.min_distance,
+        sampler.min_distance_of,
     )
     bank.source = sampler
     _POOLS[key] = bank

@@ -14,6 +14,7 @@ import numpy as np
 from worlds import kernel, perception
 from worlds.bank import merged_bank, private_copy
 from worlds.config import NavConfig
+from worlds.gridsearch import new_work
 from worlds.maps import Task
 from worlds.obstacles import DiscObstacles
 from worlds.tasks import TaskSampler
@@ -45,6 +46,9 @@ class NavBatch:
         f8, i8 = np.float64, np.int64
         self.x, self.y, self.theta, self.gx, self.gy = (np.zeros(n, f8) for _ in range(5))
         self.steps, self.ent, self.outcome = np.zeros(n, i8), np.zeros(n, i8), np.zeros(n, i8)
+        self.step_limit = np.zeros(n, i8)  # each robot's episode step limit (worlds.config.step_limit)
+        self._search: list[tuple] = []  # per stepping thread, the kernel's A* work arrays
+        self._fit_search()
         self.map_index = np.zeros(n, i8)
         self.path_length, self.goal_dist = np.zeros(n, f8), np.zeros(n, f8)
         self.start_cell, self.goal_cell = np.zeros((n, 2), i8), np.zeros((n, 2), i8)
@@ -73,6 +77,13 @@ class NavBatch:
         self.final_start, self.final_goal = np.zeros((n, 2), i8), np.zeros((n, 2), i8)
         self.done = np.zeros(n, bool)
 
+    def _fit_search(self) -> None:
+        """Work arrays for the kernel's step-limit A* (one set per stepping thread), as large as the
+        bank's largest map."""
+        cells = self.bank.max_cells
+        if not self._search or self._search[0][0].shape[0] < cells:
+            self._search = [new_work(cells) for _ in range(self.threads)]
+
     def _alloc_discs(self, capacity: int, keep: int = 0) -> None:
         old = getattr(self, "disc_arrays", None)
         arrays = [np.zeros((self.n, capacity), np.float64) for _ in range(5)]
@@ -98,7 +109,7 @@ class NavBatch:
             self.pool_lo,
             self.pool_n,
         )
-        return (*motion, *episode, self.map_index)
+        return (*motion, *episode, self.map_index, self.step_limit)
 
     def _finals(self) -> tuple:
         return (self.base_final, self.final_rays, self.final_outcome, self.final_path_length,
@@ -129,6 +140,7 @@ class NavBatch:
                 self.ent[:] = remap[self.ent]
                 self.final_entry[:] = remap[self.final_entry]
             forced[[k for k, _ in chosen]] = entries
+            self._fit_search()
         keep = np.zeros(len(indices), dtype=np.bool_)
         if obstacles is not None:
             needed = max((len(o) for o in obstacles if o is not None), default=0)
@@ -152,6 +164,7 @@ class NavBatch:
         kernel.reset_some(
             indices, forced, keep, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
             self.disc_arrays, self.params, self.turns, self._beams[0], self.base_obs, self.rays, drivable,
+            self._search[0],
         )  # fmt: skip
         if self.perception is not None:
             self._perceive_fresh(indices)
@@ -175,7 +188,7 @@ class NavBatch:
             n_done = kernel.step_all(
                 actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
                 self.disc_arrays, self.params, self.turns, self._beams[0], self.base_obs, self.rays,
-                self.reward, self.terminated, self.truncated, self._finals(),
+                self.reward, self.terminated, self.truncated, self._finals(), self._search[0],
             )  # fmt: skip
         if self.perception is not None:
             self._perceive_step(actions, autoreset)
@@ -219,7 +232,7 @@ class NavBatch:
             return (
                 actions, autoreset, self.bank.kernel_maps(), self.bank.kernel_entries(), self._robots(),
                 self.disc_arrays, self.params, self.turns, self._beams[k], self.base_obs, self.rays,
-                self.reward, self.terminated, self.truncated, self._finals(),
+                self.reward, self.terminated, self.truncated, self._finals(), self._search[k],
             )  # fmt: skip
 
         bounds = [self.n * k // self.threads for k in range(self.threads + 1)]

@@ -233,7 +233,11 @@ class NavConfig:
     obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     max_steps: int = 200
-    """episode step limit; reaching it truncates the episode (outcome TIMEOUT)"""
+    """least episode step limit; reaching the limit truncates the episode (outcome TIMEOUT)"""
+    step_factor: float = 4.0
+    """the step limit grows with the episode's path: at least ``step_factor`` times the steps the
+    grid A* path from start to goal takes (see :func:`step_limit`; 0: ``max_steps`` for every
+    episode, the rule before maps grew)"""
     goal_tolerance: float = 0.5
     """the goal is reached when the robot centre ends a step this close to the goal cell centre (m)"""
     pool_size: int = 1024
@@ -243,7 +247,21 @@ class NavConfig:
 
     def __post_init__(self) -> None:
         _check(self.max_steps >= 1 and self.pool_size >= 1, "max_steps and pool_size must be >= 1")
+        _check(self.step_factor >= 0, f"step_factor must be >= 0 (0: a fixed limit), got {self.step_factor}")
         _check(self.goal_tolerance > 0, f"goal_tolerance must be positive, got {self.goal_tolerance}")
+
+
+def step_limit(config: NavConfig, path_length: float) -> int:
+    """The step limit of an episode whose grid A* path (8-connected, no corner cutting, on the
+    world's map) is ``path_length`` metres: ``max(max_steps, ceil(step_factor * path_length /
+    robot.step))``. A robot that drives straight along the path needs ``path_length / step`` steps,
+    so a timeout means it drove ``step_factor`` times that (4 by default) without arriving: it
+    dawdled, the map's size did not cause it. The floor ``max_steps`` (200) keeps short episodes,
+    and so every figure on 16-cell maps, as they were. The compiled kernel applies the same rule
+    (:func:`worlds.kernel._limit`); an unreachable goal gets the floor."""
+    if config.step_factor <= 0 or not math.isfinite(path_length):
+        return config.max_steps
+    return max(config.max_steps, math.ceil(config.step_factor * path_length / config.robot.step - 1e-9))
 
 
 def _check(ok: bool, message: str) -> None:

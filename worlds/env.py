@@ -76,7 +76,9 @@ class NavigationEnv(gym.Env):
     Terminated when the robot centre ends a step within ``goal_tolerance`` (0.5 m) of the goal
     (outcome GOAL), or when its disc, swept along the step, touches a blocked cell or the map
     border (COLLISION_STATIC; the robot stays where it was) or a moving disc
-    (COLLISION_DYNAMIC). Truncated after ``max_steps`` (200) steps (TIMEOUT).
+    (COLLISION_DYNAMIC). Truncated (TIMEOUT) after the episode's step limit, ``info["step_limit"]``:
+    ``max(max_steps, ceil(step_factor * L / step))`` with ``L`` the grid A* path length from start
+    to goal (200 steps at least, 4 times the path's steps; :func:`worlds.config.step_limit`).
     ``info["outcome"]`` holds the :class:`worlds.outcomes.Outcome` (RUNNING meanwhile),
     ``info["pose"]`` (x, y, theta), ``info["path_length"]`` (m) and ``info["steps"]``;
     ``reset`` also returns ``info["task"]``.
@@ -154,6 +156,7 @@ class NavigationEnv(gym.Env):
             "path_length": float(b.path_length[0]),
             "outcome": int(b.outcome[0]),
             "steps": int(b.steps[0]),
+            "step_limit": int(b.step_limit[0]),
         }
 
     def render(self):

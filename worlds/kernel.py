@@ -30,8 +30,9 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from worlds.bank import E_CN, E_COFF, E_GC, E_GR, E_MAP, E_MIN_D2, E_RESAMPLE, E_SC, E_SR
+from worlds.bank import E_CN, E_COFF, E_GC, E_GR, E_LIMIT, E_MAP, E_MIN_D2, E_RESAMPLE, E_SC, E_SR
 from worlds.config import NavConfig
+from worlds.gridsearch import GEN, search_run, search_start
 from worlds.obstacles import move_disc, place_discs, swept_contact
 from worlds.outcomes import Outcome
 from worlds.rng import gauss, randint, uniform
@@ -64,6 +65,7 @@ P_DROP, P_RGOAL, P_RCOLL, P_RSTEP, P_RPROG, P_MAXSTEPS, P_GOALTOL = range(7, 14)
 P_OCOUNT, P_ORAD, P_OSPEED, P_OPATROL, P_OLENGTH, P_OSPAWN = range(14, 20)
 P_PER = 20  # rays per range reading (sector)
 P_OMIX = 21  # 1.0: each episode draws its disc count from 0..P_OCOUNT
+P_STEPFACTOR = 22  # the step limit's factor on the A* path's steps (worlds.config.step_limit)
 
 RUNNING, GOAL = int(Outcome.RUNNING), int(Outcome.GOAL)
 HIT_STATIC, HIT_DYNAMIC, TIMEOUT = (
@@ -87,7 +89,7 @@ def make_params(config: NavConfig) -> np.ndarray:
         config.goal_tolerance,
     ]
     values += [o.count, o.radius, o.speed, float(o.mode == "patrol"), o.patrol_length, o.spawn_clearance]
-    values += [s.rays_per_beam, float(o.mix)]
+    values += [s.rays_per_beam, float(o.mix), config.step_factor]
     return np.asarray(values, dtype=np.float64)
 
 
@@ -157,7 +159,7 @@ def _observe(i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy,
 @njit(cache=True, inline="always")
 def _step(
     i, action, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, discs,
-    n_discs, params, turns
+    n_discs, params, turns, limit
 ):  # fmt: skip
     """Move robot ``i`` and its ``n_discs`` discs one step; set its outcome; return its reward and
     the cosine and sine of its new heading (for :func:`_observe`).
@@ -204,10 +206,28 @@ def _step(
     else:
         reward += params[P_RCOLL]
     steps[i] += 1
-    if result == RUNNING and steps[i] >= params[P_MAXSTEPS]:
+    if result == RUNNING and steps[i] >= limit[i]:
         result = TIMEOUT
     outcome[i] = result
     return reward, c, s
+
+
+@njit(cache=True, inline="always")
+def _limit(field, off, height, width, cell, sr, sc, gr, gc, params, search) -> int:
+    """The step limit of an episode from cell (sr, sc) to (gr, gc) (worlds.config.step_limit): an A*
+    on the map's padded field (:mod:`worlds.gridsearch`, in the work arrays ``search``)."""
+    floor = int(params[P_MAXSTEPS])
+    if params[P_STEPFACTOR] <= 0.0:
+        return floor
+    g, parent, pos, seen, heap, key_f, key_g, order, meta = search
+    stride = width + 2
+    start, goal = (sr + 1) * stride + sc + 1, (gr + 1) * stride + gc + 1
+    search_start(start, goal, stride, True, g, parent, pos, seen, heap, key_f, key_g, order, meta)
+    search_run(field, off, stride, goal, True, g, parent, pos, seen, heap, key_f, key_g, order, meta)
+    if seen[goal] != meta[GEN] or pos[goal] != -2:  # not reached: the floor
+        return floor
+    steps = math.ceil(params[P_STEPFACTOR] * g[goal] * cell / params[P_STEP] - 1e-9)
+    return max(floor, steps)
 
 
 MAX_START_DRAWS = 64
@@ -243,14 +263,15 @@ def start_heading(field, off, height, width, cell, x, y, sampled, params, turns)
 @njit(cache=True, inline="always")
 def _reset(
     i, forced, keep_discs, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent, scell,
-    gcell, plo, pn, moving, ocount, params, turns, beams, obs, rays
+    gcell, plo, pn, moving, ocount, params, turns, beams, obs, rays, limit, search
 ) -> bool:  # fmt: skip
     """Start a new episode for robot ``i``: entry ``forced`` (or a random pool entry when
     negative, with fresh random endpoints if the entry allows), a random initial heading made
     drivable by :func:`start_heading`, new discs unless ``keep_discs``; then observe. A pool
     draw whose start has no drivable heading is redrawn (at most :data:`MAX_START_DRAWS`
-    draws). Returns False when the start kept has no drivable heading. (Resets are rare, so
-    the map tables may stay in their tuples here.)"""
+    draws). Its step limit goes to ``limit[i]`` (:func:`_limit`, kept in the entry's ``E_LIMIT``
+    unless its endpoints are resampled). Returns False when the start kept has no drivable heading.
+    (Resets are rare, so the map tables may stay in their tuples here.)"""
     field, moff, mh, mw, mcell = maps
     etab, cand = entries
     ox, oy, orad = moving[0], moving[1], moving[4]
@@ -282,6 +303,13 @@ def _reset(
     gx[i], gy[i] = (gc + 0.5) * cell, (gr + 0.5) * cell
     th[i] = heading if drivable else _wrap(sampled)
     steps[i] = 0
+    own = sr == etab[j, E_SR] and sc == etab[j, E_SC] and gr == etab[j, E_GR] and gc == etab[j, E_GC]
+    if own and etab[j, E_LIMIT] >= 0:
+        limit[i] = etab[j, E_LIMIT]
+    else:
+        limit[i] = _limit(field, moff[m], mh[m], width, cell, sr, sc, gr, gc, params, search)
+        if own:
+            etab[j, E_LIMIT] = limit[i]  # the same value whoever computes it: a cache
     plen[i] = 0.0
     pdist[i] = math.hypot(gx[i] - x[i], gy[i] - y[i])
     outcome[i] = RUNNING
@@ -305,23 +333,23 @@ def _reset(
 
 @njit(cache=True, _nrt=False)
 def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, beams, obs, rays,
-             reward, terminated, truncated, finals):  # fmt: skip
+             reward, terminated, truncated, finals, search):  # fmt: skip
     """Step every robot; with ``autoreset``, a finished robot's terminal observation and results
     go to ``finals`` and it starts its next episode in the same call. Returns the number done."""
     return step_range(
         0, actions.shape[0], actions, autoreset, maps, entries, robots, discs, params, turns, beams,
-        obs, rays, reward, terminated, truncated, finals,
+        obs, rays, reward, terminated, truncated, finals, search,
     )  # fmt: skip
 
 
 @njit(cache=True, nogil=True, _nrt=False)
 def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params, turns, beams, obs,
-               rays, reward, terminated, truncated, finals):  # fmt: skip
+               rays, reward, terminated, truncated, finals, search):  # fmt: skip
     """The work of :func:`step_all` for robots ``lo .. hi - 1``. Releases the GIL: robots share
     nothing they write and each owns its random stream, so threads may step disjoint ranges at
     once with results equal to :func:`step_all`'s (see :class:`worlds.batch.NavBatch`)."""
     field, moff, mh, mw, mcell = maps
-    x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp = robots
+    x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp, limit = robots
     ox, oy, orad, ocount = discs[0], discs[1], discs[4], discs[10]
     moving = discs[:10]
     f_obs, f_rays, f_outcome, f_plen, f_steps, f_pose, f_ent, f_scell, f_gcell, f_done = finals
@@ -329,7 +357,7 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
     for i in range(lo, hi):
         reward[i], c, s = _step(
             i, actions[i], field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome,
-            moving, ocount[i], params, turns,
+            moving, ocount[i], params, turns, limit,
         )  # fmt: skip
         _observe(
             i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beams,
@@ -354,22 +382,22 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
                 f_gcell[i, 0], f_gcell[i, 1] = gcell[i, 0], gcell[i, 1]
                 _reset(
                     i, -1, False, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent,
-                    scell, gcell, plo, pn, moving, ocount, params, turns, beams, obs, rays,
+                    scell, gcell, plo, pn, moving, ocount, params, turns, beams, obs, rays, limit, search,
                 )  # fmt: skip
     return n_done
 
 
 @njit(cache=True, _nrt=False)
 def reset_some(indices, forced, keep_discs, maps, entries, robots, discs, params, turns, beams, obs,
-               rays, drivable):  # fmt: skip
+               rays, drivable, search):  # fmt: skip
     """Start new episodes for robots ``indices`` (see :func:`_reset` for ``forced``/``keep_discs``);
     ``drivable[n]`` tells whether robot ``indices[n]`` got a start with a drivable heading."""
-    x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp = robots
+    x, y, th, gx, gy, steps, plen, pdist, ent, scell, gcell, outcome, rng, plo, pn, mp, limit = robots
     ocount = discs[10]
     moving = discs[:10]
     for n in range(indices.shape[0]):
         drivable[n] = _reset(
             indices[n], forced[n], keep_discs[n], maps, entries, mp, x, y, th, gx, gy, rng, steps, plen,
             pdist, outcome, ent, scell, gcell, plo, pn, moving, ocount, params, turns, beams, obs,
-            rays,
+            rays, limit, search,
         )  # fmt: skip

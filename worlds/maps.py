@@ -21,8 +21,10 @@ import numpy as np
 
 Cell = tuple[int, int]
 
-MOVINGAI_FREE = frozenset(".G")
-MOVINGAI_BLOCKED = frozenset("@OTSW")
+MOVINGAI_FREE = frozenset(".GS")
+"""passable terrain of MovingAI maps: ground ``.``/``G`` and swamp ``S`` (passable in the format)"""
+MOVINGAI_BLOCKED = frozenset("@OTW")
+"""out of bounds ``@``/``O``, trees ``T`` and water ``W`` (not reachable from ground in the format)"""
 ASCII_FREE = frozenset(".SG ")
 ASCII_BLOCKED = frozenset("#@")
 
@@ -142,7 +144,7 @@ def _header_int(path: str | Path, lines: list[str], index: int, key: str) -> int
 
 
 def load_movingai(path: str | Path, cell_size: float = 1.0) -> GridMap:
-    """Load a MovingAI ``.map`` file (``type octile``; ``.``/``G`` free, ``@OTSW`` blocked)."""
+    """Load a MovingAI ``.map`` file (``type octile``; ``.``/``G``/``S`` free, ``@OTW`` blocked)."""
     lines = _read_lines(path)
     if not lines or lines[0].strip() != "type octile":
         raise MapFormatError(path, 1, "missing header: the first line must be 'type octile'")

@@ -23,6 +23,7 @@ from agents.evaluation.runner import (
     Policy,
     evaluate,
     make_eval_set,
+    make_map_eval_set,
 )
 
 __all__ = [
@@ -39,6 +40,7 @@ __all__ = [
     "compare",
     "evaluate",
     "make_eval_set",
+    "make_map_eval_set",
     "mcnemar_exact",
     "plot_learning_curves",
     "plot_paths",

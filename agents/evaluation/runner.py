@@ -11,6 +11,9 @@ Evaluation sets (``make_eval_set``), all reproducible from ``(family, n_episodes
   bouncing) placed by the environment from the episode seed.
 * ``movingai``: the MovingAI arena map (``/work/shared/data/movingai`` or ``path``) with
   its scenarios, ``n_episodes`` of them drawn without replacement from the set seed.
+* a map spec naming files (``make_map_eval_set``; ``navlearn evaluate --map``): a user's map_server,
+  MovingAI or ASCII maps (:mod:`worlds.tasks`), the scenarios they carry or pairs drawn by A*
+  distance buckets from the set seed (never the training pool's seed).
 
 Every episode also carries its environment seed (``s * SEED_STRIDE + i``), which fixes
 the start heading, the noise and the moving discs.
@@ -57,7 +60,7 @@ from worlds.config import NavConfig, ObstacleConfig, check_observation, with_obs
 from worlds.generators import generate_task
 from worlds.maps import Task, clearance, load_movingai, load_scenarios
 from worlds.outcomes import OUTCOME_NAMES
-from worlds.tasks import MIXED_FAMILIES, TRAIN_SEEDS, TaskSampler
+from worlds.tasks import MIXED_FAMILIES, TRAIN_SEEDS, TaskSampler, file_tasks, parse_map_spec, spec_options
 from worlds.vector_env import NavigationVectorEnv
 
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -126,6 +129,37 @@ def make_eval_set(
         raise ValueError(f"evaluation set {family!r} holds a task without a grid path")
     seeds = tuple(base + i for i in range(n_episodes))
     return EvalSet(family, tuple(tasks), seeds, shortest, discs, tuple(map_families))
+
+
+def make_map_eval_set(
+    spec: str | TaskSampler,
+    n_episodes: int,
+    seed: int = 0,
+    obstacles: ObstacleConfig | None = None,
+    name: str | None = None,
+) -> EvalSet:
+    """An evaluation set on the map files of ``spec`` (a file, a directory, with ``key=value`` map
+    options; :mod:`worlds.tasks`): ``n_episodes`` tasks split over the files, a file's own scenarios
+    (MovingAI ``.scen``, ASCII S/G) in a seeded order, else pairs drawn with the seed ``TRAIN_SEEDS +
+    seed`` (training pools use small seeds). ``obstacles``: moving discs (default none). The set is
+    called ``name`` (default the first file's name, e.g. ``office``); each episode's map family is
+    its map's name. ``spec`` may be the sampler :func:`worlds.tasks.parse_map_spec` made of it."""
+    if n_episodes < 1:
+        raise ValueError(f"n_episodes must be positive, got {n_episodes}")
+    sampler = spec if isinstance(spec, TaskSampler) else parse_map_spec(spec)
+    if not sampler.maps:
+        raise ValueError(f"{spec!r} names no map file (generated maps: use the unseen/dynamic sets)")
+    tasks = file_tasks(sampler.maps, spec_options(sampler.spec), n_episodes, TRAIN_SEEDS + seed)[:n_episodes]
+    shortest = np.array([astar(t.grid, t.start, t.goal).length for t in tasks])
+    if not np.isfinite(shortest).all():
+        raise ValueError(f"evaluation set {spec!r} holds a task without a grid path")
+    base = seed * SEED_STRIDE
+    seeds = tuple(base + i for i in range(len(tasks)))
+    label = name or sampler.maps[0].grid.name + (
+        "" if len(sampler.maps) == 1 else f"+{len(sampler.maps) - 1}"
+    )
+    discs = obstacles or ObstacleConfig(count=0)
+    return EvalSet(label, tuple(tasks), seeds, shortest, discs, tuple(t.map_id for t in tasks))
 
 
 @dataclass

@@ -22,7 +22,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "PNG per map type with the policy's paths beside A*'s. With --compare A B, runs both on the same "
         "episodes and prints, per set and per map family (rects, discs, rooms), both success rates, the "
         "episodes only one solved with the exact McNemar p-value, SPL, and each one's path length ratio "
-        "to A* on the episodes both solved (--out: compare.json).",
+        "to A* on the episodes both solved (--out: compare.json). --map evaluates on your own map files "
+        "(ROS map_server YAML, MovingAI .map with its .scen, ASCII; docs/maps.md).",
     )
     which = parser.add_mutually_exclusive_group(required=True)
     which.add_argument("--policy", metavar="DIR", help="policy directory")
@@ -37,10 +38,43 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--maps",
         nargs="+",
         choices=("unseen", "dynamic", "movingai"),
-        default=["unseen", "dynamic"],
         help="evaluation sets: unseen (held-out generated maps), dynamic (the same with moving discs), "
-        "movingai (the arena map's 130 scenarios: use --episodes 130 or fewer); default: %(default)s",
+        "movingai (the arena map's 130 scenarios: use --episodes 130 or fewer); default: unseen dynamic, "
+        "none when --map is given",
     )
+    parser.add_argument(
+        "--map",
+        action="append",
+        metavar="PATH",
+        help="an evaluation set on your map file(s): a map_server .yaml, a MovingAI .map (its .scen "
+        "scenarios when beside it), an ASCII map, or a directory of them; repeat for several sets. "
+        "Pairs are drawn by A* distance from --seed; the cell size chosen is printed",
+    )
+    maps = parser.add_argument_group("map files (--map)", "how map files are read and their pairs drawn")
+    maps.add_argument("--min-distance", type=float, help="least A* start-goal distance in metres (default 2)")
+    maps.add_argument(
+        "--max-distance",
+        type=float,
+        help="largest A* start-goal distance in metres (default: the map's longest)",
+    )
+    maps.add_argument(
+        "--unknown",
+        choices=("blocked", "free"),
+        help="map_server cells of unknown occupancy (default blocked: nobody has seen them)",
+    )
+    maps.add_argument(
+        "--cell-size",
+        type=float,
+        help="world cell size in metres for map_server maps (default: the largest multiple of the "
+        "resolution up to half the robot radius; walls are never lost)",
+    )
+    parser.add_argument(
+        "--step-factor",
+        type=float,
+        help="step limit = max(--max-steps, step-factor x the A* path's steps); default 4 "
+        "(worlds.config.NavConfig.step_factor); 0: a fixed --max-steps",
+    )
+    parser.add_argument("--max-steps", type=int, help="least step limit of an episode (default 200)")
     parser.add_argument(
         "--episodes", type=int, help=f"episodes per evaluation set (default: {HEADLINE_HELP})"
     )
@@ -71,16 +105,38 @@ def run(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
-    from agents.evaluation import HEADLINE_EPISODES, compare, evaluate, make_eval_set, plot_paths
+    from agents.evaluation import (
+        HEADLINE_EPISODES,
+        compare,
+        evaluate,
+        make_eval_set,
+        make_map_eval_set,
+        plot_paths,
+    )
     from agents.evaluation.policies import GreedyMLPPolicy, PolicyFormatError, load_policy_or_baseline
     from worlds.config import NavConfig, ObstacleConfig
+    from worlds.tasks import parse_map_spec, with_options
 
     if args.episodes is None:
         args.episodes = HEADLINE_EPISODES
     if args.episodes < 1:
         print("navlearn evaluate: --episodes must be positive", file=sys.stderr)
         return 2
-    config = NavConfig()
+    if args.maps is None:
+        args.maps = [] if args.map else ["unseen", "dynamic"]
+    limits = {"step_factor": args.step_factor, "max_steps": args.max_steps}
+    try:
+        config = NavConfig(**{k: v for k, v in limits.items() if v is not None})
+    except ValueError as exc:
+        print(f"navlearn evaluate: {exc}", file=sys.stderr)
+        return 2
+    map_specs = [
+        with_options(
+            spec, min_distance=args.min_distance, max_distance=args.max_distance, unknown=args.unknown,
+            cell_size=args.cell_size,
+        )
+        for spec in args.map or []
+    ]  # fmt: skip
     specs = args.compare or [args.policy]
     policies, configs = [], []
     for spec in specs:
@@ -115,9 +171,15 @@ def run(args: argparse.Namespace) -> int:
             )
             for f in args.maps
         ]
+        for spec in map_specs:
+            sampler = parse_map_spec(spec)
+            for mf in sampler.maps:
+                print(mf.note)
+            sets.append(make_map_eval_set(sampler, args.episodes, seed=args.seed))
     except ValueError as exc:
         print(f"navlearn evaluate: {exc}", file=sys.stderr)
         return 2
+    args.maps = [s.family for s in sets]
     results = [evaluate(policy, sets, cfg) for policy, cfg in zip(policies, configs, strict=True)]
     out = Path(args.out) if args.out else None
     if out:
