@@ -278,3 +278,18 @@ def test_the_documented_example_env_passes_gymnasiums_checks_and_both_of_its_nam
     assert env_spaces(by_class) == env_spaces(by_id) == (4, 3)
     forward = evaluate_env(lambda obs: np.ones(len(obs), np.int64), by_class, episodes=8)[by_class.env]
     assert 0.0 <= forward["success"]["value"] <= 1.0 and forward["length"] <= 24
+
+
+def test_train_local_trains_on_a_users_env_and_saves_a_policy_that_records_it(
+    user_module: str, tmp_path: Path
+) -> None:
+    out = tmp_path / "local"
+    done = navlearn(
+        "train", "--local", "--env", f"{user_module}:DictCorridor", "--steps", "1600", "--envs", "4",
+        "--eval-every", "800", "--eval-episodes", "6", "--final-eval-episodes", "6", "--hidden", "16",
+        "--no-progress", "--out", str(out),
+    )  # fmt: skip
+    assert done.returncode == 0, (done.stdout, done.stderr)
+    assert f"{user_module}:DictCorridor: return" in done.stdout and "success" in done.stdout
+    assert load_policy(out).env["id"] == f"{user_module}:DictCorridor"
+    assert json.loads((out / "summary.json").read_text())["final_eval"]["episodes"] == 6

@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from agents.evaluation.env_returns import evaluate_env
+from agents.evaluation.env_returns import table as env_table
 from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
@@ -29,6 +31,7 @@ from agents.nnql.recurrent_learner import RecurrentNNQLLearner
 from agents.nnql.recurrent_rollout import RecurrentRollout
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
 from worlds.config import LEARNING_NAV, TRAINING_DISCS, NavConfig, observation_settings, with_moving_discs
+from worlds.own_env import EnvConfig, make_vector_env
 from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
@@ -130,23 +133,32 @@ def train_local(
     nav: NavConfig | None = None,
     reward: Reward | None = None,
     initial_weights: dict[str, np.ndarray] | None = None,
+    env_config: EnvConfig | None = None,
 ) -> TrainResult:
     """Train NNQL for ``run.steps`` robot-steps in ``nav`` (default :data:`worlds.config.LEARNING_NAV`)
     with ``run.moving_discs`` applied to it; writes the outputs to ``run.out`` if set. ``reward``
     (NIRL's fixed learned reward, agents.nirl.policy_iteration) replaces the environment's reward in
     every batch before it reaches the replay; the env's reward then only feeds the logged returns.
     ``initial_weights`` (plain layout, ``networks.export_weights``) start the Q-network and its target
-    instead of a fresh initialisation (NIRL's warm-started phase)."""
+    instead of a fresh initialisation (NIRL's warm-started phase). ``env_config``: a Gymnasium env
+    (worlds.own_env) instead of navlearn's world; validation and the final test are then its seeded
+    episodes (agents.evaluation.env_returns), scored by success where it says one, else mean return."""
     nnql = nnql or NNQLConfig(seed=run.seed)
     nav = training_nav(run, nav)
-    env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
-    obs_dim = int(env.single_observation_space.shape[0])
+    gym_env = env_config if env_config is not None and not env_config.own_world else None
+    if gym_env is None:
+        env = NavigationVectorEnv(run.envs, config=nav, maps=run.maps, seed=run.seed)
+        observation = observation_settings(nav)
+    else:
+        env = make_vector_env(gym_env, run.envs)
+        observation = None
+    obs_dim = int(np.prod(env.single_observation_space.shape))
     n_actions = int(env.single_action_space.n)
-    observation = observation_settings(nav)
     if nnql.recurrent:
         learner = RecurrentNNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
     else:
         learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
+    learner.env = None if gym_env is None else gym_env.record()
     if initial_weights is not None:
         learner.set_weights(initial_weights)
     policy = learner.policy(seed=run.seed)
@@ -192,7 +204,7 @@ def train_local(
         if next_eval <= rollout.steps < run.steps:
             if curve[-1]["env_steps"] != rollout.steps:
                 curve.append(_curve_point(rollout.steps, now - start, learner, recent, policy, metrics))
-            best = _validate(policy, run, nav, curve[-1], best)
+            best = _validate(policy, run, nav, curve[-1], best, gym_env)
             next_eval += run.eval_every
         if bar is not None:
             bar.update(rollout.num_envs)
@@ -217,10 +229,13 @@ def train_local(
         policy=policy,
     )
     if best is not None:  # keep_best: the final weights compete with the periodic ones
-        best = _validate(policy, run, nav, curve[-1], best)
+        best = _validate(policy, run, nav, curve[-1], best, gym_env)
         policy.set_weights(best.weights, best.version)
         result.selected_version = best.version
-    if run.final_eval_episodes > 0:
+    if run.final_eval_episodes > 0 and gym_env is not None:
+        tested = evaluate_env(policy.greedy(), gym_env, run.final_eval_episodes, seed=TEST_SEED)
+        result.final_eval, result.final_table = tested[gym_env.env], env_table(tested)
+    elif run.final_eval_episodes > 0:
         report = evaluate_policy(policy, run.final_eval_episodes, TEST_SEED, nav)
         result.final_eval = report.to_dict(with_episodes=False)["metrics"]["unseen"]
         result.final_table = report.table()
@@ -247,9 +262,22 @@ class Candidate:
 
 
 def _validate(
-    policy: NNQLPolicy, run: LocalTrainConfig, nav: NavConfig, point: dict[str, float], best: Candidate | None
+    policy: NNQLPolicy,
+    run: LocalTrainConfig,
+    nav: NavConfig,
+    point: dict[str, float],
+    best: Candidate | None,
+    gym_env: EnvConfig | None = None,
 ):
-    """Evaluate on the validation set, note it on the curve point, return the better candidate."""
+    """Evaluate on the validation set (a Gymnasium env's validation-seed episodes), note it on the curve
+    point, return the better candidate."""
+    if gym_env is not None:
+        m = evaluate_env(policy.greedy(), gym_env, run.eval_episodes, seed=VALIDATION_SEED)[gym_env.env]
+        point["eval_return"] = m["return"]["mean"]
+        if "success" in m:
+            point["eval_success"] = m["success"]["value"]
+        score = (m["success"]["value"] if "success" in m else m["return"]["mean"], m["return"]["mean"])
+        return Candidate.better(best, score, policy.version, policy.get_weights) if run.keep_best else None
     report = evaluate_policy(policy, run.eval_episodes, VALIDATION_SEED, nav, run.eval_dynamic_episodes)
     metrics = report.metrics["unseen"]
     point["eval_success"] = metrics.success.value
@@ -265,12 +293,12 @@ def _validate(
 
 
 def _curve_point(steps, wall, learner, recent, policy, metrics) -> dict[str, float]:
-    outcomes = [e.outcome for e in recent]
+    successes = [e.outcome == SUCCESS_OUTCOME if e.success is None else e.success for e in recent]
     point = {
         "env_steps": float(steps),
         "wall_time": float(wall),
         "updates": float(learner.updates),
-        "train_success": float(np.mean([o == SUCCESS_OUTCOME for o in outcomes])) if outcomes else 0.0,
+        "train_success": float(np.mean(successes)) if successes else 0.0,
         "episode_return": float(np.mean([e.episode_return for e in recent])) if recent else 0.0,
         "temperature": policy.temperature,
         "epsilon": policy.epsilon,
@@ -302,7 +330,9 @@ def write_outputs(
     """Policy files, the learning curve (JSON lines + PNG) and a summary in ``out`` (with the moving
     discs the env really had, ``obstacles``)."""
     out.mkdir(parents=True, exist_ok=True)
-    policy.save(out, nnql_config=nnql.to_dict(), env_steps=result.env_steps, maps=run.maps)
+    env = None if result.learner is None else result.learner.env
+    where = {"maps": run.maps} if env is None else {"env": env}  # a Gymnasium env: what evaluate rebuilds
+    policy.save(out, nnql_config=nnql.to_dict(), env_steps=result.env_steps, **where)
     with open(out / "curve.jsonl", "w") as fh:
         for point in result.curve:
             fh.write(json.dumps(point) + "\n")
@@ -329,7 +359,7 @@ def plot_curve(result: TrainResult, path: Path) -> None:
     evals = [(p["env_steps"], p["eval_success"]) for p in curve if "eval_success" in p]
     if evals:
         ax_s.plot(*zip(*evals, strict=True), "o-", label=f"greedy, validation maps (seed {VALIDATION_SEED})")
-    if result.final_eval:
+    if result.final_eval and "success" in result.final_eval:
         saved = [p["env_steps"] for p in curve if p["updates"] == result.selected_version] or [steps[-1]]
         test = result.final_eval["success"]["value"]
         ax_s.plot(saved[:1], [test], "*", ms=12, label=f"saved policy, test maps (seed {TEST_SEED})")

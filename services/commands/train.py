@@ -8,7 +8,9 @@ from dataclasses import replace
 
 from agents.device import DEVICES, resolve_device
 from agents.nnql.config import Q_NETWORKS, NNQLConfig
+from services.common.options import add_options, options_from_args
 from worlds.config import LEARNING_NAV, TRAINING_DISCS
+from worlds.own_env import ENV_TITLE, EnvConfig, env_spaces
 
 
 def register(subparsers) -> None:
@@ -162,6 +164,7 @@ def register(subparsers) -> None:
         help="auto: CNN over the patch beside the MLP when there is one; mlp: one MLP over every input",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE)
     parser.set_defaults(func=run)
 
 
@@ -220,6 +223,13 @@ def run(args: argparse.Namespace) -> int:
         from worlds.tasks import parse_map_spec
 
         parse_map_spec(args.maps)
+        env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
+        if not env.own_world:
+            if nnql.recurrent or args.patch or nnql.action_local:
+                raise ValueError(
+                    "--recurrent, --patch and --action-local are for navlearn's world; drop them with --env"
+                )
+            env_spaces(env)  # a bad id or a continuous action space: refused now, with its sentence
     except ValueError as err:
         print(f"navlearn train: {err}", file=sys.stderr)
         return 2
@@ -241,7 +251,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         device=args.device,
     )
-    result = train_local(run_config, nnql, nav)
+    result = train_local(run_config, nnql, nav, env_config=env)
     print(
         f"{result.env_steps} robot-steps, {result.updates} updates in {result.wall_time:.0f} s "
         f"({result.env_steps_per_s:.0f} steps/s, learner {result.updates_per_s:.0f} updates/s)"
