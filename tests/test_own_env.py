@@ -293,3 +293,23 @@ def test_train_local_trains_on_a_users_env_and_saves_a_policy_that_records_it(
     assert f"{user_module}:DictCorridor: return" in done.stdout and "success" in done.stdout
     assert load_policy(out).env["id"] == f"{user_module}:DictCorridor"
     assert json.loads((out / "summary.json").read_text())["final_eval"]["episodes"] == 6
+
+
+def test_a_checkpoint_of_another_env_is_refused_on_resume_naming_both() -> None:
+    from agents.nnql.config import NNQLConfig
+    from agents.nnql.learner import NNQLLearner
+
+    config = NNQLConfig(hidden_sizes=(8,), replay_capacity=64, batch_size=4)
+    saved = NNQLLearner(config, 4, 2)
+    saved.env = EnvConfig(env="CartPole-v1").record()
+    state = saved.state_dict()
+    other = NNQLLearner(config, 4, 2)
+    other.env = EnvConfig(env="CartPole-v1", env_kwargs='{"max_episode_steps": 50}').record()
+    with pytest.raises(ValueError, match=r"trained on env CartPole-v1, this learner runs env CartPole-v1 \{"):
+        other.load_state_dict(state)
+    world = NNQLLearner(config, 4, 2)
+    with pytest.raises(ValueError, match="runs navlearn's world: resume it with --env CartPole-v1"):
+        world.load_state_dict(state)
+    same = NNQLLearner(config, 4, 2)
+    same.env = EnvConfig(env="CartPole-v1").record()
+    same.load_state_dict(state)

@@ -37,7 +37,12 @@ from agents.nnql.losses import PRIORITY_KEY, make_loss
 from agents.nnql.networks import export_weights, import_weights, make_q_actor
 from agents.nnql.nstep import NStepAccumulator
 from agents.nnql.patch_network import build_q_network
-from agents.nnql.persistence import CHECKPOINT_STATE, LearnerOutputs, check_checkpoint_observation
+from agents.nnql.persistence import (
+    CHECKPOINT_STATE,
+    LearnerOutputs,
+    check_checkpoint_env,
+    check_checkpoint_observation,
+)
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.replay_storage import (
     columns,
@@ -261,6 +266,7 @@ class NNQLLearner(LearnerOutputs):
             "config": self.config.to_dict(),
             "architecture": self.architecture,
             "observation": self.observation,
+            "env": self.env,
             "loss": self.loss.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "target_updater": self.target_updater.state_dict(),
@@ -272,6 +278,7 @@ class NNQLLearner(LearnerOutputs):
         }
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        check_checkpoint_env(state.get("env"), self.env)
         check_checkpoint_observation(state.get("observation"), self.observation)
         if state["architecture"] != self.architecture:
             raise ValueError(f"checkpoint architecture {state['architecture']} != {self.architecture}")

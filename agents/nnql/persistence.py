@@ -40,6 +40,23 @@ def check_checkpoint_observation(saved: dict | None, mine: dict | None) -> None:
         )
 
 
+def check_checkpoint_env(saved: dict | None, mine: dict | None) -> None:
+    """Raise a ValueError naming both envs when a checkpoint's network was trained on another env
+    (``worlds.own_env.EnvConfig.record``; None, or a checkpoint from before envs were recorded:
+    navlearn's world) than this learner's."""
+    if (saved or None) == (mine or None):
+        return
+    named = [
+        "navlearn's world" if r is None else f"env {r['id']} {r.get('kwargs') or ''}".strip()
+        for r in (saved, mine)
+    ]
+    fix = "no --env" if saved is None else f"--env {saved['id']}"
+    raise ValueError(
+        f"the checkpoint's network was trained on {named[0]}, this learner runs {named[1]}: resume it with "
+        f"{fix} (and its --env-kwargs), or give a new --run (or --checkpoint-dir)"
+    )
+
+
 def replace_dir(path: str | Path, write: Callable[[Path], None]) -> Path:
     """Have ``write`` fill a fresh directory beside ``path``, then swap it in for ``path``: a crash
     leaves either the old directory or the new one (a checkpoint's write)."""

@@ -33,7 +33,7 @@ import torch.nn.functional as F
 from agents.device import resolve_device
 from agents.nnql.config import NNQLConfig
 from agents.nnql.losses import td_target
-from agents.nnql.persistence import LearnerOutputs, check_checkpoint_observation
+from agents.nnql.persistence import LearnerOutputs, check_checkpoint_env, check_checkpoint_observation
 from agents.nnql.recurrent_net import RecurrentQNetwork, State
 from agents.nnql.recurrent_policy import RecurrentNNQLPolicy
 from agents.nnql.sequence_replay import (
@@ -193,6 +193,7 @@ class RecurrentNNQLLearner(LearnerOutputs):
             "config": self.config.to_dict(),
             "architecture": self.architecture,
             "observation": self.observation,
+            "env": self.env,
             "network": self.network.state_dict(),
             "target": self.target.state_dict(),
             "optimizer": self.optimizer.state_dict(),
@@ -201,6 +202,7 @@ class RecurrentNNQLLearner(LearnerOutputs):
         }
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        check_checkpoint_env(state.get("env"), self.env)
         check_checkpoint_observation(state.get("observation"), self.observation)
         if state["architecture"] != self.architecture:
             raise ValueError(f"checkpoint architecture {state['architecture']} != {self.architecture}")
