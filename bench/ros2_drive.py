@@ -30,10 +30,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench._common import free_port, spawn, stop
-
-FAST = ("--max-linear", "1.0", "--linear-accel", "4", "--max-angular", "3", "--angular-accel", "12",
-        "--settle-gain", "5", "--rate", "50")  # fmt: skip
-"""the drive's limits here: a quick robot, so that an episode takes seconds (the same for the tests)"""
+from tests.drive_helpers import FAST
 
 
 def world_outcomes(policy_dir: str, episodes: int, seed: int) -> list[str]:

@@ -12,7 +12,7 @@ import argparse
 
 import pytest
 
-from bench.checkpoint_stall import run_case
+from tests.stall_helpers import run_case
 
 # alone: a bound in seconds on the acknowledgements' longest wait, which a test beside it would stretch
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.alone, pytest.mark.timeout(240)]

@@ -13,12 +13,12 @@ import time
 
 import pytest
 
-from bench.ros2_drive import FAST
 from services.common.transport import ZenohSettings, open_session
 from services.drive import wire
 from services.drive.node import RosNode
 from services.drive.trial import Trial, robot_status
 from tests.conftest import free_port
+from tests.drive_helpers import FAST
 from tests.wire_helpers import start, stop, wait_for_line
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
