@@ -313,3 +313,20 @@ def test_a_checkpoint_of_another_env_is_refused_on_resume_naming_both() -> None:
     same = NNQLLearner(config, 4, 2)
     same.env = EnvConfig(env="CartPole-v1").record()
     same.load_state_dict(state)
+
+
+def test_async_copies_step_like_sync_ones(user_module: str) -> None:
+    config = EnvConfig(env=f"{user_module}:make_box", env_kwargs='{"limit": 3}')
+    results = []
+    for mode in ("sync", "async"):
+        env = make_vector_env(EnvConfig(**{**config.__dict__, "env_vector": mode}), 2)
+        try:
+            steps = [env.reset(seed=3)[0]]
+            for actions in ([1, 1], [1, 0], [0, 1]):
+                obs, reward, terminated, truncated, _ = env.step(np.array(actions))
+                steps += [obs, reward, terminated, truncated]
+        finally:
+            env.close()
+        results.append(steps)
+    for a, b in zip(*results, strict=True):
+        np.testing.assert_array_equal(a, b)
