@@ -22,6 +22,10 @@ Connect it to the learner (default tcp/127.0.0.1:7447) or to a router: an actor 
 host is `navlearn actor --connect tcp/LEARNER_HOST:7447 --id robot-b --seed 2` (the learner
 must listen on an address that host reaches, e.g. --listen tcp/0.0.0.0:7447). Logs to stdout;
 stops cleanly on SIGTERM or Ctrl-C.
+
+With --env it steps --envs copies of a Gymnasium env instead of robots (gymnasium.vector, sync or
+async; discrete actions, observations flattened); give it the learner's --env and --env-kwargs
+(docs/own-env.md).
 """
 
 

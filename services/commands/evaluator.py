@@ -18,6 +18,10 @@ arena), publishes an EvalReport on eval/<id> (the learner shows it in its status
 line to <out>/evaluations.jsonl and redraws <out>/learning_curve.png (success rate and path
 length ratio to A* against policy version and wall time). Logs to stdout; stops cleanly on
 SIGTERM or Ctrl-C.
+
+With --env it plays --episodes seeded greedy episodes of that Gymnasium env instead and reports the
+mean return with its 95% interval, the episode length and the success rate where the env gives
+info["is_success"] (docs/own-env.md).
 """
 
 

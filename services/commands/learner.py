@@ -23,6 +23,10 @@ SIGTERM/SIGINT, resuming from the newest checkpoint on start.
 By default it hosts the Zenoh router on tcp/127.0.0.1:7447 (--listen changes it; use
 --listen tcp/0.0.0.0:7447 to let actors on other hosts in). With --connect it joins an
 existing router as a client instead. Logs to stdout.
+
+With --env the actors run a Gymnasium env instead of navlearn's world: the learner builds one copy to
+size its network from the env's spaces, refuses transitions of any other env (naming both), and
+records the env in its checkpoints and saved policies (docs/own-env.md).
 """
 
 

@@ -26,6 +26,10 @@ flags go to the learner. With --nirl the learner also trains NIRL, a demonstrato
 publishes demonstrations (the expert's --demo-episodes, or a --demos dataset once) and the
 evaluator reports NIRL beside NNQL. Exit code 2 for a bad argument (before anything starts), 1 if
 a process fails (its log tail is printed).
+
+With --env every process runs a Gymnasium env with discrete actions instead of the robot world (an id,
+module:Id or module:callable, --env-kwargs as JSON; nothing is compiled): the evaluator reports the
+mean return, episode length and success where the env says it. How-to: docs/own-env.md.
 """
 
 
