@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import threading
 from dataclasses import dataclass
@@ -10,7 +11,10 @@ from pathlib import Path
 
 import pytest
 
+from agents.nnql.config import NNQLConfig
 from agents.nnql.ratelimit import RateLimiter
+from services.cli import build_parser, main
+from services.commands.learner import config_file
 from services.common.options import OptionError, add_options, field_docs, options_from_args
 from services.common.outbox import Outbox
 from services.learner.checkpoint import CheckpointDir
@@ -252,9 +256,45 @@ def test_bad_environment_value_is_one_clear_error(monkeypatch):
 
 @pytest.mark.parametrize("command", ["learner", "up"])
 def test_distributed_commands_refuse_sarsa(command, monkeypatch, capsys):
-    from services.cli import main
-
     monkeypatch.setenv("NAVLEARN_NNQL_SARSA", "1")
     monkeypatch.setenv("NAVLEARN_NNQL_DOUBLE_Q", "0")
     assert main([command]) == 2
     assert "navlearn train --local --sarsa" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["learner", "up"])
+@pytest.mark.parametrize(
+    ("flags", "reason"),
+    [
+        (["--sarsa"], "navlearn train --local --sarsa"),
+        (["--cnn-goal"], "own-map patch"),
+        (["--cnn-embed", "64"], "own-map patch"),
+        (["--cnn-channels", "8", "16"], "own-map patch"),
+        (["--cnn-strides", "1", "1"], "own-map patch"),
+    ],
+)
+def test_distributed_commands_refuse_what_they_cannot_honour_while_parsing(command, flags, reason, capsys):
+    """Flags the learner service cannot honour end the parse in one sentence, before anything starts."""
+    with pytest.raises(SystemExit) as exit_:
+        main([command, *flags])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert f"{flags[0]}: " in err and reason in err
+
+
+def test_learner_reads_its_nnql_config_from_a_file_and_flags_win(tmp_path, monkeypatch):
+    """`up` hands the learner its NNQLConfig as a file (not re-parsed environment variables)."""
+    path = tmp_path / "nnql.json"
+    path.write_text(json.dumps(NNQLConfig(gamma=0.9, hidden_sizes=(32, 16), seed=4).to_dict()))
+    monkeypatch.setenv("NAVLEARN_NNQL_GAMMA", "0.5")  # the file wins over the environment
+    args = build_parser().parse_args(["learner", "--nnql-config", str(path), "--lr", "0.01"])
+    nnql = options_from_args(
+        NNQLConfig, args, "NAVLEARN_NNQL", base=config_file(args.nnql_config, NNQLConfig)
+    )
+    assert (nnql.gamma, nnql.hidden_sizes, nnql.seed, nnql.lr) == (0.9, (32, 16), 4, 0.01)
+    path.write_text(json.dumps({"cnn_goal": True}))
+    with pytest.raises(OptionError, match="own-map patch"):
+        options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", base=config_file(args.nnql_config, NNQLConfig))
+    path.write_text(json.dumps({"gama": 0.9}))
+    with pytest.raises(ValueError, match=r"unknown NNQLConfig field\(s\) \['gama'\]"):
+        config_file(str(path), NNQLConfig)

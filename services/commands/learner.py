@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 
 from agents.nnql.config import NNQLConfig
 from services.common.options import add_options
 from services.common.transport import add_zenoh_args
-from services.learner.config import LearnerConfig
+from services.learner.config import NNQL_REFUSED, LearnerConfig
 from worlds.own_env import ENV_TITLE, EnvConfig
 
 DESCRIPTION = """\
@@ -30,13 +31,6 @@ records the env in its checkpoints and saved policies (docs/own-env.md).
 """
 
 
-# Transition batches on the wire carry no next action, which SARSA bootstraps on.
-SARSA_LOCAL_ONLY = (
-    "the SARSA variant needs the next action taken, which transition batches do not carry; "
-    "use `navlearn train --local --sarsa` (unset NAVLEARN_NNQL_SARSA)"
-)
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "learner",
@@ -46,7 +40,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_options(parser, LearnerConfig, "NAVLEARN_LEARNER", "learner service")
     add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE)
-    add_options(parser, NNQLConfig, "NAVLEARN_NNQL", "NNQL hyper-parameters", skip=("sarsa",))
+    add_options(parser, NNQLConfig, "NAVLEARN_NNQL", "NNQL hyper-parameters", refuse=NNQL_REFUSED)
+    parser.add_argument(
+        "--nnql-config",
+        metavar="FILE",
+        help="JSON object of NNQL hyper-parameters (agents.nnql.config.NNQLConfig fields; `navlearn up` "
+        "writes its run's there): flags win over it, it wins over NAVLEARN_NNQL_<FIELD> variables",
+    )
     parser.add_argument(
         "--nirl-config",
         metavar="FILE",
@@ -71,9 +71,9 @@ def main(args: argparse.Namespace) -> int:
         config = options_from_args(LearnerConfig, args, "NAVLEARN_LEARNER")
         env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
         resolve_device(config.device)  # cuda without a GPU: one sentence, before anything starts
-        nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL")
-        if nnql.sarsa:
-            raise ValueError(SARSA_LOCAL_ONLY)
+        nnql = options_from_args(
+            NNQLConfig, args, "NAVLEARN_NNQL", base=config_file(args.nnql_config, NNQLConfig)
+        )
         nirl = nirl_config(args, nnql.seed) if config.nirl else None
         settings = settings_from_args(args)
         if args.zenoh_mode is None and settings.connect:
@@ -92,25 +92,32 @@ def main(args: argparse.Namespace) -> int:
         return 2
 
 
+def config_file(path: str | None, cls: type) -> dict:
+    """The fields of ``cls`` a JSON config file holds ({} without one); unknown fields are an error."""
+    import json
+    from pathlib import Path
+
+    if not path:
+        return {}
+    loaded = json.loads(Path(path).read_text())
+    if not isinstance(loaded, dict):
+        raise ValueError(f"{path}: expected a JSON object of {cls.__name__} fields")
+    unknown = sorted(set(loaded) - {f.name for f in dataclasses.fields(cls)})
+    if unknown:
+        raise ValueError(f"{path}: unknown {cls.__name__} field(s) {unknown}")
+    return loaded
+
+
 def nirl_config(args: argparse.Namespace, seed: int):
     """NIRLConfig from NAVLEARN_NIRL_* variables and --nirl-config (JSON, which wins, as flags do);
     seeded like NNQL unless told otherwise."""
-    import json
     import os
-    from pathlib import Path
 
     from agents.nirl.config import NIRLConfig
     from services.common.options import options_from_args
 
     values = {} if os.environ.get("NAVLEARN_NIRL_SEED") else {"seed": seed}
-    if args.nirl_config:
-        loaded = json.loads(Path(args.nirl_config).read_text())
-        if not isinstance(loaded, dict):
-            raise ValueError(f"{args.nirl_config}: expected a JSON object of NIRLConfig fields")
-        unknown = sorted(set(loaded) - set(NIRLConfig().to_dict()))
-        if unknown:
-            raise ValueError(f"{args.nirl_config}: unknown NIRLConfig field(s) {unknown}")
-        values.update(loaded)
+    values.update(config_file(args.nirl_config, NIRLConfig))
     config = options_from_args(NIRLConfig, None, "NAVLEARN_NIRL", **values)
     if config.refine and config.refine_prior == "hindsight":  # demonstrations arrive without their poses
         raise ValueError(

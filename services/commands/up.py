@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from agents.nnql.config import NNQLConfig
-from services.commands.learner import SARSA_LOCAL_ONLY
 from services.common.options import add_options
+from services.learner.config import NNQL_REFUSED
 from services.ops.up_config import UpConfig
 from worlds.own_env import ENV_TITLE, EnvConfig
 
@@ -46,7 +46,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         NNQLConfig,
         "NAVLEARN_NNQL",
         "NNQL hyper-parameters (passed to the learner)",
-        skip=("seed", "sarsa"),
+        skip=("seed",),
+        refuse=NNQL_REFUSED,
     )
     add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE)
     parser.set_defaults(func=main)
@@ -73,8 +74,6 @@ def main(args: argparse.Namespace) -> int:
     try:
         config = options_from_args(UpConfig, args, "NAVLEARN_UP")
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=config.seed)
-        if nnql.sarsa:
-            raise OptionError(SARSA_LOCAL_ONLY)
         env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
         check_config(config, env)
     except (OptionError, ValueError) as exc:

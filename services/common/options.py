@@ -8,8 +8,14 @@ variables; :func:`options_from_args` resolves flag > environment > default.
 A field's ``metadata`` may rename its flag (``flag``), its environment variable
 (``env``) or its metavar (``metavar``) and restrict its values (``choices``); a
 ``list[str]`` field is a repeatable flag whose environment variable is
-comma-separated. This is the one option system: the Zenoh flags
-(services.common.transport.ZenohSettings) are built by it too.
+comma-separated. This is the one option system: every command's config flags
+(``up``, ``learner``, ``actor``, ``train``, ``nirl train``, ...) and the Zenoh flags
+(services.common.transport.ZenohSettings) are built by it, so one field has one
+spelling everywhere (tests/test_option_spelling.py lists them).
+
+A field a command cannot honour is named in ``refuse`` with the reason: its flag, or its
+environment variable, is refused while the arguments are parsed, in one sentence, before
+anything starts (never silently ignored).
 """
 
 from __future__ import annotations
@@ -30,6 +36,17 @@ T = TypeVar("T")
 
 class OptionError(ValueError):
     """A flag or environment variable holds a value its field cannot take."""
+
+
+class _Refused(argparse.Action):
+    """A flag its command cannot honour: parsing it ends the parse with the reason."""
+
+    def __init__(self, option_strings: list[str], dest: str, reason: str = "", **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, nargs="*", **kwargs)
+        self.reason = reason
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        parser.error(f"{option_string}: {self.reason}")
 
 
 @functools.cache
@@ -93,21 +110,35 @@ def add_options(
     title: str,
     *,
     skip: tuple[str, ...] = (),
+    refuse: dict[str, str] | None = None,
     defaults: dict[str, Any] | None = None,
     dest_prefix: str = "opt_",
     description: str = "each flag also reads the environment variable named in it",
 ) -> None:
     """Add one flag per field of dataclass ``cls`` (except ``skip``) in an argument group.
 
-    ``defaults`` overrides the dataclass defaults shown in --help and used when neither flag
-    nor environment variable is given; ``dest_prefix`` names the parsed attributes
+    ``skip`` leaves fields to the command (it sets them itself); ``refuse`` maps fields the command
+    cannot honour to the reason, said when their flag or environment variable is given (the flag is
+    hidden from --help). ``defaults`` overrides the dataclass defaults shown in --help and used when
+    neither flag nor environment variable is given; ``dest_prefix`` names the parsed attributes
     (``<dest_prefix><field>``), for :func:`options_from_args` with the same prefix.
     """
     group = parser.add_argument_group(title, description)
     docs = field_docs(cls)
     defaults = defaults or {}
+    refuse = refuse or {}
     for field in dataclasses.fields(cls):
         if field.name in skip:
+            continue
+        if field.name in refuse:
+            group.add_argument(
+                _flag(field),
+                action=_Refused,
+                reason=refuse[field.name],
+                dest=argparse.SUPPRESS,
+                default=argparse.SUPPRESS,
+                help=argparse.SUPPRESS,
+            )
             continue
         kind = _field_type(cls, field)
         default = defaults.get(field.name, _default(field))
@@ -132,7 +163,7 @@ def add_options(
         else:
             metavar = metavar or field.name.upper()
             group.add_argument(_flag(field), type=_scalar(kind), metavar=metavar, **kwargs)
-    parser.set_defaults(**{f"optdefaults_{cls.__name__}": defaults})
+    parser.set_defaults(**{f"optdefaults_{cls.__name__}": defaults, f"optrefused_{cls.__name__}": refuse})
 
 
 def _default(field: dataclasses.Field) -> Any:
@@ -166,15 +197,29 @@ def options_from_args(
     env_prefix: str,
     *,
     dest_prefix: str = "opt_",
+    base: dict[str, Any] | None = None,
     **overrides: Any,
 ) -> T:
-    """Build ``cls`` from parsed flags, then environment variables, then defaults; ``overrides`` win."""
+    """Build ``cls`` from parsed flags, then ``base`` (a config file's fields), then environment
+    variables, then defaults; ``overrides`` win. An environment variable of a field the command
+    refuses (``add_options(refuse=...)``) is an OptionError naming the reason."""
     defaults = getattr(args, f"optdefaults_{cls.__name__}", {}) if args is not None else {}
+    refused = getattr(args, f"optrefused_{cls.__name__}", {}) if args is not None else {}
+    base = base or {}
     values: dict[str, Any] = {}
     for field in dataclasses.fields(cls):
         kind = _field_type(cls, field)
         value = getattr(args, f"{dest_prefix}{field.name}", None) if args is not None else None
         env = env_name(env_prefix, field.name, field)
+        if field.name in refused and os.environ.get(env, "").strip():
+            raise OptionError(f"{env}: {refused[field.name]}")
+        from_file = base.get(field.name)
+        if from_file is not None and _is_tuple(kind):
+            from_file = tuple(from_file)  # JSON has lists
+        if field.name in refused and from_file is not None and from_file != _default(field):
+            raise OptionError(f"{field.name} {from_file!r} (config file): {refused[field.name]}")
+        if value is None:
+            value = from_file
         if value is None and os.environ.get(env, "").strip():
             value = _parse_env(os.environ[env], kind, env)
         if value is None and field.name in defaults:

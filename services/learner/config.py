@@ -6,8 +6,22 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agents.device import DEVICES
-from agents.nnql.config import STORAGES
+from agents.nnql.config import CNN_FIELDS, STORAGES
 from worlds.config import observation_field
+
+SARSA_LOCAL_ONLY = (
+    "the SARSA variant needs the next action taken, which transition batches do not carry; "
+    "use `navlearn train --local --sarsa`"
+)
+PATCH_ONLY = (
+    "it shapes the CNN over the own-map patch, and the observations of the distributed services "
+    "(--observation learning or learning_plan) have none; `navlearn train --local --patch-size N` has one"
+)
+NNQL_REFUSED = {"sarsa": SARSA_LOCAL_ONLY, "cnn_goal": PATCH_ONLY, "cnn_embed": PATCH_ONLY} | dict.fromkeys(
+    CNN_FIELDS, PATCH_ONLY
+)
+"""NNQLConfig fields the learner service (and so `navlearn up`) cannot honour, and why: refused when
+the arguments are parsed (services.common.options.add_options' ``refuse``)"""
 
 
 @dataclass

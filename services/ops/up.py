@@ -40,6 +40,8 @@ log = logging.getLogger("navlearn.up")
 PR_SET_PDEATHSIG = 1
 MODEL = "nnql"
 DEMO_SEED = 10_000
+NNQL_CONFIG_FILE = "nnql.json"
+"""the run's NNQLConfig in --out, which the learner reads (`navlearn learner --nnql-config`)"""
 """the expert demonstrator's episodes start at this seed (+ --seed), apart from the actors' seeds"""
 PHASES = (
     ("building", "compiling"),
@@ -108,18 +110,6 @@ class Child:
         return "\n".join(text[-lines:])
 
 
-def nnql_environment(nnql) -> dict[str, str]:
-    """NNQLConfig as NAVLEARN_NNQL_* variables for the learner process."""
-    env = {}
-    for name, value in nnql.to_dict().items():
-        if isinstance(value, list | tuple):
-            value = " ".join(map(str, value))
-        elif isinstance(value, bool):
-            value = "1" if value else "0"
-        env[f"NAVLEARN_NNQL_{name.upper()}"] = str(value)
-    return env
-
-
 class Up:
     """Starts, watches and stops the processes of one run."""
 
@@ -152,7 +142,9 @@ class Up:
         (out / "logs").mkdir(parents=True, exist_ok=True)
         base = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
         base.update({"NAVLEARN_RUN": cfg.run, "PYTHONUNBUFFERED": "1"})
-        learner_env = {**base, **nnql_environment(self.nnql)}
+        # the learner reads the run's NNQLConfig itself, not re-parsed environment variables
+        nnql_file = out / NNQL_CONFIG_FILE
+        nnql_file.write_text(json.dumps(self.nnql.to_dict(), indent=1) + "\n")
         self._spawn(
             "learner",
             [
@@ -170,8 +162,10 @@ class Up:
                 *(["--nirl"] if cfg.nirl else []),
                 *(["--nirl-config", cfg.nirl_config] if cfg.nirl_config else []),
                 *self.env.flags(),
+                "--nnql-config",
+                str(nnql_file),
             ],
-            learner_env,
+            base,
         )
         if cfg.nirl:
             argv = ["demonstrator", "--connect", self.endpoint, "--observation", cfg.observation,
