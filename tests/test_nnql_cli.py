@@ -16,7 +16,7 @@ def test_train_requires_local(capsys):
 def test_bad_flags_are_one_line_errors(capsys):
     assert main(["train", "--local", "--maps", "nowhere:12"]) == 2
     assert "nowhere" in capsys.readouterr().err
-    assert main(["train", "--local", "--hidden", "0"]) == 2
+    assert main(["train", "--local", "--hidden-sizes", "0"]) == 2
     assert "hidden_sizes" in capsys.readouterr().err
 
 
@@ -25,7 +25,16 @@ def test_small_local_run_writes_a_loadable_policy(tmp_path, capsys):
     corridor.write_text(CORRIDOR)
     out = tmp_path / "run"
     argv = ["train", "--local", "--steps", "800", "--envs", "4", "--maps", str(corridor), "--out", str(out)]
-    argv += ["--eval-every", "0", "--final-eval-episodes", "0", "--hidden", "16", "--no-progress", "--sarsa"]
+    argv += [
+        "--eval-every",
+        "0",
+        "--final-eval-episodes",
+        "0",
+        "--hidden-sizes",
+        "16",
+        "--no-progress",
+        "--sarsa",
+    ]
     assert main(argv) == 0
     assert "robot-steps" in capsys.readouterr().out
     summary = json.loads((out / "summary.json").read_text())

@@ -156,13 +156,13 @@ def test_bad_values_raise_value_errors_naming_the_field():
 
 
 def test_train_local_cli_patch_option(tmp_path, capsys):
-    assert main(["train", "--local", "--patch", "-2"]) == 2
+    assert main(["train", "--local", "--patch-size", "-2"]) == 2
     assert "patch_size" in capsys.readouterr().err
     assert main(["train", "--local", "--cnn-goal"]) == 2
     assert "add --patch" in capsys.readouterr().err
     out = tmp_path / "f"
-    argv = ["train", "--local", "--patch", "8", "--no-subgoal", "--steps", "600", "--envs", "4",
-            "--out", str(out), "--eval-every", "0", "--final-eval-episodes", "0", "--hidden", "16",
+    argv = ["train", "--local", "--patch-size", "8", "--subgoal", "none", "--steps", "600", "--envs", "4",
+            "--out", str(out), "--eval-every", "0", "--final-eval-episodes", "0", "--hidden-sizes", "16",
             "--no-progress", "--cnn-goal", "--cnn-embed", "8", "--action-local", "2"]  # fmt: skip
     assert main(argv) == 0
     config = json.loads((out / "config.json").read_text())

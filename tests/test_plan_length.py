@@ -33,12 +33,12 @@ def test_plan_length_is_recorded_and_checked_in_saved_policies():
 
 
 def test_train_local_plan_length_trains_saves_and_evaluates(tmp_path, capsys):
-    assert main(["train", "--local", "--plan-length", "--no-subgoal", "--steps", "10"]) == 2
+    assert main(["train", "--local", "--plan-length", "--subgoal", "none", "--steps", "10"]) == 2
     assert "observation.plan_length=True needs a subgoal" in capsys.readouterr().err
     out = tmp_path / "planned"
     argv = ["train", "--local", "--plan-length", "--steps", "400", "--envs", "4", "--out", str(out),
             "--eval-every", "200", "--eval-episodes", "3", "--eval-dynamic-episodes", "0",
-            "--final-eval-episodes", "0", "--hidden", "16", "--no-progress"]  # fmt: skip
+            "--final-eval-episodes", "0", "--hidden-sizes", "16", "--no-progress"]  # fmt: skip
     assert main(argv) == 0
     saved = json.loads((out / "config.json").read_text())["observation"]
     assert saved["observation.plan_length"] is True

@@ -111,7 +111,7 @@ def test_train_local_flags_reach_the_trained_task_and_the_saved_policy(tmp_path)
     out = tmp_path / "rr"
     argv = ["train", "--local", "--range-rate", "--frame-stack", "2", "--moving-discs", "2", "--steps", "400",
             "--envs", "4", "--out", str(out), "--eval-every", "200", "--eval-episodes", "3",
-            "--eval-dynamic-episodes", "3", "--final-eval-episodes", "0", "--hidden", "16",
+            "--eval-dynamic-episodes", "3", "--final-eval-episodes", "0", "--hidden-sizes", "16",
             "--no-progress"]  # fmt: skip
     assert main(argv) == 0
     trained = json.loads((out / "summary.json").read_text())["obstacles"]

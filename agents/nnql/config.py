@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 STORAGES = ("memory", "memmap")
@@ -28,7 +28,7 @@ class NNQLConfig:
 
     hidden_sizes: tuple[int, ...] = (128, 128)
     """widths of the Q-network's hidden layers (MLP over range sensors + goal features)"""
-    activation: str = "relu"
+    activation: str = field(default="relu", metadata={"choices": ACTIVATION_NAMES})
     """hidden activation: relu, tanh or elu"""
     lr: float = 1e-3
     """Adam learning rate"""
@@ -50,7 +50,7 @@ class NNQLConfig:
     """importance-sampling exponent of prioritized replay"""
     priority_eps: float = 1e-6
     """added to priorities so no transition becomes unsampleable"""
-    target_update: str = "soft"
+    target_update: str = field(default="soft", metadata={"choices": TARGET_UPDATES})
     """target network update: soft (Polyak, tau each update) or hard (copy every target_period updates)"""
     target_tau: float = 0.005
     """Polyak factor of soft target updates"""
@@ -68,11 +68,11 @@ class NNQLConfig:
     """double Q-learning: the online network picks the next action, the target network values it"""
     sarsa: bool = False
     """SARSA variant: bootstrap on the next action actually taken (needs next_action in transitions)"""
-    loss_function: str = "smooth_l1"
+    loss_function: str = field(default="smooth_l1", metadata={"choices": LOSS_FUNCTIONS})
     """TD loss: l2, smooth_l1 (Huber) or l1"""
     grad_clip: float = 10.0
     """max global gradient norm (0 disables clipping)"""
-    exploration: str = "boltzmann"
+    exploration: str = field(default="boltzmann", metadata={"choices": EXPLORATIONS})
     """behaviour policy: boltzmann (softmax over Q / temperature, the thesis' policy) or epsilon (greedy)"""
     temperature_start: float = 0.2
     """Boltzmann temperature at version 0"""
@@ -90,7 +90,7 @@ class NNQLConfig:
     """seeds network initialisation and replay sampling"""
     torch_threads: int = 1
     """torch intra-op threads, set process-wide by the learner (small MLPs are fastest on one)"""
-    q_network: str = "auto"
+    q_network: str = field(default="auto", metadata={"choices": Q_NETWORKS})
     """auto: a small CNN over the own-map patch beside the MLP when the observation has a patch
     (agents.nnql.patch_network), else the MLP; mlp: the flat MLP over every input"""
     cnn_channels: tuple[int, ...] = (16, 32)

@@ -30,46 +30,14 @@ from agents.nnql.ratelimit import RateLimiter
 from agents.nnql.recurrent_learner import RecurrentNNQLLearner
 from agents.nnql.recurrent_rollout import RecurrentRollout
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
-from worlds.config import LEARNING_NAV, TRAINING_DISCS, NavConfig, observation_settings, with_moving_discs
+from agents.nnql.train_config import LocalTrainConfig
+from worlds.config import LEARNING_NAV, NavConfig, observation_settings, with_moving_discs
 from worlds.own_env import EnvConfig, make_vector_env
 from worlds.vector_env import NavigationVectorEnv
 
 SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
 CURVE_EVERY = 2_000
 """robot-steps between learning-curve points"""
-
-
-@dataclass
-class LocalTrainConfig:
-    """Budget, environment and outputs of one local training run."""
-
-    steps: int = 200_000
-    """robot-steps (transitions) to collect, summed over the vector env"""
-    envs: int = 16
-    """robots stepped together in the vector env"""
-    maps: str = "mixed:16"
-    """training map spec (worlds.tasks.parse_map_spec)"""
-    moving_discs: int = TRAINING_DISCS
-    """each training episode has 0..moving_discs moving discs, uniform (0: none; the dynamic set has 4)"""
-    seed: int = 0
-    """seeds the env, the learner and the exploration"""
-    out: str = "runs/nnql-local"
-    """output directory: policy (model.safetensors + config.json), curve.png, curve.jsonl, summary.json"""
-    eval_every: int = 25_000
-    """robot-steps between greedy evaluations on held-out maps (0: only the final one)"""
-    eval_episodes: int = 100
-    """episodes of each periodic evaluation (validation set, seed 1)"""
-    eval_dynamic_episodes: int = 0
-    """episodes with 4 moving discs added to each periodic evaluation (the validation seed's dynamic set);
-    keep_best then scores the success pooled over both sets (0: unseen static maps only)"""
-    keep_best: bool = True
-    """save the weights that scored best on the validation evaluations (seed 1) rather than the last"""
-    final_eval_episodes: int = 100
-    """episodes of the final evaluation (test set, seed 0: generated maps never trained on)"""
-    progress: bool = True
-    """show a progress bar"""
-    device: str = "cpu"
-    """where the learner's networks, loss and sampled batches live: cpu, cuda or auto (agents.device)"""
 
 
 @dataclass

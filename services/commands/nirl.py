@@ -72,11 +72,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "demonstration sets); the "
         "demonstrations must have been recorded in it (default %(default)s)",
     )
-    add_options(
-        train, NIRLRun, "NAVLEARN_NIRL_RUN", "run: environment, evaluation, outputs", skip=("progress",)
-    )
+    add_options(train, NIRLRun, "NAVLEARN_NIRL_RUN", "run: environment, evaluation, outputs")
     add_options(train, NIRLConfig, "NAVLEARN_NIRL", "NIRL hyper-parameters")
-    train.add_argument("--no-progress", action="store_true", help="no progress bar")
     train.set_defaults(func=run_train)
 
     weights = sub.add_parser(
@@ -120,7 +117,7 @@ def run_train(args: argparse.Namespace) -> int:
 
     try:
         config = options_from_args(NIRLConfig, args, "NAVLEARN_NIRL")
-        run = options_from_args(NIRLRun, args, "NAVLEARN_NIRL_RUN", progress=not args.no_progress)
+        run = options_from_args(NIRLRun, args, "NAVLEARN_NIRL_RUN")
         resolve_device(run.device)  # cuda without a GPU: one sentence, before anything starts
         if run.envs < 1:
             raise OptionError("--envs must be positive")
