@@ -20,13 +20,14 @@ from services.cli import build_parser
 from services.common.transport import ZenohSettings
 from services.learner.config import NNQL_REFUSED, LearnerConfig
 from services.ops.up_config import UpConfig
+from worlds.own_env import EnvConfig
 
 COMMANDS = {
-    "up": (UpConfig, NNQLConfig),
-    "learner": (LearnerConfig, NNQLConfig, ZenohSettings),
+    "up": (UpConfig, NNQLConfig, EnvConfig),
+    "learner": (LearnerConfig, NNQLConfig, EnvConfig, ZenohSettings),
     "train": (LocalTrainConfig, TrainObservation, NNQLConfig, EnvConfig),
     "nirl train": (NIRLRun, NIRLConfig),
-    "actor": (ActorConfig, ZenohSettings),
+    "actor": (ActorConfig, EnvConfig, ZenohSettings),
 }
 """each command and the configs its flags come from"""
 
