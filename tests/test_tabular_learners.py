@@ -161,3 +161,21 @@ def test_learners_need_a_grid_world():
 
     with pytest.raises(TypeError, match="GridWorldEnv"):
         q_learning(gym.make("FrozenLake-v1"), TabularConfig(episodes=1))
+
+
+KERNEL_FIGURES = {
+    "q_learning epsilon-greedy": [-1058.429649072, 14528, -26160.0],
+    "q_learning boltzmann": [-1056.356249206, 13939, -20291.0],
+    "sarsa epsilon-greedy": [-1453.96453676, 12381, -22829.0],
+    "sarsa boltzmann": [-1093.599543564, 11851, -17523.0],
+}
+"""(sum of Q, steps, summed returns) of 300 seeded maze episodes, recorded on a731e15, when Q-learning
+and SARSA each had their own copy of the episode kernel"""
+
+
+@pytest.mark.parametrize("key", sorted(KERNEL_FIGURES))
+def test_the_shared_td_control_kernel_learns_what_the_two_copies_learned(key):
+    learner = {"q_learning": q_learning, "sarsa": sarsa}[key.split()[0]]
+    result = learner(maze_env(), TabularConfig(episodes=300, exploration=key.split()[1], seed=5))
+    figures = [float(result.q.sum()), int(result.lengths.sum()), float(result.returns.sum())]
+    assert figures == pytest.approx(KERNEL_FIGURES[key], abs=1e-6)

@@ -9,8 +9,8 @@ import numpy as np
 from numba import njit
 
 from agents.tabular.common import (
-    ALPHA_SCHEDULES,
     Progress,
+    StepSizeConfig,
     grid_dynamics,
     run_in_chunks,
     sample_index,
@@ -22,33 +22,8 @@ from worlds.gridworld import GridWorldEnv
 
 
 @dataclass(frozen=True)
-class TDConfig:
-    """TD(0) prediction."""
-
-    episodes: int = 20000
-    """Number of episodes."""
-    gamma: float = 0.95
-    """Discount factor."""
-    alpha: float = 0.5
-    """Step size (its first value under the "visits" schedule)."""
-    alpha_schedule: str = "visits"
-    """"constant", or "visits": alpha / n(s) ** alpha_power after n visits of s."""
-    alpha_power: float = 0.6
-    """Exponent of the "visits" schedule, in (0.5, 1]."""
-    seed: int = 0
-    """Seed of the learner's random generator."""
-
-    def __post_init__(self) -> None:
-        if self.episodes < 1:
-            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
-        if not 0.0 <= self.gamma <= 1.0:
-            raise ValueError(f"gamma must be in [0, 1], got {self.gamma}")
-        if not 0.0 < self.alpha <= 1.0:
-            raise ValueError(f"alpha must be in (0, 1], got {self.alpha}")
-        if self.alpha_schedule not in ALPHA_SCHEDULES:
-            raise ValueError(f"alpha_schedule must be one of {ALPHA_SCHEDULES}, got {self.alpha_schedule!r}")
-        if not 0.0 < self.alpha_power <= 1.0:
-            raise ValueError(f"alpha_power must be in (0, 1], got {self.alpha_power}")
+class TDConfig(StepSizeConfig):
+    """TD(0) prediction: the step sizes every tabular learner takes (a visit counts states here)."""
 
 
 @dataclass(frozen=True)
