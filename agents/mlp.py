@@ -20,7 +20,9 @@ from safetensors.numpy import save_file
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
 KINDS = ("q_network", "policy_logits")
-ACTIVATIONS = ("relu", "tanh", "elu")
+ACTIVATION_NAMES = ("relu", "tanh", "elu")
+"""the hidden activations every navlearn network takes, by name (the one list; torch classes in
+agents.nnql.networks.ACTIVATIONS, numpy in :func:`activate`)"""
 ARCHITECTURE_KEYS = ("obs_dim", "n_actions", "hidden_sizes", "activation")
 
 Layers = list[tuple[np.ndarray, np.ndarray]]

@@ -286,6 +286,7 @@ def _read_env(value: object, what: str, limits: Limits) -> str:
 
 
 EXPLORATIONS = ("boltzmann", "epsilon")
+"""the behaviour policies an actor runs (the one list: NNQLConfig.exploration takes these)"""
 
 
 @dataclass(kw_only=True, frozen=True)

@@ -40,7 +40,7 @@ from safetensors import SafetensorError
 from safetensors.numpy import load_file
 
 from agents.forward import network_forward
-from agents.mlp import ACTIVATIONS, ARCHITECTURE_KEYS, CONFIG_FILE, KINDS, WEIGHTS_FILE, save_policy
+from agents.mlp import ACTIVATION_NAMES, ARCHITECTURE_KEYS, CONFIG_FILE, KINDS, WEIGHTS_FILE, save_policy
 from agents.nnql.recurrent_policy import Memory, RecurrentQ, is_recurrent
 from worlds.config import NavConfig, saved_observation, with_observation
 from worlds.heuristics import goal_seeking_policy
@@ -155,7 +155,7 @@ def load_policy(path: str | Path) -> GreedyMLPPolicy:
     architecture = config.get("architecture")
     if not isinstance(architecture, dict) or any(k not in architecture for k in ARCHITECTURE_KEYS):
         raise PolicyFormatError(f"{config_path}: 'architecture' must hold {ARCHITECTURE_KEYS}")
-    if architecture["activation"] not in ACTIVATIONS:
+    if architecture["activation"] not in ACTIVATION_NAMES:
         raise PolicyFormatError(f"{config_path}: unknown activation {architecture['activation']!r}")
     try:
         weights = load_file(str(weights_path))

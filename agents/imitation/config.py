@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-ACTIVATION_NAMES = ("relu", "tanh", "elu")
+from agents.mlp import ACTIVATION_NAMES
 
 
 @dataclass(frozen=True)

@@ -25,9 +25,9 @@ from torchrl.modules import MLP
 from agents.demos import Demo
 from agents.evaluation.policies import GreedyMLPPolicy, save_policy
 from agents.imitation.config import ImitationConfig
+from agents.nnql.networks import activation_class
 
 MODEL_NAME = "imitation"
-ACTIVATIONS: dict[str, type[nn.Module]] = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}
 
 
 @dataclass
@@ -110,7 +110,7 @@ def train_policy(
         in_features=obs_dim,
         out_features=n_actions,
         num_cells=list(config.hidden_sizes),
-        activation_class=ACTIVATIONS[config.activation],
+        activation_class=activation_class(config.activation),
     )
     optimiser = torch.optim.Adam(network.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     xt, yt = torch.from_numpy(x_train), torch.from_numpy(y_train)

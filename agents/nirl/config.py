@@ -7,7 +7,8 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-from agents.nnql.config import ACTIVATION_NAMES, NNQLConfig
+from agents.mlp import ACTIVATION_NAMES
+from agents.nnql.config import NNQLConfig
 
 CORES = ("iq", "sqil", "max_margin")
 FIXED_REWARDS = ("network", "progress")

@@ -22,7 +22,7 @@ import torch
 from torch import nn
 from torchrl.modules import MLP
 
-from agents.nnql.networks import ACTIVATIONS
+from agents.nnql.networks import activation_class
 from worlds.perception import observation_dim
 
 REWARD_OUTPUTS = ("cost", "linear")
@@ -115,8 +115,7 @@ class RewardNetwork(nn.Module):
         super().__init__()
         if output not in REWARD_OUTPUTS:
             raise ValueError(f"reward output {output!r}: expected one of {REWARD_OUTPUTS}")
-        if activation not in ACTIVATIONS:
-            raise ValueError(f"unknown activation {activation!r}; expected one of {sorted(ACTIVATIONS)}")
+        activation_class(activation)  # ValueError for an unknown one, before anything is built
         turns = np.asarray(turns, dtype=np.float64)
         if len(turns) != n_actions or obs_dim < n_beams + 3:
             raise ValueError(
@@ -144,7 +143,7 @@ class RewardNetwork(nn.Module):
             in_features=obs_dim + n_actions + N_ACTION_FEATURES,
             out_features=1,
             num_cells=[int(h) for h in hidden_sizes],
-            activation_class=ACTIVATIONS[activation],
+            activation_class=activation_class(activation),
         )
 
     @classmethod

@@ -27,7 +27,7 @@ import torch
 from torch import nn
 from torchrl.modules import MLP
 
-from agents.nnql.networks import ACTIVATIONS
+from agents.nnql.networks import activation_class
 
 
 def steps_to_go(n_steps: int, reached_goal: bool) -> np.ndarray:
@@ -64,7 +64,7 @@ class ProgressPotential(nn.Module):
         self.first_input = int(first_input)
         self.mlp = MLP(
             in_features=obs_dim - self.first_input, out_features=1, num_cells=list(hidden_sizes),
-            activation_class=ACTIVATIONS[activation],
+            activation_class=activation_class(activation),
         )  # fmt: skip
         self.scale = 1.0 / (1.0 - gamma)  # the net outputs values in units of 1 / (1 - gamma)
 

@@ -40,7 +40,6 @@ from agents.nnql.train_local import Candidate, TrainResult
 from worlds.config import LEARNING_NAV, NavConfig, with_moving_discs
 from worlds.vector_env import NavigationVectorEnv
 
-SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
 VALIDATION_SEED = 1
 """periodic evaluations use the held-out set of this seed; the final one uses seed 0, the reported set"""
 
@@ -197,13 +196,12 @@ def _validate(learner: NIRLLearner, run: NIRLRun, nav: NavConfig, point: dict) -
 
 
 def _curve_point(learner, env_steps, wall, recent, metrics) -> dict[str, float]:
-    outcomes = [e.outcome for e in recent]
     point = {
         "iteration": float(learner.iteration),
         "env_steps": float(env_steps),
         "updates": float(learner.version),
         "wall_time": float(wall),
-        "train_success": float(np.mean([o == SUCCESS_OUTCOME for o in outcomes])) if outcomes else 0.0,
+        "train_success": float(np.mean([e.solved for e in recent])) if recent else 0.0,
     }
     point.update({k: float(v) for k, v in metrics.items() if k.startswith(("losses/", "charts/", "nirl/"))})
     return point

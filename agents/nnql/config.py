@@ -6,13 +6,14 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+from agents.mlp import ACTIVATION_NAMES
+from protocols.messages import EXPLORATIONS
+
 STORAGES = ("memory", "memmap")
 """Where a replay keeps its transitions (agents.nnql.replay_storage): RAM or memory-mapped files."""
 
 TARGET_UPDATES = ("soft", "hard")
-EXPLORATIONS = ("boltzmann", "epsilon")
 LOSS_FUNCTIONS = ("l2", "smooth_l1", "l1")
-ACTIVATION_NAMES = ("relu", "tanh", "elu")
 Q_NETWORKS = ("auto", "mlp")
 CNN_FIELDS = ("cnn_channels", "cnn_kernel_sizes", "cnn_strides")
 

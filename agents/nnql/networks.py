@@ -23,9 +23,20 @@ from torchrl.data import Categorical
 from torchrl.modules import MLP, QValueActor
 from torchrl.modules.models.models import DuelingMlpDQNet
 
+from agents.mlp import ACTIVATION_NAMES
 from agents.nnql.config import NNQLConfig
 
-ACTIVATIONS: dict[str, type[nn.Module]] = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU}
+ACTIVATIONS: dict[str, type[nn.Module]] = dict(zip(ACTIVATION_NAMES, (nn.ReLU, nn.Tanh, nn.ELU), strict=True))
+"""agents.mlp.ACTIVATION_NAMES' torch modules"""
+
+
+def activation_class(name: str) -> type[nn.Module]:
+    """The torch module of activation ``name``; ValueError naming the choices for another."""
+    if name not in ACTIVATIONS:
+        raise ValueError(f"unknown activation {name!r}; expected one of {sorted(ACTIVATIONS)}")
+    return ACTIVATIONS[name]
+
+
 OBSERVATION_KEY = "observation"
 
 
@@ -40,13 +51,11 @@ class QNetwork(MLP):
     def __init__(
         self, obs_dim: int, n_actions: int, hidden_sizes: list[int] | tuple[int, ...], activation: str
     ):
-        if activation not in ACTIVATIONS:
-            raise ValueError(f"unknown activation {activation!r}; expected one of {sorted(ACTIVATIONS)}")
         super().__init__(
             in_features=int(obs_dim),
             out_features=int(n_actions),
             num_cells=[int(h) for h in hidden_sizes],
-            activation_class=ACTIVATIONS[activation],
+            activation_class=activation_class(activation),
         )
         self.architecture = {
             "obs_dim": int(obs_dim),
@@ -79,8 +88,6 @@ class DuelingQNetwork(DuelingMlpDQNet):
     def __init__(
         self, obs_dim: int, n_actions: int, hidden_sizes: list[int] | tuple[int, ...], activation: str
     ):
-        if activation not in ACTIVATIONS:
-            raise ValueError(f"unknown activation {activation!r}; expected one of {sorted(ACTIVATIONS)}")
         hidden = [int(h) for h in hidden_sizes]
         super().__init__(
             out_features=int(n_actions),
@@ -88,7 +95,7 @@ class DuelingQNetwork(DuelingMlpDQNet):
                 "in_features": int(obs_dim),
                 "num_cells": hidden[:-1],
                 "out_features": hidden[-1],
-                "activation_class": ACTIVATIONS[activation],
+                "activation_class": activation_class(activation),
                 "activate_last_layer": True,
             },
             mlp_kwargs_output={"in_features": hidden[-1], "depth": 0},

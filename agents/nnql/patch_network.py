@@ -39,7 +39,7 @@ from torch import nn
 from torchrl.modules import MLP, ConvNet
 
 from agents.nnql.config import NNQLConfig
-from agents.nnql.networks import ACTIVATIONS, QNetwork
+from agents.nnql.networks import QNetwork, activation_class
 from worlds.config import NavConfig, with_observation
 from worlds.perception import frame_dim, frame_layout
 
@@ -177,8 +177,7 @@ class PatchQNetwork(nn.Module):
         missing = [k for k in PATCH_KEYS if k not in patch]
         if missing:
             raise ValueError(f"architecture['patch'] lacks {missing}")
-        if arch["activation"] not in ACTIVATIONS:
-            raise ValueError(f"unknown activation {arch['activation']!r}; expected {sorted(ACTIVATIONS)}")
+        activation_class(arch["activation"])  # ValueError for an unknown one, before anything is built
         self.size, self.frames = int(patch["size"]), int(patch["frames"])
         self.start, self.frame_dim = int(patch["start"]), int(patch["frame_dim"])
         self.stop = self.start + 2 * self.size**2
@@ -199,7 +198,7 @@ class PatchQNetwork(nn.Module):
             num_cells=[int(c) for c in patch["channels"]],
             kernel_sizes=[int(k) for k in patch["kernel_sizes"]],
             strides=[int(s) for s in patch["strides"]],
-            activation_class=ACTIVATIONS[arch["activation"]],
+            activation_class=activation_class(arch["activation"]),
         )
         try:
             with torch.no_grad():
@@ -210,13 +209,13 @@ class PatchQNetwork(nn.Module):
                 f"kernel sizes {patch['kernel_sizes']} and strides {patch['strides']} ({exc})"
             ) from None
         embed = int(patch.get("embed", 0))  # 0: the flat features go to the head as they are
-        activation = ACTIVATIONS[arch["activation"]]
+        activation = activation_class(arch["activation"])
         self.embed = nn.Sequential(nn.Linear(features, embed), activation()) if embed else None
         self.head = MLP(
             in_features=(embed or features) + rest,
             out_features=int(arch["n_actions"]),
             num_cells=[int(h) for h in arch["hidden_sizes"]],
-            activation_class=ACTIVATIONS[arch["activation"]],
+            activation_class=activation_class(arch["activation"]),
         )
         self.architecture = {
             "obs_dim": int(arch["obs_dim"]),
@@ -269,7 +268,7 @@ class LocalQNetwork(nn.Module):
         arch = dict(architecture)
         local, self.frame_dim = arch.pop("local"), int(arch.pop("frame_dim"))
         self.head = QNetwork.from_architecture(arch)
-        self.local = ActionLocal(local, ACTIVATIONS[arch["activation"]])
+        self.local = ActionLocal(local, activation_class(arch["activation"]))
         obs_dim = int(arch["obs_dim"])
         if self.frame_dim < 1 or obs_dim % self.frame_dim:
             raise ValueError(

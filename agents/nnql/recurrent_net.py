@@ -18,7 +18,7 @@ from torch import nn
 from torchrl.modules import MLP, LSTMModule, set_recurrent_mode
 
 from agents.nnql.config import NNQLConfig
-from agents.nnql.networks import ACTIVATIONS
+from agents.nnql.networks import activation_class
 
 State = tuple[torch.Tensor, torch.Tensor]
 
@@ -35,10 +35,8 @@ class RecurrentQNetwork(nn.Module):
         lstm_size: int,
     ):
         super().__init__()
-        if activation not in ACTIVATIONS:
-            raise ValueError(f"unknown activation {activation!r}; expected one of {sorted(ACTIVATIONS)}")
         hidden = [int(h) for h in hidden_sizes]
-        act = ACTIVATIONS[activation]
+        act = activation_class(activation)
         self.encoder = MLP(
             in_features=obs_dim, out_features=hidden[0], num_cells=[], activation_class=act,
             activate_last_layer=True,

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from worlds.outcomes import Outcome
+
 Policy = Callable[[np.ndarray], np.ndarray]
 
 
@@ -31,6 +33,11 @@ class EpisodeEnd:
     path_length: float | None
     success: bool | None = None
     """the terminal ``info["is_success"]`` (gymnasium-robotics / SB3 convention); None: not given"""
+
+    @property
+    def solved(self) -> bool:
+        """Did the episode succeed: the env's ``is_success`` when it gives one, else reaching the goal."""
+        return self.outcome == Outcome.GOAL if self.success is None else bool(self.success)
 
 
 def _row(info: dict[str, Any], key: str, index: int) -> Any:

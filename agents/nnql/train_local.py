@@ -35,7 +35,6 @@ from worlds.config import LEARNING_NAV, NavConfig, observation_settings, with_mo
 from worlds.own_env import EnvConfig, make_vector_env
 from worlds.vector_env import NavigationVectorEnv
 
-SUCCESS_OUTCOME = 1  # worlds.outcomes.Outcome.GOAL
 CURVE_EVERY = 2_000
 """robot-steps between learning-curve points"""
 
@@ -261,12 +260,11 @@ def _validate(
 
 
 def _curve_point(steps, wall, learner, recent, policy, metrics) -> dict[str, float]:
-    successes = [e.outcome == SUCCESS_OUTCOME if e.success is None else e.success for e in recent]
     point = {
         "env_steps": float(steps),
         "wall_time": float(wall),
         "updates": float(learner.updates),
-        "train_success": float(np.mean(successes)) if successes else 0.0,
+        "train_success": float(np.mean([e.solved for e in recent])) if recent else 0.0,
         "episode_return": float(np.mean([e.episode_return for e in recent])) if recent else 0.0,
         "temperature": policy.temperature,
         "epsilon": policy.epsilon,

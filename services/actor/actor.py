@@ -49,7 +49,6 @@ from worlds.own_env import EnvConfig, make_vector_env
 from worlds.vector_env import NavigationVectorEnv
 
 log = logging.getLogger("navlearn.actor")
-SUCCESS = 1  # worlds.outcomes.Outcome.GOAL
 
 
 def default_actor_id() -> str:
@@ -230,8 +229,7 @@ class Actor:
             batch, ended = self.rollout.step()
             pieces.append(batch)
             for episode in ended:
-                success = episode.outcome == SUCCESS if episode.success is None else episode.success
-                self.episodes.append(int(success))
+                self.episodes.append(int(episode.solved))
                 self.returns.append(episode.episode_return)
             self.episodes_done += len(ended)
         flat = concat_batches(pieces, self.rollout.num_envs)

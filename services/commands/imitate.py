@@ -20,7 +20,8 @@ def _sizes(text: str) -> tuple[int, ...]:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from agents.imitation.config import ACTIVATION_NAMES, ImitationConfig
+    from agents.imitation.config import ImitationConfig
+    from agents.mlp import ACTIVATION_NAMES
 
     d = ImitationConfig()
     parser = subparsers.add_parser(
