@@ -286,7 +286,7 @@ def test_train_local_trains_on_a_users_env_and_saves_a_policy_that_records_it(
     out = tmp_path / "local"
     done = navlearn(
         "train", "--local", "--env", f"{user_module}:DictCorridor", "--steps", "1600", "--envs", "4",
-        "--eval-every", "800", "--eval-episodes", "6", "--final-eval-episodes", "6", "--hidden", "16",
+        "--eval-every", "800", "--eval-episodes", "6", "--final-eval-episodes", "6", "--hidden-sizes", "16",
         "--no-progress", "--out", str(out),
     )  # fmt: skip
     assert done.returncode == 0, (done.stdout, done.stderr)
