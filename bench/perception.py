@@ -19,8 +19,8 @@ robot-steps, several seeds, one observation per variant:
     Fgea+geo  Fge+geo with the action-local branch (NNQLConfig.action_local=3): one MLP shared by the
           actions adds to each action's Q what it makes of the 7 readings around its heading and the
           goal seen from it
-    G, G+geo  B (and B+geo) with the recurrent Q (R2D2-style: LSTM, sequence replay with burn-in and
-          stored state; agents/nnql/recurrent_learner.py, options RECURRENT below): memory, no planner
+    G, G+geo  B and B+geo with NNQL's retired recurrent Q: measured, no longer run here (their
+          figures: docs/notebook.md, results/perception/)
 
 Each run keeps its best weights on the validation set (seed 1, periodic evaluations of
 ``--val-episodes``), then is evaluated on the validation set (seed 1) and on the test sets
@@ -72,7 +72,6 @@ from agents.imitation.config import ImitationConfig
 from agents.imitation.train import train_policy
 from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
-from agents.nnql.recurrent_policy import RecurrentNNQLPolicy
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.planning.demonstrate import generate_demos
 from bench._common import parse_overrides
@@ -115,14 +114,7 @@ VARIANTS["F+geo"] = replace(VARIANTS["F"], rewards=GEODESIC)
 VARIANTS["Fg+geo"] = VARIANTS["F+geo"]
 VARIANTS["Fge+geo"] = VARIANTS["F+geo"]
 VARIANTS["Fgea+geo"] = VARIANTS["F+geo"]
-VARIANTS["G"] = VARIANTS["B"]
-VARIANTS["G+geo"] = VARIANTS["B+geo"]
-RECURRENT = {"recurrent": True, "utd_ratio": 0.04}
-"""NNQLConfig of the recurrent variants (the rest default: LSTM 128, 10 burn-in + 20 trained steps,
-32 sequences per update); utd 0.04 replays each transition about as often as the default MLP's 1/16"""
 NNQL_OPTIONS: dict[str, dict] = {
-    "G": RECURRENT,
-    "G+geo": RECURRENT,
     "Fg+geo": {"cnn_goal": True},
     "Fge+geo": {"cnn_goal": True, "cnn_embed": 64},
     "Fgea+geo": {"cnn_goal": True, "cnn_embed": 64, "action_local": 3},
@@ -230,14 +222,13 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
     )  # fmt: skip
     options = {"dueling": False, **NNQL_OPTIONS.get(variant, {}), **getattr(args, "nnql_overrides", {})}
     nnql = NNQLConfig(seed=seed, **options)  # a plain head unless overridden
-    policy_class = RecurrentNNQLPolicy if nnql.recurrent else NNQLPolicy
-    trained = finished(out, run, nav, policy_class)
+    trained = finished(out, run, nav)
     if trained is None:
         start = time.perf_counter()
         result = train_local(run, nnql, nav=nav)
         trained = {"env_steps": result.env_steps, "wall": time.perf_counter() - start,
                    "selected_version": result.selected_version, "curve": result.curve}  # fmt: skip
-    policy = policy_class.load(out).greedy()
+    policy = NNQLPolicy.load(out).greedy()
     results = evaluate_sets(policy, nav, sets)
     record = {
         "variant": label(variant, args),
@@ -252,11 +243,10 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
     return record
 
 
-def finished(out: Path, run: LocalTrainConfig, nav: NavConfig, policy_class: type) -> dict | None:
+def finished(out: Path, run: LocalTrainConfig, nav: NavConfig) -> dict | None:
     """The training record of a run directory whose training finished with these settings (its
     evaluation was cut, or it was trained by ``train_local`` elsewhere, e.g. bench/sb3_compare.py's
-    NNQL run): summary.json, curve.jsonl and the policy's observation (the saved policy loaded with
-    ``policy_class``: NNQLPolicy, or RecurrentNNQLPolicy for G); None if there is none.
+    NNQL run): summary.json, curve.jsonl and the saved policy's observation; None if there is none.
     Its wall time is ``train_local``'s own (without building the env)."""
     if not (out / "summary.json").is_file():
         return None
@@ -264,7 +254,7 @@ def finished(out: Path, run: LocalTrainConfig, nav: NavConfig, policy_class: typ
     same = {k: summary["run"][k] for k in ("steps", "envs", "seed", "eval_every", "eval_episodes", "maps")}
     want = {"steps": run.steps, "envs": run.envs, "seed": run.seed, "eval_every": run.eval_every,
             "eval_episodes": run.eval_episodes, "maps": run.maps}  # fmt: skip
-    if same != want or policy_class.load(out).observation != observation_settings(nav):
+    if same != want or NNQLPolicy.load(out).observation != observation_settings(nav):
         raise ValueError(f"{out} holds a run with other settings ({same}), not {want} in this variant")
     curve = [json.loads(line) for line in (out / "curve.jsonl").read_text().splitlines() if line.strip()]
     return {"env_steps": summary["env_steps"], "wall": summary["wall_time"],

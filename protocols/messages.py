@@ -124,25 +124,6 @@ class TransitionBatch(Message):
         return int(self.action.shape[0])
 
 
-@register
-@dataclass(kw_only=True, eq=False)
-class SequenceBatch(TransitionBatch):
-    """A TransitionBatch from a recurrent policy (R2D2-style NNQL): each transition also says which episode
-    of its robot (``env_ids``) it belongs to, at which step, and the LSTM state the policy acted from, so
-    the learner replays within-episode sequences from the stored state (agents/nnql/sequence_replay.py)."""
-
-    KIND: ClassVar[str] = "sequences"
-    VERSION: ClassVar[int] = 1
-    episode: np.ndarray = column("<i8")
-    """int64 (N,): the robot's episode number (0, 1, ... per robot of this actor)."""
-    step: np.ndarray = column("<i8")
-    """int64 (N,): the step within that episode (0: its first)."""
-    state_h: np.ndarray = column("<f4", width="lstm_size")
-    """float32 (N, lstm_size): the LSTM's h before the step (zero at an episode's first step)."""
-    state_c: np.ndarray = column("<f4", width="lstm_size")
-    """float32 (N, lstm_size): the LSTM's c before the step."""
-
-
 @dataclass(kw_only=True)
 class EpisodeMeta:
     """Where one demonstrated episode comes from (stored as Minari episode metadata)."""

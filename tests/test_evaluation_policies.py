@@ -11,6 +11,7 @@ import pytest
 
 from agents.evaluation.policies import PolicyFormatError, load_policy, save_policy
 from agents.evaluation.runner import evaluate, make_eval_set
+from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
 from worlds.config import (
     LEARNING_NAV,
@@ -169,3 +170,34 @@ def test_policy_saved_without_an_observation_record_evaluates_in_the_legacy_obse
     assert [(e.outcome, e.steps) for e in legacy] == [(e.outcome, e.steps) for e in plain]
     with pytest.raises(ValueError, match=r"sensors\.n_beams=8 \(the env has 24\)"):
         evaluate(policy, episodes, config=LEARNING_NAV)
+
+
+PRETRAINED_Q = [
+    [1.41906, 1.52512, 1.5957, 1.56455, 1.43788],
+    [0.82689, 1.2211, 1.19871, 1.17899, 1.00361],
+    [0.69341, 0.71277, 0.66629, 0.64749, 0.69857],
+]
+"""pretrained/nnql's Q-values on three seeded observations, read on a731e15 (before issue 42's refactor)"""
+
+
+def test_the_shipped_policy_loads_and_computes_what_it_did_before_the_refactor():
+    obs = np.random.default_rng(42).uniform(0, 1, (3, 30)).astype(np.float32)
+    assert load_policy(PRETRAINED)(obs).tolist() == [2, 1, 1]
+    flat = [q for row in NNQLPolicy.load(PRETRAINED).q_values(obs) for q in row]
+    assert flat == pytest.approx([q for row in PRETRAINED_Q for q in row], abs=2e-5)
+    saved = json.loads((PRETRAINED / "config.json").read_text())["nnql_config"]
+    assert saved["recurrent"] is False  # saved with the retired variant's fields, which are dropped
+    assert NNQLConfig.from_dict(saved) == NNQLConfig(seed=saved["seed"])  # its recipe: the default
+
+
+def test_a_policy_or_config_of_the_retired_recurrent_variant_is_refused_in_one_sentence(tmp_path):
+    """NNQL's recurrent variant is retired: what it saved is refused naming the commit that still runs it."""
+    weights = {"0.weight": np.zeros((5, 30), np.float32), "0.bias": np.zeros(5, np.float32)}
+    architecture = {"obs_dim": 30, "n_actions": 5, "hidden_sizes": [], "activation": "relu", "lstm_size": 8}
+    save_policy(tmp_path / "lstm", weights, architecture, model="nnql", kind="q_network")
+    with pytest.raises(PolicyFormatError, match=r"recurrent .* retired.*a731e15"):
+        load_policy(tmp_path / "lstm")
+    with pytest.raises(ValueError, match="retired"):
+        NNQLConfig.from_dict({**NNQLConfig().to_dict(), "recurrent": True, "lstm_size": 64})
+    older = {**NNQLConfig().to_dict(), "recurrent": False, "lstm_size": 64}  # a feed-forward run's config
+    assert NNQLConfig.from_dict(older) == NNQLConfig()

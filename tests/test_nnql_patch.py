@@ -346,5 +346,3 @@ def test_action_local_without_a_patch_adds_the_branch_to_the_flat_mlp(tmp_path, 
     assert isinstance(learner_for(nav, nirl).network, LocalQNetwork)
     with pytest.raises(ValueError, match="action_local=-2"):
         NIRLConfig(action_local=-2)
-    with pytest.raises(ValueError, match=r"recurrent.*action_local"):  # the LSTM's encoder has no branch
-        NNQLConfig(recurrent=True, action_local=3)

@@ -26,7 +26,7 @@ LIMITS = Limits(n_actions=N_ACTIONS)
 
 @dataclass(kw_only=True, eq=False)
 class WideBatch(TransitionBatch):
-    """TransitionBatch with three more columns, as the recurrent learner would add (#14)."""
+    """TransitionBatch with three more columns, as a learner with memory would add."""
 
     KIND: ClassVar[str] = "test-wide"
     episode_step: np.ndarray = column("<i4")

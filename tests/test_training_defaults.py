@@ -8,7 +8,6 @@ import json
 from agents.nnql.config import NNQLConfig
 from agents.nnql.networks import DuelingQNetwork
 from agents.nnql.patch_network import PatchQNetwork, build_q_network
-from agents.nnql.recurrent_net import RecurrentQNetwork
 from agents.nnql.train_local import LocalTrainConfig
 from services.actor.config import ActorConfig
 from services.cli import main
@@ -25,9 +24,7 @@ def test_every_trainer_defaults_to_the_disc_mix_and_the_dueling_head():
 
 
 def test_networks_without_a_dueling_head_take_the_default_config():
-    """The LSTM and patch-CNN Q-networks keep a plain head; the default config must not refuse them."""
-    recurrent = NNQLConfig(recurrent=True)
-    assert isinstance(RecurrentQNetwork.from_config(recurrent, 30, 5), RecurrentQNetwork)
+    """The patch-CNN Q-network keeps a plain head; the default config must not refuse it."""
     nav = NavConfig(sensors=SensorConfig(n_beams=8, n_rays=16), observation=ObservationConfig(patch_size=16))
     net = build_q_network(NNQLConfig(), observation_dim(nav), 5, observation_settings(nav))
     assert isinstance(net, PatchQNetwork)

@@ -16,9 +16,8 @@ A policy directory holds two files (written atomically, temp + rename):
   trained on a user's Gymnasium env records ``env`` (``{"id", "kwargs", "module"}``,
   :meth:`worlds.own_env.EnvConfig.record`) instead, and ``navlearn evaluate --policy`` rebuilds that env.
 
-An NNQL policy whose ``architecture`` also has ``lstm_size`` is recurrent (encoder, LSTM, Q head;
-agents/nnql/recurrent_policy.py): ``load_policy`` gives a :class:`GreedyRecurrentPolicy`, which
-carries one LSTM state per robot and resets it per episode.
+A policy of NNQL's retired recurrent variant (``lstm_size`` in its architecture) is refused, naming
+the commit that still evaluates it (:data:`agents.nnql.config.RECURRENT_RETIRED`).
 
 ``kind`` says what the network outputs: ``"q_network"`` (Q-values, NNQL) or
 ``"policy_logits"`` (action logits, imitation and NIRL neural policies). Both are
@@ -41,14 +40,13 @@ from safetensors.numpy import load_file
 
 from agents.forward import network_forward
 from agents.mlp import ACTIVATION_NAMES, ARCHITECTURE_KEYS, CONFIG_FILE, KINDS, WEIGHTS_FILE, save_policy
-from agents.nnql.recurrent_policy import Memory, RecurrentQ, is_recurrent
+from agents.nnql.config import RECURRENT_RETIRED
 from worlds.config import NavConfig, saved_observation, with_observation
 from worlds.heuristics import goal_seeking_policy
 from worlds.perception import observation_dim
 
 __all__ = [
     "GreedyMLPPolicy",
-    "GreedyRecurrentPolicy",
     "PolicyFormatError",
     "load_policy",
     "load_policy_or_baseline",
@@ -120,25 +118,6 @@ class GreedyMLPPolicy:
         return f"{type(self).__name__}(model={self.model!r}, kind={self.kind!r}, version={self.version})"
 
 
-class GreedyRecurrentPolicy(GreedyMLPPolicy):
-    """A recurrent Q-network's policy (architecture with ``lstm_size``): argmax Q, one LSTM state per
-    robot, zeroed by ``reset_state(mask)`` at episode starts (the evaluation runner calls it)."""
-
-    def _set_weights(self, weights: dict[str, np.ndarray]) -> None:
-        self.net = RecurrentQ(weights, self.architecture)
-        self.memory = Memory(self.net.size)
-
-    def reset_state(self, done: np.ndarray) -> None:
-        self.memory.reset(done)
-
-    def outputs(self, obs: np.ndarray) -> np.ndarray:
-        """Q-values ``(N, n_actions)`` of one step; every robot's state moves on."""
-        obs = np.asarray(obs, dtype=np.float32)
-        if obs.ndim != 2 or obs.shape[1] != self.obs_dim:
-            raise ValueError(f"expected observations (N, {self.obs_dim}), got {obs.shape}")
-        return self.memory.advance(self.net, obs)
-
-
 def load_policy(path: str | Path) -> GreedyMLPPolicy:
     """The greedy policy saved in directory ``path`` by any navlearn learner."""
     path = Path(path)
@@ -155,6 +134,8 @@ def load_policy(path: str | Path) -> GreedyMLPPolicy:
     architecture = config.get("architecture")
     if not isinstance(architecture, dict) or any(k not in architecture for k in ARCHITECTURE_KEYS):
         raise PolicyFormatError(f"{config_path}: 'architecture' must hold {ARCHITECTURE_KEYS}")
+    if "lstm_size" in architecture:
+        raise PolicyFormatError(f"{path}: {RECURRENT_RETIRED}")
     if architecture["activation"] not in ACTIVATION_NAMES:
         raise PolicyFormatError(f"{config_path}: unknown activation {architecture['activation']!r}")
     try:
@@ -162,8 +143,6 @@ def load_policy(path: str | Path) -> GreedyMLPPolicy:
     except (SafetensorError, OSError) as exc:
         raise PolicyFormatError(f"{weights_path}: unreadable safetensors file ({exc})") from None
     try:
-        if is_recurrent(architecture):
-            return GreedyRecurrentPolicy(weights, config)
         return GreedyMLPPolicy(weights, config)
     except (KeyError, ValueError) as exc:
         raise PolicyFormatError(f"{path}: {exc}") from None

@@ -39,9 +39,7 @@ process-wide (threadpoolctl) and lifted when ``evaluate`` returns, so a thread t
 torch's BLAS at the same moment in the same process runs on one BLAS thread meanwhile.
 
 A ``Policy`` is any callable mapping an observation batch ``(n, obs_dim)`` float32 to
-actions ``(n,)`` int64, greedy for evaluation (see ``agents.imitation.policy.load_policy``). A
-policy with memory also has ``reset_state(mask)`` (agents.nnql.recurrent_policy): called with
-all robots at each wave's start and with the robots whose episode ended after each step.
+actions ``(n,)`` int64, greedy for evaluation (see ``agents.imitation.policy.load_policy``).
 """
 
 from __future__ import annotations
@@ -254,16 +252,11 @@ def _run_wave(policy: Policy, config: NavConfig, tasks: list[Task], seeds: list[
     if dynamic:
         disc_gap = np.array([_disc_gap(env, i, frames[0][i]) for i in range(n)])
     running = np.ones(n, bool)
-    reset_state = getattr(policy, "reset_state", None)  # a recurrent policy's memory: fresh per episode
-    if reset_state is not None:
-        reset_state(running)
     outcome, length, steps = np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64)
     while running.any():
         obs, _, _, _, info = env.step(np.asarray(policy(obs), dtype=np.int64).reshape(n))
         poses = env.poses()
         if info:
-            if reset_state is not None:
-                reset_state(info["_final_obs"])
             ended = running & info["_final_obs"]
             final = info["final_info"]
             poses[ended] = final["pose"][ended]

@@ -16,6 +16,14 @@ TARGET_UPDATES = ("soft", "hard")
 LOSS_FUNCTIONS = ("l2", "smooth_l1", "l1")
 Q_NETWORKS = ("auto", "mlp")
 CNN_FIELDS = ("cnn_channels", "cnn_kernel_sizes", "cnn_strides")
+RETIRED_FIELDS = ("recurrent", "lstm_size", "seq_len", "burn_in", "sequences")
+"""fields of the retired recurrent variant, which older configs (checkpoints, saved policies'
+nnql_config) still hold: dropped when read, unless ``recurrent`` is set"""
+RECURRENT_RETIRED = (
+    "NNQL's recurrent (LSTM, R2D2-style) variant is retired: the feed-forward Q-network does better on "
+    "every measured task (its figures: docs/notebook.md, results/perception/); commit a731e15 still "
+    "trains and evaluates it"
+)
 
 
 @dataclass
@@ -114,16 +122,6 @@ class NNQLConfig:
     readings centred on a's heading and the goal's distance and bearing seen from that heading (the
     same small MLP for each action, so what one action learns of a wall ahead holds for all; with a
     patch, agents.nnql.patch_network; no planner)"""
-    recurrent: bool = False
-    """R2D2-style recurrent Q (agents/nnql/recurrent_learner.py): encoder, LSTM, Q head; sequence replay"""
-    lstm_size: int = 128
-    """LSTM hidden units (recurrent)"""
-    seq_len: int = 20
-    """steps of a replayed sequence that are trained on, after the burn-in (recurrent)"""
-    burn_in: int = 10
-    """steps at a sequence's start that only unroll the LSTM from the stored state, no loss (recurrent)"""
-    sequences: int = 32
-    """sequences per update (recurrent; batch_size counts transitions of the feed-forward Q only)"""
 
     def __post_init__(self) -> None:
         self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)
@@ -165,20 +163,6 @@ class NNQLConfig:
             raise ValueError(f"NNQLConfig.n_step={self.n_step!r}: expected an integer >= 1")
         if self.sarsa and self.n_step > 1:
             raise ValueError("NNQLConfig.n_step: SARSA bootstraps one step ahead; use n_step=1 with sarsa")
-        for name in ("lstm_size", "seq_len", "sequences"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"NNQLConfig.{name}={getattr(self, name)}: expected >= 1")
-        if self.burn_in < 0:
-            raise ValueError(f"NNQLConfig.burn_in={self.burn_in}: expected >= 0")
-        if self.recurrent and (self.sarsa or self.prioritized):
-            raise ValueError("NNQLConfig.recurrent: uniform sequence replay; no sarsa/prioritized")
-        if self.recurrent and (self.action_local or self.cnn_goal or self.cnn_embed):
-            raise ValueError(
-                "NNQLConfig.recurrent: its encoder is an MLP; action_local, cnn_goal and cnn_embed shape the"
-                " feed-forward Q-network (drop them or recurrent)"
-            )
-        if self.recurrent and self.n_step > 1:
-            raise ValueError("NNQLConfig.recurrent: one-step targets; use n_step=1 with recurrent")
         if self.sarsa and self.double_q:
             raise ValueError("NNQLConfig: sarsa bootstraps on the taken action; set double_q=False")
 
@@ -191,7 +175,11 @@ class NNQLConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> NNQLConfig:
-        """Inverse of to_dict; unknown keys are an error so typos do not pass silently."""
+        """Inverse of to_dict; unknown keys are an error so typos do not pass silently. A config saved
+        before the recurrent variant was retired loads (its fields dropped) unless it is recurrent."""
+        if data.get("recurrent"):
+            raise ValueError(RECURRENT_RETIRED)
+        data = {k: v for k, v in data.items() if k not in RETIRED_FIELDS}
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names)
         if unknown:

@@ -1,5 +1,4 @@
-"""What both NNQL learners (feed-forward and recurrent) share about their outputs: the policy
-version, saved policies and checkpoint directories.
+"""The NNQL learner's outputs: the policy version, saved policies and checkpoint directories.
 
 A checkpoint is a directory: ``learner.pt`` (the learner's ``state_dict``), ``replay/`` (its
 ``save_replay``) and ``policy/`` (its ``save_policy``), written beside its final path and swapped

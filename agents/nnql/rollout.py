@@ -64,8 +64,6 @@ class VectorRollout:
         self.env = env
         self.policy = policy
         self.with_next_action = with_next_action
-        self.reset_state = getattr(policy, "reset_state", None)
-        """a recurrent policy's hook: zero the memory of robots whose episode ended"""
         self.num_envs = int(env.num_envs)
         self.obs: np.ndarray | None = None
         self.actions: np.ndarray | None = None
@@ -114,8 +112,6 @@ class VectorRollout:
             self.returns[done] = 0.0
             self.lengths[done] = 0
         self.obs = np.asarray(next_obs, dtype=np.float32)
-        if self.reset_state is not None and done.any():
-            self.reset_state(done)
         self.actions = self.policy(self.obs)
         self.steps += self.num_envs
         batch = {

@@ -27,8 +27,6 @@ from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.ratelimit import RateLimiter
-from agents.nnql.recurrent_learner import RecurrentNNQLLearner
-from agents.nnql.recurrent_rollout import RecurrentRollout
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
 from agents.nnql.train_config import LocalTrainConfig
 from worlds.config import LEARNING_NAV, NavConfig, observation_settings, with_moving_discs
@@ -57,7 +55,7 @@ class TrainResult:
     """FamilyMetrics.to_dict() of the final greedy evaluation of the saved weights (test set, seed 0)"""
     final_table: str = ""
     out: str | None = None
-    learner: NNQLLearner | RecurrentNNQLLearner | None = field(default=None, repr=False)
+    learner: NNQLLearner | None = field(default=None, repr=False)
     """the trained learner (not serialised)"""
     policy: NNQLPolicy | None = field(default=None, repr=False)
     """the policy with the saved weights (keep_best's choice, else the last; not serialised)"""
@@ -121,19 +119,13 @@ def train_local(
         observation = None
     obs_dim = int(np.prod(env.single_observation_space.shape))
     n_actions = int(env.single_action_space.n)
-    if nnql.recurrent:
-        learner = RecurrentNNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
-    else:
-        learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
+    learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
     learner.env = None if gym_env is None else gym_env.record()
     if initial_weights is not None:
         learner.set_weights(initial_weights)
     policy = learner.policy(seed=run.seed)
     policy.explore_as(nnql, learner.version)
-    if nnql.recurrent:
-        rollout = RecurrentRollout(env, policy)
-    else:
-        rollout = VectorRollout(env, policy, with_next_action=nnql.sarsa)
+    rollout = VectorRollout(env, policy, with_next_action=nnql.sarsa)
     rollout.reset(seed=run.seed)
     # The learner service's rate logic, with no slack: one update per 1 / utd_ratio transitions once
     # the replay holds learning_starts (and a batch).

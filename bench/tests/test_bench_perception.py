@@ -9,10 +9,10 @@ from bench.perception import bc_variants, joint_path_ratios, pooled
 
 
 def test_one_clone_per_distinct_observation_the_reward_and_the_learner_play_no_part():
-    # G observes as B (recurrent Q), D+geo as D (geodesic reward), Fgea+geo as F (network options)
-    got = bc_variants(["G", "B", "D+geo", "D", "Fgea+geo", "F", "A"])
+    # B+geo observes as B, D+geo as D (geodesic reward), Fgea+geo as F (network options)
+    got = bc_variants(["B+geo", "B", "D+geo", "D", "Fgea+geo", "F", "A"])
     assert got == {"BC:A": "A", "BC:B": "B", "BC:D": "D", "BC:F": "F"}
-    assert bc_variants(["G"]) == {"BC:G": "G"}  # B's observation, named after the variant asked for
+    assert bc_variants(["B+geo"]) == {"BC:B+geo": "B+geo"}  # B's observation, named as asked
 
 
 def record(seed, solved, ratios, spl=0.5):

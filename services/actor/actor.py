@@ -29,15 +29,12 @@ from threadpoolctl import threadpool_limits
 
 from agents.nnql.config import NNQLConfig
 from agents.nnql.policy import NNQLPolicy
-from agents.nnql.recurrent_policy import RecurrentNNQLPolicy, is_recurrent
-from agents.nnql.recurrent_rollout import RecurrentRollout
 from agents.nnql.rollout import VectorRollout
 from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
-from protocols.messages import ExplorationSchedule, SequenceBatch, TransitionBatch
+from protocols.messages import ExplorationSchedule, TransitionBatch
 from services.actor.config import ActorConfig
-from services.actor.recurrent import RecurrentActing
 from services.actor.silence import SilenceWatch
 from services.actor.status import BACKPRESSURE_SHARE, ActorView, BlockedShare, actor_status
 from services.common.outbox import Outbox, decode_ack
@@ -97,12 +94,7 @@ class Actor:
         self.policy = None
         self.version = 0
         self.exploration: ExplorationSchedule | None = None
-        self.recurrent = None
-        if config.recurrent:  # one LSTM state per robot; batches carry what sequence replay needs
-            self.recurrent = RecurrentActing(env.num_envs, self.n_actions, config.lstm_size, self.rng)
-            self.rollout = RecurrentRollout(env, self.recurrent)
-        else:
-            self.rollout = VectorRollout(env, self.act)
+        self.rollout = VectorRollout(env, self.act)
         self._declared = contextlib.ExitStack()
         """everything declared on the session, undeclared by close() in reverse order"""
         self.receiver = self._declared.enter_context(
@@ -197,17 +189,8 @@ class Actor:
         message = received.message
         network = message.architecture
         try:
-            if is_recurrent(network) != self.config.recurrent:
-                recurrent = is_recurrent(network)
-                raise ValueError(
-                    f"recurrent weights: {recurrent}; this actor's --recurrent: {self.config.recurrent}"
-                )
             if self.policy is None or self.policy.architecture != network:
-                kind = RecurrentNNQLPolicy if self.recurrent else NNQLPolicy
-                policy = kind(message.tensors, network, version=message.version, seed=self.seed)
-                if self.recurrent:
-                    self.recurrent.use(policy)
-                self.policy = policy
+                self.policy = NNQLPolicy(message.tensors, network, version=message.version, seed=self.seed)
             else:
                 self.policy.set_weights(message.tensors, message.version)
         except (ValueError, TypeError, KeyError) as exc:
@@ -217,12 +200,11 @@ class Actor:
         self.policy.explore_as(self.exploration, message.version)
         self.version = message.version
         self.weights_applied += 1
-        if self.rollout.obs is not None and not self.recurrent:  # act on the next step with it already
-            # (a recurrent policy has stepped its memory on this observation: it acts from the next one)
+        if self.rollout.obs is not None:  # act on the next step with it already
             self.rollout.actions = self.act(self.rollout.obs)
         return True
 
-    def step_batch(self) -> TransitionBatch | SequenceBatch:
+    def step_batch(self) -> TransitionBatch:
         """``batch_steps`` vector steps as one TransitionBatch (all from one policy version)."""
         pieces = []
         for _ in range(self.config.batch_steps):
@@ -234,8 +216,7 @@ class Actor:
             self.episodes_done += len(ended)
         flat = concat_batches(pieces, self.rollout.num_envs)
         self.seq += 1
-        kind = SequenceBatch if self.recurrent else TransitionBatch
-        return kind(
+        return TransitionBatch(
             sender=self.sender,
             seq=self.seq,
             actor=self.config.id,

@@ -37,10 +37,6 @@ class ActorConfig:
     silence_warning: float = 15.0
     """seconds without any acknowledgement, while batches wait, before the actor says so and names the
     likely cause (no learner on this run, a wrong --run, an ACL); repeated with back-off (0: never)"""
-    recurrent: bool = False
-    """the learner trains recurrent NNQL (its --recurrent): an LSTM state per robot, SequenceBatches out"""
-    lstm_size: int = 128
-    """the learner's --lstm-size (recurrent): the state sent before the first weights arrive (all zero)"""
     max_steps: int = 0
     """stop after this many robot-steps (0: run until stopped)"""
     log_every: float = 10.0

@@ -66,9 +66,9 @@ def configs(args: argparse.Namespace):
         raise OptionError("--moving-discs and --eval-dynamic-episodes must be >= 0")
     env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
     if not env.own_world:
-        if nnql.recurrent or nav.observation.patch_size or nnql.action_local:
+        if nav.observation.patch_size or nnql.action_local:
             raise OptionError(
-                "--recurrent, --patch-size and --action-local are for navlearn's world; drop them with --env"
+                "--patch-size and --action-local are for navlearn's world; drop them with --env"
             )
         env_spaces(env)  # a bad id or a continuous action space: refused now, with its sentence
     return run, nnql, nav, env

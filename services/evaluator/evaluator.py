@@ -25,7 +25,6 @@ from agents.evaluation.env_returns import evaluate_env, table
 from agents.evaluation.plots import REFERENCE, plot_evaluations
 from agents.evaluation.policies import load_policy
 from agents.nnql.policy import NNQLPolicy
-from agents.nnql.recurrent_policy import RecurrentNNQLPolicy, is_recurrent
 from protocols import keys
 from protocols.codec import encode
 from protocols.limits import Limits
@@ -120,8 +119,7 @@ class Evaluator:
         return version > last[1] and version - last[1] >= self.config.every_versions
 
     def evaluate(self, weights: dict, architecture: dict, version: int) -> dict[str, Any]:
-        kind = RecurrentNNQLPolicy if is_recurrent(architecture) else NNQLPolicy  # memory reset per episode
-        policy = kind(weights, architecture, mode="greedy", version=version)
+        policy = NNQLPolicy(weights, architecture, mode="greedy", version=version)
         start = time.perf_counter()
         if not self.env.own_world:
             metrics = evaluate_env(policy, self.env, self.config.episodes, seed=self.config.eval_seed)

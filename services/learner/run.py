@@ -12,7 +12,6 @@ import time
 from agents.nirl.config import NIRLConfig
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
-from agents.nnql.recurrent_learner import RecurrentNNQLLearner
 from protocols.limits import Limits
 from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.learner.config import LearnerConfig
@@ -53,25 +52,12 @@ def run_learner(
         obs_dim, n_actions = env_spaces(env)  # one copy built: the env's own spaces, flattened
         observation = None  # no navlearn observation settings: the env record says what it is
         log.info("learner: env %s, %d inputs, %d actions", env.signature(), obs_dim, n_actions)
-    if nnql.recurrent:  # R2D2-style: sequence replay in RAM, SequenceBatches from --recurrent actors
-        if config.replay_dir:
-            raise ValueError("--recurrent keeps its sequence replay in RAM; drop --replay-dir")
-        learner = RecurrentNNQLLearner(
-            nnql, obs_dim, n_actions, device=config.device, observation=observation
-        )
-    else:
-        learner = NNQLLearner(
-            nnql,
-            obs_dim,
-            n_actions,
-            device=config.device,
-            replay_dir=config.replay_dir,
-            observation=observation,
-        )
+    learner = NNQLLearner(
+        nnql, obs_dim, n_actions, device=config.device, replay_dir=config.replay_dir, observation=observation
+    )
     learner.env = env.record()
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
-    widest = max(obs_dim, nnql.lstm_size) if nnql.recurrent else obs_dim  # LSTM states are columns too
-    limits = Limits(n_actions=n_actions, max_obs_dim=widest)
+    limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
     inbox = learner_inbox(config, nnql, limits, settings.run, (config.acl_names, settings.acl_file))
     if settings.mode == "router" and (warning := exposure_warning(settings)):
         log.warning("%s", warning)  # the learner hosts the router

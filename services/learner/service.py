@@ -34,7 +34,6 @@ from protocols.messages import (
     DemoBatch,
     EvalReport,
     ExplorationSchedule,
-    SequenceBatch,
     StatusReport,
     TransitionBatch,
 )
@@ -250,13 +249,6 @@ class LearnerService:
         if obs.shape[1] != obs_dim:
             self.inbox.reject(
                 "shape", f"{item.channel} from {item.name} have obs_dim {obs.shape[1]}, not {obs_dim}"
-            )
-            return
-        wanted = SequenceBatch if self.learner.config.recurrent else TransitionBatch
-        if isinstance(item.message, TransitionBatch) and type(item.message) is not wanted:
-            self.inbox.reject(
-                "kind",
-                f"{item.message.KIND} from {item.name}: this learner takes {wanted.KIND} (--recurrent)",
             )
             return
         if self.durable is None or self._replaying:

@@ -132,10 +132,6 @@ class Up:
         """seconds from the processes' start to the first transition the learner received"""
         self._started_at = time.monotonic()
 
-    def _recurrent_actor(self) -> list[str]:
-        """Actor flags of a recurrent learner (its LSTM size, SequenceBatches out); none otherwise."""
-        return ["--recurrent", "--lstm-size", str(self.nnql.lstm_size)] if self.nnql.recurrent else []
-
     def start(self) -> None:
         cfg, out = self.config, self.out
         self._started_at = time.monotonic()
@@ -190,7 +186,6 @@ class Up:
                     str(cfg.seed + i),
                     "--observation",
                     cfg.observation,
-                    *self._recurrent_actor(),
                     *self.env.flags(),
                 ],
                 base,
