@@ -11,7 +11,7 @@ import pytest
 from agents.evaluation import evaluate, make_eval_set
 from agents.evaluation.policies import load_policy
 from services.drive.config import SimConfig
-from services.drive.sim import Scene, SimRobot, eval_scene
+from services.drive.sim import Scene, SimRobot, eval_scene, scene
 from worlds.maps import GridMap
 
 
@@ -61,3 +61,14 @@ def test_lidar_reads_the_wall_ahead_and_inf_where_nothing_is_in_range():
     assert not np.isinf(ranges).any()
     robot.config = SimConfig(scan_beams=360, scan_range=2.0, scan_noise=0.0)
     assert np.isinf(robot.scan()[ahead])
+
+
+def test_a_map_file_starts_at_its_centre_or_at_start_and_refuses_a_start_in_a_wall(tmp_path):
+    path = tmp_path / "box.txt"
+    path.write_text("######\n#....#\n#....#\n#.#..#\n#....#\n######\n")
+    assert scene(SimConfig(map=str(path))).start == (3.0, 3.0, 0.0)
+    assert scene(SimConfig(map=str(path), start=(1.5, 1.5, 0.3))).start == (1.5, 1.5, 0.3)
+    with pytest.raises(ValueError, match="inside a wall"):
+        scene(SimConfig(map=str(path), start=(2.5, 3.5, 0.0)))
+    with pytest.raises(ValueError, match="outside"):
+        scene(SimConfig(map=str(path), start=(9.0, 1.0, 0.0)))

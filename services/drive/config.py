@@ -77,8 +77,7 @@ class SimConfig(RosSettings):
 
     map: str = "unseen:0"
     """the map and start: unseen:<k> or dynamic:<k> (episode k of `navlearn evaluate`'s set, its map,
-    start, start heading and goal), or a map file (MovingAI .map, ASCII .txt, map_server .yaml) with
-    --start"""
+    start, start heading and goal), or a map file (MovingAI .map or ASCII .txt, 1 m cells) with --start"""
     eval_seed: int = 0
     """seed of the evaluation set of unseen:<k> (as navlearn evaluate --seed)"""
     start: tuple[float, ...] = ()

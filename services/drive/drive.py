@@ -36,7 +36,15 @@ from typing import Any
 
 import numpy as np
 
+from agents.evaluation.policies import load_policy
+from protocols import keys
+from protocols.codec import encode as encode_message
+from protocols.messages import StatusReport
+from services.common.process import stop_on_signals
+from services.common.transport import declare_alive, open_session
+from services.drive import wire
 from services.drive.motion import ActionMotion, Limits
+from services.drive.node import RosNode
 from services.drive.scan import ScanRefused, check_geometry, scan_rays
 from worlds.live import LiveObserver, Workspace
 
@@ -269,15 +277,6 @@ class Driver:
 
 def run_drive(config, settings, stop: threading.Event) -> int:
     """``navlearn drive``'s process: load the policy, join the robot's router, drive until ``stop``."""
-    from agents.evaluation.policies import load_policy
-    from protocols import keys
-    from protocols.codec import encode as encode_message
-    from protocols.messages import StatusReport
-    from services.common.process import stop_on_signals
-    from services.common.transport import declare_alive, open_session
-    from services.drive import wire
-    from services.drive.node import RosNode
-
     policy = load_policy(config.policy)
     limits = Limits(
         config.max_linear,

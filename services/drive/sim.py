@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agents.evaluation.runner import fixed_sampler, make_eval_set
 from protocols import keys
 from protocols.codec import encode as encode_message
 from protocols.messages import StatusReport
@@ -35,9 +36,11 @@ from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.drive import wire
 from services.drive.config import SimConfig
 from services.drive.node import RosNode
+from worlds.config import NavConfig
 from worlds.maps import GridMap, Task, load_map
 from worlds.robot import collides
 from worlds.sensors import cast_rays
+from worlds.vector_env import NavigationVectorEnv
 
 log = logging.getLogger("navlearn.ros2_sim")
 
@@ -60,21 +63,20 @@ def scene(config: SimConfig) -> Scene:
     grid = load_map(config.map)
     if config.start and len(config.start) != 3:
         raise ValueError(f"--start takes x y theta, got {config.start}")
-    start = (
-        tuple(config.start)
-        if config.start
-        else (grid.width * grid.cell_size / 2, grid.height * grid.cell_size / 2, 0.0)
-    )
+    centre = (grid.width * grid.cell_size / 2, grid.height * grid.cell_size / 2, 0.0)
+    start = tuple(config.start) if config.start else centre
+    cell = (int(start[1] // grid.cell_size), int(start[0] // grid.cell_size))
+    if not grid.in_bounds(cell) or grid.blocked[cell]:
+        where = "outside" if not grid.in_bounds(cell) else "inside a wall of"
+        raise ValueError(
+            f"the start ({start[0]:g}, {start[1]:g}) is {where} {config.map}: give --start x y theta"
+        )
     return Scene(grid, start, None, config.map)
 
 
 def eval_scene(k: int, seed: int) -> Scene:
     """Episode ``k`` of evaluation set ``unseen`` of seed ``seed``: its map, its start pose as
     ``navlearn evaluate`` starts it (heading from the episode's seed) and its goal cell's centre."""
-    from agents.evaluation.runner import fixed_sampler, make_eval_set
-    from worlds.config import NavConfig
-    from worlds.vector_env import NavigationVectorEnv
-
     es = make_eval_set("unseen", k + 1, seed=seed)
     task: Task = es.tasks[k]
     env = NavigationVectorEnv(1, NavConfig(), maps=fixed_sampler([task], f"ros2-sim:{seed}:{k}"))

@@ -24,8 +24,13 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import math
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
+from zenoh import ZBytes
+from zenoh.ext import Int64, ZDeserializeError, z_deserialize, z_serialize
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
@@ -195,8 +200,6 @@ def entity_gid(token: str) -> bytes:
 
 def attachment(seq: int, timestamp_ns: int, gid: bytes) -> bytes:
     """The attachment of every sample: zenoh-ext serialization of (int64 seq, int64 ns, 16-byte gid)."""
-    from zenoh.ext import Int64, z_serialize
-
     if len(gid) != GID_SIZE:
         raise WireError(f"a gid has {GID_SIZE} bytes, got {len(gid)}")
     return z_serialize((Int64(seq), Int64(timestamp_ns), bytes(gid))).to_bytes()
@@ -204,9 +207,6 @@ def attachment(seq: int, timestamp_ns: int, gid: bytes) -> bytes:
 
 def read_attachment(raw: bytes | None) -> tuple[int, int, bytes]:
     """(seq, timestamp ns, gid) of an attachment; WireError when missing or malformed."""
-    from zenoh import ZBytes
-    from zenoh.ext import Int64, ZDeserializeError, z_deserialize
-
     if raw is None:
         raise WireError("sample without the rmw_zenoh attachment (sequence number, timestamp, gid)")
     try:
@@ -274,8 +274,6 @@ def twist_stamped(linear: float, angular: float, ns: int, frame_id: str):
 
 def pose(x: float, y: float, yaw: float):
     """geometry_msgs/msg/Pose at (x, y, 0) facing ``yaw``."""
-    import math
-
     types = _types()
     return types["geometry_msgs/msg/Pose"](
         position=types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0),
@@ -287,8 +285,6 @@ def pose(x: float, y: float, yaw: float):
 
 def yaw_of(orientation) -> float:
     """The yaw (rad) of a geometry_msgs/msg/Quaternion (rotation about z; roll and pitch ignored)."""
-    import math
-
     q = orientation
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
@@ -301,8 +297,6 @@ def odometry(
     x: float, y: float, yaw: float, linear: float, angular: float, ns: int, frame_id: str, child: str
 ):
     """nav_msgs/msg/Odometry: pose in ``frame_id``, twist in ``child`` (covariances zero: unknown)."""
-    import numpy as np
-
     types = _types()
     return types[ODOMETRY](
         header=header(ns, frame_id),
@@ -317,8 +311,6 @@ def odometry(
 def laser_scan(ranges, angle_min: float, angle_increment: float, range_min: float, range_max: float, ns: int,
                frame_id: str, scan_time: float = 0.0):  # fmt: skip
     """sensor_msgs/msg/LaserScan of ``ranges`` (float32) at ``angle_min + i * angle_increment``."""
-    import numpy as np
-
     ranges = np.asarray(ranges, np.float32)
     return _types()[LASER_SCAN](
         header=header(ns, frame_id),
