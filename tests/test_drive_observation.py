@@ -93,3 +93,44 @@ def test_observe_needs_a_goal_and_the_action():
     live.observe(rays, (0.0, 0.0, 0.0))
     with pytest.raises(ValueError, match="action"):
         live.observe(rays, (0.1, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("error", [0.01, 0.03])
+def test_snapped_hits_give_the_worlds_own_map_from_noisy_ranges(error):
+    """Ranges off by up to a few centimetres (noise), padded and snapped (``snap_hits``), write the
+    world's own map with a third or less of the wrong cells the same ranges write unsnapped (a
+    ray grazing a corner can still end in the wrong cell)."""
+    from services.drive.scan import pad_returns
+
+    nav = noiseless(replace(LEARNING_NAV, observation=ObservationConfig(subgoal="own_map", patch_size=5)))
+    rng = np.random.default_rng(11)
+    wrong = {"snapped": 0, "plain": 0}
+    steps = 0
+    for seed in range(12):
+        task = generate_task("rooms", 16, 16, TRAIN_SEEDS + 91 + seed)
+        env = NavigationEnv(nav, maps="rooms:16")
+        _, info = env.reset(seed=seed, options={"task": task})
+        grid = task.grid
+        goal = ((task.goal[1] + 0.5) * grid.cell_size, (task.goal[0] + 0.5) * grid.cell_size)
+        snapped, plain = LiveObserver(nav, snap_hits=True), LiveObserver(nav)
+        ws = Workspace(0.0, 0.0, grid.height, grid.width, grid.cell_size)
+        for live in (snapped, plain):
+            live.start(ws, goal)
+        action = -1
+        for _ in range(30):
+            exact = env.batch.rays[0]
+            noisy = np.where(exact < 6.0, exact + rng.uniform(-error, error, exact.shape), exact)
+            rays = pad_returns(noisy, 0.05, 6.0)
+            snapped.observe(rays, tuple(info["pose"]), action)
+            plain.observe(rays, tuple(info["pose"]), action)
+            world_map = env.batch.perception.occ[0]
+            wrong["snapped"] += int((snapped.perception.occ[0] != world_map).sum())
+            wrong["plain"] += int((plain.perception.occ[0] != world_map).sum())
+            steps += 1
+            action = int(rng.integers(nav.robot.n_actions))
+            _, _, terminated, truncated, info = env.step(action)
+            if terminated or truncated:
+                break
+    # wrong cells of the own map, summed over the steps (a wrong cell counts at every step it stays):
+    # measured 320 snapped against 1115 unsnapped over 134 steps
+    assert steps > 100 and wrong["plain"] >= 3 * max(wrong["snapped"], 1), (wrong, steps)

@@ -13,6 +13,16 @@ content only what the robot's rays saw; the goal sits at a cell centre, as in th
 
 ``tests/test_drive_observation.py`` proves that it is one builder: fed the world's own rays and
 poses on the world's grid, the observations equal the world's, step by step.
+
+Measured rays need one more step (``snap_hits``). The world's rays are exact: each ends on the
+face of the blocked cell it hits, so the own map marks that cell blocked and the cells before it
+free. A measured range is off by the sensor's noise and by resampling: a little short, and the map
+marks the free cell in front of the wall as blocked; a little long, and the free trace of the ray
+runs into the wall cell and clears it. With ``snap_hits`` the own map gets, for every return, the
+range at which the ray enters the cell its measured end point lies in (a hair less): that cell is
+marked blocked and no trace clears it, as with the world's rays. The readings (sector minima) keep
+the measured ranges. The caller moves returns a little past the measurement first
+(``services.drive.scan.pad_returns``), so that a short reading of a wall still ends inside it.
 """
 
 from __future__ import annotations
@@ -107,9 +117,10 @@ class LiveObserver:
     ``[0, max_range]`` (``max_range``: nothing seen); poses are odometry-frame (x, y, theta).
     """
 
-    def __init__(self, config: NavConfig) -> None:
-        self.config = config
+    def __init__(self, config: NavConfig, snap_hits: bool = False) -> None:
+        self.config, self.snap_hits = config, snap_hits
         self.n_rays = len(config.sensors.ray_angles)
+        self.ray_c, self.ray_s = np.cos(config.sensors.ray_angles), np.sin(config.sensors.ray_angles)
         self.per = config.sensors.rays_per_beam
         self.max_range = float(config.sensors.max_range)
         self.obs_dim = observation_dim(config)
@@ -140,9 +151,10 @@ class LiveObserver:
             self._fresh = False
             return base
         f8 = np.float64
+        map_rays = self._snapped(rays, x, y, theta) if self.snap_hits else rays
         robots = (np.array([x], f8), np.array([y], f8), np.array([theta], f8), np.array([gx], f8),
                   np.array([gy], f8), self.goal_cell, np.zeros(1, np.int64), base[None, :].copy(),
-                  rays[None, :].copy())  # fmt: skip
+                  map_rays[None, :].copy())  # fmt: skip
         obs = np.zeros((1, self.obs_dim), np.float32)
         if self._fresh:
             self.perception.observe_fresh(np.zeros(1, np.int64), self.maps, robots, obs)
@@ -166,3 +178,19 @@ class LiveObserver:
                 np.zeros(1),
             )
         return obs[0]
+
+    def _snapped(self, rays: np.ndarray, x: float, y: float, theta: float) -> np.ndarray:
+        """The rays as the own map should take them (``snap_hits``, see the module docstring): each
+        return ends just short of where it enters the cell its end point lies in (1e-9 cell, so
+        that :func:`worlds.own_map.map_rays` marks that cell blocked and its trace stops before it)."""
+        cell = self.workspace.cell
+        c, s = math.cos(theta), math.sin(theta)
+        dx, dy = c * self.ray_c - s * self.ray_s, s * self.ray_c + c * self.ray_s  # as map_rays turns them
+        px, py, length = x / cell, y / cell, rays / cell
+        ex, ey = px + length * dx, py + length * dy  # the end points, in cells
+        with np.errstate(divide="ignore", invalid="ignore"):  # where each ray enters its end's cell
+            entry_x = np.where(dx != 0, (np.floor(ex) + (dx < 0) - px) / np.where(dx != 0, dx, 1.0), -np.inf)
+            entry_y = np.where(dy != 0, (np.floor(ey) + (dy < 0) - py) / np.where(dy != 0, dy, 1.0), -np.inf)
+        entry = np.maximum(entry_x, entry_y)
+        snap = (rays < self.max_range) & (entry > 0) & (entry <= length)
+        return np.where(snap, (entry - 1e-9) * cell, rays)

@@ -61,6 +61,10 @@ class DriveConfig(RosSettings):
     """control loop rate (Hz): velocity commands and the watchdog's checks"""
     scan_yaw: float = 0.0
     """the lidar's yaw on the robot (rad, counter-clockwise; pi for one mounted backwards)"""
+    hit_margin: float = 0.05
+    """metres added to every scan return before it feeds the policy's rays (services.drive.scan.
+    pad_returns: keeps the lidar's noise from drawing walls in front of walls in the own map); about
+    three times the lidar's range noise"""
     cell: float = 1.0
     """cell size (m) of the robot's own map (the policy's training maps have 1 m cells)"""
     margin: float = 6.0

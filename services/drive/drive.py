@@ -45,7 +45,7 @@ from services.common.transport import declare_alive, open_session
 from services.drive import wire
 from services.drive.motion import ActionMotion, Limits
 from services.drive.node import RosNode
-from services.drive.scan import ScanRefused, check_geometry, scan_rays
+from services.drive.scan import ScanRefused, check_geometry, pad_returns, scan_rays
 from worlds.live import LiveObserver, Workspace
 
 log = logging.getLogger("navlearn.drive")
@@ -101,13 +101,15 @@ class Driver:
         max_actions: int,
         scan_topic: str = "/scan",
         scan_yaw: float = 0.0,
+        hit_margin: float = 0.05,
     ) -> None:
         self.policy, self.inputs, self._send, self.limits = policy, inputs, send, limits
         self.nav = policy.nav_config()
-        self.observer = LiveObserver(self.nav)
+        self.observer = LiveObserver(self.nav, snap_hits=True)
         self.turns, self.step = self.nav.robot.turns, self.nav.robot.step
         self.stale_after, self.cell, self.margin = stale_after, cell, margin
         self.goal_tolerance = goal_tolerance or self.nav.goal_tolerance
+        self.hit_margin = hit_margin
         self.max_actions, self.scan_topic, self.scan_yaw = max_actions, scan_topic, scan_yaw
         self.state, self.detail = "waiting for a goal", ""
         self.goal: tuple[float, float] | None = None
@@ -242,7 +244,10 @@ class Driver:
             self.detail = str(exc)
             return False
         self.detail = ""
-        rays = scan_rays(scan, self.nav.sensors.ray_angles, self.nav.sensors.max_range, self.scan_yaw)
+        max_range = self.nav.sensors.max_range
+        rays = pad_returns(
+            scan_rays(scan, self.nav.sensors.ray_angles, max_range, self.scan_yaw), self.hit_margin, max_range
+        )
         obs = self.observer.observe(rays, pose, -1 if self.last_action is None else self.last_action)
         action = int(np.asarray(self.policy(obs[None, :])).reshape(-1)[0])
         self.motion = ActionMotion(pose, float(self.turns[action]), self.step, self.limits)
@@ -318,6 +323,7 @@ def run_drive(config, settings, stop: threading.Event) -> int:
             max_actions=config.max_actions,
             scan_topic=config.scan_topic,
             scan_yaw=config.scan_yaw,
+            hit_margin=config.hit_margin,
         )
         driver.warm_up()
         stop_on_signals(first=driver.halt, event=stop)  # from here on a signal sends zero velocity first

@@ -1,18 +1,27 @@
 """A LaserScan as the policy's rays: ROS's reading semantics, any beam geometry, one refusal.
 
 A policy casts ``n_rays`` rays at fixed angles from its heading (``worlds.config.SensorConfig.
-ray_angles``, 96 all round for the shipped one). A lidar has its own beam count, start angle,
-increment and range limits. :func:`scan_rays` resamples: ray k reads the smallest valid reading of
-the beams within half a ray spacing of its direction (so no obstacle falls between rays), or
-the nearest beam's when none is that close. Readings follow REP 117 (sensor_msgs/LaserScan):
+ray_angles``, 96 all round for the shipped one), and its own map marks the cell just past each
+ray's end as blocked, so a ray must read the range along its own direction: a reading a few
+centimetres short marks the free cell in front of a wall as a wall. :func:`scan_rays`
+therefore interpolates, for each ray, between the two valid beams on either side of its direction,
+linearly in angle, unless their readings differ by more than :data:`EDGE` (an object's edge lies
+between them): the farther reading then, since the nearer one put along the ray's direction would
+mark a free cell beside the object as blocked (a phantom wall), while the farther one only misses
+an edge that the neighbouring rays see. With a valid beam on one side only, that beam's reading.
+:func:`pad_returns` then moves every return a little beyond the measured range, so that the
+sensor's noise does not put half the wall hits in the free cell in front of the wall.
+(Measured on the simulated lidar, 360 beams with 1 cm noise: returns whose end cell is free in the
+true map, 0 for the world's exact rays, 50% for noisy readings as they come, 0.4% with both;
+tests/test_drive_scan.py.) Readings follow REP 117 (sensor_msgs/LaserScan):
 
 * a finite reading in ``[range_min, range_max]`` is a return at that range;
 * ``+inf``, or a finite reading above ``range_max``: no return within range, read as the
   policy's ``max_range`` (nothing seen, as the world reads a free beam);
 * ``-inf``: an object closer than ``range_min``, read as 0;
 * ``NaN``, or a finite reading below ``range_min`` (drivers that write 0 for "no return"): no
-  measurement; the ray takes its other beams, and with none ``max_range`` (as the world reads a
-  dropped-out beam).
+  measurement; the ray uses the valid beams around it, and with none ``max_range`` (as the world
+  reads a dropped-out beam).
 
 Beam i points at ``angle_min + i * angle_increment`` (``angle_max`` is not trusted: real drivers
 write it inconsistently, see the held-out RPLIDAR recording), counter-clockwise from the sensor's
@@ -86,16 +95,39 @@ def readings(scan, max_range: float) -> np.ndarray:
     return np.minimum(out, max_range)
 
 
+EDGE = 0.2
+"""two neighbouring beams whose readings differ by more than this (m) straddle an object's edge:
+a ray between them takes the farther reading instead of interpolating"""
+
+
 def scan_rays(scan, ray_angles: np.ndarray, max_range: float, yaw_offset: float = 0.0) -> np.ndarray:
     """The policy's rays (metres along ``ray_angles`` from the heading) from a LaserScan whose
     geometry :func:`check_geometry` accepted (see the module docstring)."""
     values = readings(scan, max_range)
-    diff = np.abs(_wrap(np.asarray(ray_angles)[:, None] - beam_angles(scan, yaw_offset)[None, :]))
-    spacing = float(np.diff(np.sort(ray_angles)).min()) if len(ray_angles) > 1 else 2 * np.pi
-    window = diff <= spacing / 2 + 1e-12
-    nearest = np.zeros_like(window)
-    nearest[np.arange(len(ray_angles)), diff.argmin(axis=1)] = True
-    window |= nearest & ~window.any(axis=1, keepdims=True)  # no beam that close: the nearest one
-    masked = np.where(window & ~np.isnan(values)[None, :], values[None, :], np.inf)
-    rays = masked.min(axis=1)
-    return np.where(np.isfinite(rays), rays, max_range)
+    angles = beam_angles(scan, yaw_offset)
+    valid = ~np.isnan(values)
+    rays = np.asarray(ray_angles, np.float64)
+    if not valid.any():
+        return np.full(rays.shape, float(max_range))
+    order = np.argsort(angles[valid], kind="stable")
+    a, v = angles[valid][order], values[valid][order]
+    a = np.concatenate([a[-1:] - 2 * np.pi, a, a[:1] + 2 * np.pi])  # the circle closes
+    v = np.concatenate([v[-1:], v, v[:1]])
+    wanted = _wrap(rays)
+    hi = np.clip(np.searchsorted(a, wanted, side="left"), 1, len(a) - 1)
+    lo = hi - 1
+    gap = a[hi] - a[lo]
+    t = np.where(gap > 0, (wanted - a[lo]) / np.where(gap > 0, gap, 1.0), 0.0)
+    between = v[lo] + t * (v[hi] - v[lo])
+    edge = np.abs(v[hi] - v[lo]) > EDGE
+    return np.minimum(np.where(edge, np.maximum(v[lo], v[hi]), between), max_range)
+
+
+def pad_returns(rays: np.ndarray, margin: float, max_range: float) -> np.ndarray:
+    """``rays`` with ``margin`` metres added to every return (a ray shorter than ``max_range``),
+    kept a return. The own map marks as blocked the cell a ray ends in, and the world's rays are exact,
+    ending on a wall's face; a lidar's noise puts half its readings a little short of the face, in
+    the free cell in front of it, and the map would grow a wall there. A margin of a few noise
+    standard deviations puts them back in the wall (walls are cells, at least one cell thick)."""
+    below = np.nextafter(max_range, 0.0)
+    return np.where(rays < max_range, np.minimum(rays + margin, below), rays)

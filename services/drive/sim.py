@@ -132,10 +132,10 @@ class SimRobot:
         """Ranges (float32) of the beams at ``self.angles`` from the heading: +inf for no return."""
         x, y, theta = self.pose()
         ranges = cast_rays(self.scene.grid, x, y, theta, self.angles, self.config.scan_range)[0]
+        hit = ranges < self.config.scan_range  # the noise is on returns: nothing in range stays +inf
         if self.config.scan_noise > 0:
             ranges = ranges + self.rng.normal(0.0, self.config.scan_noise, ranges.shape)
-        ranges = np.where(ranges >= self.config.scan_range, np.inf, np.maximum(ranges, 0.0))
-        return ranges.astype(np.float32)
+        return np.where(hit, np.clip(ranges, 0.0, self.config.scan_range), np.inf).astype(np.float32)
 
     def status(self) -> dict:
         with self.lock:
