@@ -50,7 +50,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=40, help="first episodes of the unseen set")
     parser.add_argument("--seed", type=int, default=0, help="evaluation set seed (navlearn evaluate --seed)")
     parser.add_argument("--policy", default="pretrained/nnql", help="saved policy directory")
-    parser.add_argument("--timeout", type=float, default=400.0, help="wall-clock limit per episode (s): 200 actions take about 300 s here")
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=400.0,
+        help="wall-clock limit per episode (s): 200 actions take about 300 s here",
+    )
     parser.add_argument("--out", help="directory for episodes.jsonl and the logs")
     args = parser.parse_args(argv)
 
