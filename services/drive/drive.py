@@ -6,7 +6,7 @@ loop, with no Zenoh in it (the publisher is handed in as ``send``), ticking at `
 
 * a new goal starts an episode: the robot's own map is a :class:`worlds.live.Workspace` around
   the robot and the goal (odometry frame), the observation builder (:class:`worlds.live.LiveObserver`,
-  the world's own code) starts afresh, and a recurrent policy's memory is cleared;
+  the world's own code) starts afresh;
 * at rest, on a scan taken after the last action ended, it checks the scan's geometry
   (:func:`services.drive.scan.check_geometry`: one sentence, and the robot stays put, if the
   policy cannot use it), builds the observation from the scan's rays and the odometry pose, asks
@@ -138,8 +138,6 @@ class Driver:
         observer.start(Workspace.around((0.0, 0.0), (3.0, 0.0), self.margin, self.cell), (3.0, 0.0))
         rays = np.full(len(self.nav.sensors.ray_angles), self.nav.sensors.max_range)
         self.policy(observer.observe(rays, (0.0, 0.0, 0.0))[None, :])
-        if hasattr(self.policy, "reset_state"):
-            self.policy.reset_state(np.ones(1, bool))
 
     # ------------------------------------------------------------------ commands
     def send(self, linear: float, angular: float) -> None:
@@ -211,8 +209,6 @@ class Driver:
             return
         self.goal, self.state, self.decided_after = goal, "driving", -math.inf
         self.observer.start(workspace, goal)
-        if hasattr(self.policy, "reset_state"):
-            self.policy.reset_state(np.ones(1, bool))
         log.info("new goal (%.2f, %.2f), %.2f m away", goal[0], goal[1], math.dist(goal, pose[:2]))
 
     def _finish(self, state: str, counter: str, detail: str = "") -> None:
