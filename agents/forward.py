@@ -60,7 +60,7 @@ class TorchForward:
         first = "torch" not in sys.modules
         import torch  # only policies with a CNN need torch; MLP actors start without it
 
-        from agents.nnql.patch_network import network_from_architecture
+        from agents.nnql.q_networks import network_from_architecture
 
         if first:
             torch.set_num_threads(1)

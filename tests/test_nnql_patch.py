@@ -12,10 +12,12 @@ from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import evaluate, make_eval_set
 from agents.forward import TorchForward
 from agents.nirl.config import NIRLConfig
+from agents.nnql.action_local import LocalQNetwork
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
-from agents.nnql.patch_network import LocalQNetwork, PatchQNetwork, build_q_network, goal_images
+from agents.nnql.patch_network import PatchQNetwork, goal_images
 from agents.nnql.policy import NNQLPolicy
+from agents.nnql.q_networks import build_q_network
 from services.cli import main
 from worlds.config import NavConfig, ObservationConfig, SensorConfig, observation_settings
 from worlds.perception import frame_dim, frame_layout, observation_dim

@@ -7,7 +7,8 @@ import json
 
 from agents.nnql.config import NNQLConfig
 from agents.nnql.networks import DuelingQNetwork
-from agents.nnql.patch_network import PatchQNetwork, build_q_network
+from agents.nnql.patch_network import PatchQNetwork
+from agents.nnql.q_networks import build_q_network
 from agents.nnql.train_local import LocalTrainConfig
 from services.actor.config import ActorConfig
 from services.cli import main

@@ -40,7 +40,7 @@ class NIRLConfig:
     level with it on the test seed. Saved configs without the field had the plain head"""
     action_local: int = 0
     """K > 0: the Q-network gets NNQL's action-local branch (``NNQLConfig.action_local``,
-    agents.nnql.patch_network.LocalQNetwork): one small MLP, shared by the actions, over the 2K+1
+    agents.nnql.action_local.LocalQNetwork): one small MLP, shared by the actions, over the 2K+1
     range readings around each action's heading and the goal turned to it, added to that action's Q -
     a wall learned ahead of one action is learned ahead of all, so NIRL reaches a given success with
     fewer robot-steps (with gamma 0.98); 0: off"""

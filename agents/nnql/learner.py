@@ -36,7 +36,6 @@ from agents.nnql.lean import Batch, LeanUpdate, Step
 from agents.nnql.losses import PRIORITY_KEY, make_loss
 from agents.nnql.networks import export_weights, import_weights, make_q_actor
 from agents.nnql.nstep import NStepAccumulator
-from agents.nnql.patch_network import build_q_network
 from agents.nnql.persistence import (
     CHECKPOINT_STATE,
     LearnerOutputs,
@@ -44,6 +43,7 @@ from agents.nnql.persistence import (
     check_checkpoint_observation,
 )
 from agents.nnql.policy import NNQLPolicy
+from agents.nnql.q_networks import build_q_network
 from agents.nnql.replay_storage import (
     columns,
     has_memmap_state,
