@@ -88,7 +88,18 @@ def test_learners_default_to_learning_nav_and_refuse_other_observations(datasets
     # behaviour cloning in either observation, the saved policy records the one it was trained in
     for name, path, nav in (("learning", new, LEARNING_NAV), ("plain", old, OBSERVATIONS["plain"])):
         out = tmp_path / f"bc-{name}"
-        argv = ["imitate", "train", "--demos", str(path), "--out", str(out), "--epochs", "2", "--hidden", "8"]
+        argv = [
+            "imitate",
+            "train",
+            "--demos",
+            str(path),
+            "--out",
+            str(out),
+            "--max-epochs",
+            "2",
+            "--hidden-sizes",
+            "8",
+        ]
         assert main([*argv, "--observation", name]) == 0
         saved = json.loads((out / "config.json").read_text())
         assert saved["observation"] == observation_settings(nav)

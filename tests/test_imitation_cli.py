@@ -14,8 +14,8 @@ def test_demos_imitate_evaluate_pipeline(tmp_path, capsys):
     assert main(["demos", "info", str(demos)]) == 0
     assert "episodes" in capsys.readouterr().out
     policy = tmp_path / "policy"
-    assert main(["imitate", "train", "--demos", str(demos), "--out", str(policy), "--epochs", "3",
-                 "--hidden", "16,16"]) == 0  # fmt: skip
+    assert main(["imitate", "train", "--demos", str(demos), "--out", str(policy), "--max-epochs", "3",
+                 "--hidden-sizes", "16", "16"]) == 0  # fmt: skip
     config = json.loads((policy / "config.json").read_text())
     assert config["kind"] == "policy_logits" and config["architecture"]["hidden_sizes"] == [16, 16]
     assert len((policy / "training.jsonl").read_text().splitlines()) == config["training"]["epochs"]

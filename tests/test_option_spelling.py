@@ -12,6 +12,7 @@ import dataclasses
 
 import pytest
 
+from agents.imitation.config import ImitationConfig
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nnql.config import NNQLConfig
 from agents.nnql.train_config import LocalTrainConfig, TrainObservation
@@ -28,6 +29,7 @@ COMMANDS = {
     "train": (LocalTrainConfig, TrainObservation, NNQLConfig, EnvConfig),
     "nirl train": (NIRLRun, NIRLConfig),
     "actor": (ActorConfig, EnvConfig, ZenohSettings),
+    "imitate train": (ImitationConfig,),
 }
 """each command and the configs its flags come from"""
 
@@ -37,6 +39,7 @@ HAND_WRITTEN = {
     "train": {"--local"},
     "nirl train": {"--demos", "--observation"},
     "actor": {"--verbose"},
+    "imitate train": {"--demos", "--out", "--observation"},
 }
 """the flags that are not a config field, and only these: a config file, logging, a dataset"""
 
@@ -105,7 +108,7 @@ def test_the_training_commands_share_the_nnql_options_and_the_old_spellings_are_
         assert option in flags["train"]
     parsed = {
         option
-        for name in ("up", "learner", "train", "nirl train")
+        for name in ("up", "learner", "train", "nirl train", "imitate train")
         for action in command_parser(name)._actions
         for option in action.option_strings
     }

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from agents.mlp import ACTIVATION_NAMES
 
@@ -13,7 +13,7 @@ class ImitationConfig:
 
     hidden_sizes: tuple[int, ...] = (128, 128)
     """widths of the hidden layers"""
-    activation: str = "relu"
+    activation: str = field(default="relu", metadata={"choices": ACTIVATION_NAMES})
     """hidden-layer activation: relu, tanh or elu"""
     lr: float = 1e-3
     """Adam learning rate"""
@@ -33,6 +33,8 @@ class ImitationConfig:
     """torch intra-op threads while training (small MLPs run fastest on one; set for the process)"""
 
     def __post_init__(self) -> None:
+        if not self.hidden_sizes or min(self.hidden_sizes) < 1:
+            raise ValueError(f"hidden_sizes must be positive layer widths, got {self.hidden_sizes}")
         if self.activation not in ACTIVATION_NAMES:
             raise ValueError(f"activation must be one of {ACTIVATION_NAMES}, got {self.activation!r}")
         if not 0.0 < self.val_fraction < 1.0:

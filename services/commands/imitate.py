@@ -4,26 +4,12 @@ from __future__ import annotations
 
 import argparse
 
+from agents.imitation.config import ImitationConfig
+from services.common.options import add_options
 from worlds.config import OBSERVATIONS
 
 
-def _sizes(text: str) -> tuple[int, ...]:
-    try:
-        sizes = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected comma-separated layer widths such as 128,128, got {text!r}"
-        ) from None
-    if not sizes or min(sizes) < 1:
-        raise argparse.ArgumentTypeError(f"layer widths must be positive, got {text!r}")
-    return sizes
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from agents.imitation.config import ImitationConfig
-    from agents.mlp import ACTIVATION_NAMES
-
-    d = ImitationConfig()
     parser = subparsers.add_parser(
         "imitate",
         help="learn a navigation policy from demonstrations (behaviour cloning)",
@@ -44,22 +30,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     train.add_argument("--out", required=True, help="output policy directory")
     train.add_argument(
-        "--hidden", type=_sizes, default=d.hidden_sizes, help="hidden layer widths, e.g. 128,128"
-    )
-    train.add_argument("--activation", choices=ACTIVATION_NAMES, default=d.activation, help="activation")
-    train.add_argument("--lr", type=float, default=d.lr, help="Adam learning rate")
-    train.add_argument("--batch-size", type=int, default=d.batch_size, help="minibatch size in steps")
-    train.add_argument("--epochs", type=int, default=d.max_epochs, help="maximum number of epochs")
-    train.add_argument(
-        "--patience", type=int, default=d.patience, help="epochs without validation gain before stopping"
-    )
-    train.add_argument(
-        "--val-fraction", type=float, default=d.val_fraction, help="share of episodes for validation"
-    )
-    train.add_argument(
-        "--seed", type=int, default=d.seed, help="seed of the split, initial weights and batches"
-    )
-    train.add_argument(
         "--observation",
         choices=list(OBSERVATIONS),
         default="learning",
@@ -68,6 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(8 beams + goal, older demonstration sets); the demonstrations must have been recorded in it, "
         "and the saved policy records it (default %(default)s)",
     )
+    add_options(train, ImitationConfig, "NAVLEARN_IMITATE", "behaviour cloning")
     train.set_defaults(func=run_train)
 
 
@@ -80,24 +51,15 @@ def run_train(args: argparse.Namespace) -> int:
 
     from agents.demo_observation import load_demos_for
     from agents.demos import DemoFormatError
-    from agents.imitation.config import ImitationConfig
     from agents.imitation.train import save_trained, train_policy
+    from services.common.options import OptionError, options_from_args
     from worlds.config import observation_settings
 
     try:
-        config = ImitationConfig(
-            hidden_sizes=args.hidden,
-            activation=args.activation,
-            lr=args.lr,
-            batch_size=args.batch_size,
-            max_epochs=args.epochs,
-            patience=args.patience,
-            val_fraction=args.val_fraction,
-            seed=args.seed,
-        )
+        config = options_from_args(ImitationConfig, args, "NAVLEARN_IMITATE")
         nav = OBSERVATIONS[args.observation]
         demos = load_demos_for(args.demos, nav)
-    except (DemoFormatError, ValueError) as exc:
+    except (OptionError, DemoFormatError, ValueError) as exc:
         print(f"navlearn imitate train: {exc}", file=sys.stderr)
         return 2
     if len(demos) < 2:
