@@ -4,6 +4,7 @@ removed flag fails here, not in a reader's terminal. docs/notebook.md is history
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import functools
 import io
@@ -89,3 +90,39 @@ def test_the_extractor_joins_continuations_and_skips_other_programs(tmp_path):
         "supervisord -c x.conf\nnavlearn actor ...\n```\n\n```\nnavlearn not-bash\n```\n"
     )
     assert commands(doc) == [(2, ["up", "--run", "a", "--duration", "5"]), (4, ["status"])]
+
+
+OTHER_PROGRAMS = {
+    "--nav", "--robots", "--runs", "--only", "--only-flood", "--compare-tree", "--against",  # bench/ programs
+    "--replicas",  # kubectl
+    "--short",  # git rev-parse
+    "--once",  # ros2 topic
+    "--tls-",  # the --tls-* family, named as a prefix
+}  # fmt: skip
+"""flags the guides name that belong to other programs than navlearn"""
+
+
+def navlearn_options() -> set[str]:
+    found: set[str] = set()
+
+    def walk(p: argparse.ArgumentParser) -> None:
+        for action in p._actions:
+            found.update(action.option_strings)
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    walk(sub)
+
+    walk(parser())
+    return found
+
+
+def test_every_flag_the_guides_name_exists():
+    known = navlearn_options() | OTHER_PROGRAMS
+    unknown = [
+        f"{doc.name}:{number}: {flag}"
+        for doc in GUIDES
+        for number, line in enumerate(doc.read_text().splitlines(), 1)
+        for flag in re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", line)
+        if flag not in known
+    ]
+    assert not unknown, "flags no navlearn command has:\n" + "\n".join(unknown)
