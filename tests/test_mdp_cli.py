@@ -67,14 +67,3 @@ def test_tabular_writes_a_learning_curve(tmp_path, capsys, algo):
 def test_tabular_rejects_bad_config(tmp_path, capsys):
     assert main(["tabular", "--alpha", "2", "--out", str(tmp_path / "c.png")]) == 2
     assert "alpha must be in (0, 1]" in capsys.readouterr().err
-
-
-def test_tabular_flag_defaults_mirror_the_config():
-    from dataclasses import asdict
-
-    from agents.tabular import TabularConfig
-    from agents.tabular.common import ALPHA_SCHEDULES, EXPLORATIONS
-    from services.commands import tabular
-
-    assert asdict(TabularConfig()) == tabular.DEFAULTS
-    assert tabular.ALPHA_SCHEDULES == ALPHA_SCHEDULES and tabular.EXPLORATIONS == EXPLORATIONS

@@ -16,6 +16,7 @@ from agents.imitation.config import ImitationConfig
 from agents.nirl.config import NIRLConfig, NIRLRun
 from agents.nnql.config import NNQLConfig
 from agents.nnql.train_config import LocalTrainConfig, TrainObservation
+from agents.tabular.config import TabularConfig
 from services.actor.config import ActorConfig
 from services.cli import build_parser
 from services.common.transport import ZenohSettings
@@ -30,6 +31,7 @@ COMMANDS = {
     "nirl train": (NIRLRun, NIRLConfig),
     "actor": (ActorConfig, EnvConfig, ZenohSettings),
     "imitate train": (ImitationConfig,),
+    "tabular": (TabularConfig,),
 }
 """each command and the configs its flags come from"""
 
@@ -40,6 +42,20 @@ HAND_WRITTEN = {
     "nirl train": {"--demos", "--observation"},
     "actor": {"--verbose"},
     "imitate train": {"--demos", "--out", "--observation"},
+    "tabular": {
+        "--algo",
+        "--map",
+        "--start",
+        "--goal",
+        "--slip",
+        "--connectivity",
+        "--step-cost",
+        "--collision-cost",
+        "--exploring-starts",
+        "--max-steps",
+        "--every-visit",
+        "--out",
+    },
 }
 """the flags that are not a config field, and only these: a config file, logging, a dataset"""
 

@@ -19,68 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from agents.tabular.config import TabularConfig
 from worlds.gridworld import GridDynamics, GridWorldEnv
 
-EXPLORATIONS = ("epsilon-greedy", "boltzmann")
-ALPHA_SCHEDULES = ("constant", "visits")
 Progress = Callable[[int], None]
 """Called with the number of episodes finished so far."""
-
-
-@dataclass(frozen=True)
-class StepSizeConfig:
-    """What every tabular learner takes: episodes, discount, step-size schedule and seed (TD(0)
-    prediction's whole config; control adds its exploration)."""
-
-    episodes: int = 20000
-    """Number of episodes."""
-    gamma: float = 0.95
-    """Discount factor."""
-    alpha: float = 0.5
-    """Step size (its first value under the "visits" schedule)."""
-    alpha_schedule: str = "visits"
-    """"constant", or "visits": alpha / n ** alpha_power after n visits of the state (-action pair)."""
-    alpha_power: float = 0.6
-    """Exponent of the "visits" schedule, in (0.5, 1] for convergence (1 = sample average)."""
-    seed: int = 0
-    """Seed of the learner's random generator."""
-
-    def __post_init__(self) -> None:
-        if self.episodes < 1:
-            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
-        if not 0.0 <= self.gamma <= 1.0:
-            raise ValueError(f"gamma must be in [0, 1], got {self.gamma}")
-        if not 0.0 < self.alpha <= 1.0:
-            raise ValueError(f"alpha must be in (0, 1], got {self.alpha}")
-        if self.alpha_schedule not in ALPHA_SCHEDULES:
-            raise ValueError(f"alpha_schedule must be one of {ALPHA_SCHEDULES}, got {self.alpha_schedule!r}")
-        if not 0.0 < self.alpha_power <= 1.0:
-            raise ValueError(f"alpha_power must be in (0, 1], got {self.alpha_power}")
-
-
-@dataclass(frozen=True)
-class TabularConfig(StepSizeConfig):
-    """Control by SARSA, Q-learning or Monte Carlo: the step sizes and the exploration."""
-
-    exploration: str = "epsilon-greedy"
-    """"epsilon-greedy" (random action with probability epsilon) or "boltzmann" (softmax of Q/temperature)."""
-    explore_start: float = 1.0
-    """Epsilon, or temperature, in the first episode."""
-    explore_end: float = 0.01
-    """Epsilon, or temperature, at the end of the decay and after it."""
-    explore_decay: float = 0.7
-    """Fraction of the episodes over which exploration decays geometrically from start to end."""
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.exploration not in EXPLORATIONS:
-            raise ValueError(f"exploration must be one of {EXPLORATIONS}, got {self.exploration!r}")
-        if not (self.explore_start > 0 and self.explore_end > 0):
-            raise ValueError("explore_start and explore_end must be positive")
-        if self.exploration == "epsilon-greedy" and max(self.explore_start, self.explore_end) > 1:
-            raise ValueError("epsilon (explore_start, explore_end) must be in (0, 1]")
-        if not 0.0 <= self.explore_decay <= 1.0:
-            raise ValueError(f"explore_decay must be in [0, 1], got {self.explore_decay}")
 
 
 @dataclass(frozen=True)
@@ -175,58 +118,6 @@ def run_control(
 
     run_in_chunks(run, config.episodes, progress)
     return TabularResult(q, returns, lengths)
-
-
-@njit(cache=True)
-def td_control_episodes(
-    q,
-    visits,
-    successor,
-    reward,
-    cum_prob,
-    goal,
-    start,
-    max_steps,
-    gamma,
-    alpha,
-    by_visits,
-    power,
-    boltzmann,
-    explore_params,
-    on_policy,
-    returns,
-    lengths,
-    first,
-):
-    """The TD control kernel (run_control's signature, ``on_policy`` as its extra argument): Q-learning
-    bootstraps on ``max_a' Q(s', a')`` and draws each action when it acts; SARSA (``on_policy``) draws
-    the next action ``a'`` first and bootstraps on ``Q(s', a')``, then takes it."""
-    for i in range(explore_params.shape[0]):
-        param = explore_params[i]
-        s = start_state(start, successor.shape[0], goal)
-        total = 0.0
-        t = 0
-        a = explore(q[s], boltzmann, param) if on_policy else 0
-        while t < max_steps and s != goal:
-            if not on_policy:
-                a = explore(q[s], boltzmann, param)
-            b = sample_index(cum_prob[a])
-            nxt = successor[s, b]
-            r = reward[s, b]
-            visits[s, a] += 1
-            if on_policy:
-                nxt_a = explore(q[nxt], boltzmann, param)
-                bootstrap = q[nxt, nxt_a]
-            else:
-                nxt_a = 0
-                bootstrap = q[nxt].max()
-            target = r if nxt == goal else r + gamma * bootstrap
-            q[s, a] += step_size(alpha, by_visits, power, visits[s, a]) * (target - q[s, a])
-            total += r
-            s, a = nxt, nxt_a
-            t += 1
-        returns[first + i] = total
-        lengths[first + i] = t
 
 
 @njit(cache=True)

@@ -7,14 +7,11 @@ policies faster."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from numba import njit
 
 from agents.tabular.common import (
     Progress,
-    TabularConfig,
     TabularResult,
     explore,
     run_control,
@@ -22,15 +19,8 @@ from agents.tabular.common import (
     start_state,
     step_size,
 )
+from agents.tabular.config import MonteCarloConfig
 from worlds.gridworld import GridWorldEnv
-
-
-@dataclass(frozen=True)
-class MonteCarloConfig(TabularConfig):
-    """Monte Carlo control; the fields of TabularConfig plus the visit rule."""
-
-    first_visit: bool = True
-    """Update from the first visit of (s, a) in an episode only (False: every visit)."""
 
 
 @njit(cache=True)

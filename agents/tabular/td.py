@@ -10,7 +10,6 @@ from numba import njit
 
 from agents.tabular.common import (
     Progress,
-    StepSizeConfig,
     grid_dynamics,
     run_in_chunks,
     sample_index,
@@ -18,12 +17,8 @@ from agents.tabular.common import (
     start_state,
     step_size,
 )
+from agents.tabular.config import TDConfig
 from worlds.gridworld import GridWorldEnv
-
-
-@dataclass(frozen=True)
-class TDConfig(StepSizeConfig):
-    """TD(0) prediction: the step sizes every tabular learner takes (a visit counts states here)."""
 
 
 @dataclass(frozen=True)

@@ -4,30 +4,16 @@ with the learning curve as a PNG."""
 from __future__ import annotations
 
 import argparse
+from dataclasses import asdict
 
+from agents.tabular.config import MonteCarloConfig, TabularConfig
 from services.commands.solve import add_world_args, load_task
+from services.common.options import OptionError, add_options, options_from_args
 
 ALGORITHMS = ("qlearning", "sarsa", "mc")
-# Mirrors of agents.tabular's choices and TabularConfig's defaults, kept here so that `navlearn --help`
-# does not import numba; tests/test_mdp_cli.py checks that they agree.
-ALPHA_SCHEDULES = ("constant", "visits")
-EXPLORATIONS = ("epsilon-greedy", "boltzmann")
-DEFAULTS = {
-    "episodes": 20000,
-    "gamma": 0.95,
-    "alpha": 0.5,
-    "alpha_schedule": "visits",
-    "alpha_power": 0.6,
-    "exploration": "epsilon-greedy",
-    "explore_start": 1.0,
-    "explore_end": 0.01,
-    "explore_decay": 0.7,
-    "seed": 0,
-}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    defaults = argparse.Namespace(**DEFAULTS)
     parser = subparsers.add_parser(
         "tabular",
         help="learn a grid world by Q-learning, SARSA or Monte Carlo control and plot the learning curve",
@@ -44,35 +30,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--exploring-starts", action="store_true", help="start each episode in a random state, not --start"
     )
     parser.add_argument("--max-steps", type=int, default=200, help="episode length cap")
-    parser.add_argument("--episodes", type=int, default=defaults.episodes, help="number of episodes")
-    parser.add_argument("--gamma", type=float, default=defaults.gamma, help="discount factor")
-    parser.add_argument("--alpha", type=float, default=defaults.alpha, help="step size (first value)")
-    parser.add_argument(
-        "--alpha-schedule",
-        choices=ALPHA_SCHEDULES,
-        default=defaults.alpha_schedule,
-        help="constant, or visits: alpha / n(s,a)^alpha-power",
-    )
-    parser.add_argument(
-        "--alpha-power", type=float, default=defaults.alpha_power, help="exponent in (0.5, 1]"
-    )
-    parser.add_argument(
-        "--exploration", choices=EXPLORATIONS, default=defaults.exploration, help="action choice"
-    )
-    parser.add_argument(
-        "--explore-start", type=float, default=defaults.explore_start, help="first epsilon or temperature"
-    )
-    parser.add_argument(
-        "--explore-end", type=float, default=defaults.explore_end, help="final epsilon or temperature"
-    )
-    parser.add_argument(
-        "--explore-decay",
-        type=float,
-        default=defaults.explore_decay,
-        help="fraction of the episodes over which exploration decays geometrically",
-    )
+    add_options(parser, TabularConfig, "NAVLEARN_TABULAR", "learner")
     parser.add_argument("--every-visit", action="store_true", help="Monte Carlo: update on every visit")
-    parser.add_argument("--seed", type=int, default=defaults.seed, help="seed of the learner")
     parser.add_argument("--out", default="curve.png", help="PNG file for the learning curve")
     parser.set_defaults(func=run)
 
@@ -85,28 +44,15 @@ def run(args: argparse.Namespace) -> int:
     from rich.progress import Progress
 
     from agents.mdp import dynamics_to_mdp, value_iteration
-    from agents.tabular import MonteCarloConfig, TabularConfig, monte_carlo_control, q_learning, sarsa
+    from agents.tabular import monte_carlo_control, q_learning, sarsa
     from worlds.gridworld import DEFAULT_MAP, GridWorldEnv
 
     try:
         dynamics, start = load_task(args, DEFAULT_MAP)
-        fields = {
-            "episodes": args.episodes,
-            "gamma": args.gamma,
-            "alpha": args.alpha,
-            "alpha_schedule": args.alpha_schedule,
-            "alpha_power": args.alpha_power,
-            "exploration": args.exploration,
-            "explore_start": args.explore_start,
-            "explore_end": args.explore_end,
-            "explore_decay": args.explore_decay,
-            "seed": args.seed,
-        }
+        config = options_from_args(TabularConfig, args, "NAVLEARN_TABULAR")
         if args.algo == "mc":
-            config = MonteCarloConfig(first_visit=not args.every_visit, **fields)
-        else:
-            config = TabularConfig(**fields)
-        if not 0.0 <= args.gamma < 1.0:
+            config = MonteCarloConfig(first_visit=not args.every_visit, **asdict(config))
+        if not 0.0 <= config.gamma < 1.0:
             raise ValueError("--gamma must be in [0, 1) (the comparison with value iteration needs it)")
         env = GridWorldEnv(
             dynamics.grid,
@@ -115,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
             dynamics.config,
             max_steps=args.max_steps,
         )
-    except ValueError as exc:
+    except (OptionError, ValueError) as exc:
         print(f"navlearn tabular: {exc}", file=sys.stderr)
         return 2
     learn = {"qlearning": q_learning, "sarsa": sarsa, "mc": monte_carlo_control}[args.algo]
