@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from agents.imitation.config import ImitationConfig
-from services.common.options import add_options
+from services.common.options import OptionError, add_options, options_from_args
 from worlds.config import OBSERVATIONS
 
 
@@ -52,7 +52,6 @@ def run_train(args: argparse.Namespace) -> int:
     from agents.demo_observation import load_demos_for
     from agents.demos import DemoFormatError
     from agents.imitation.train import save_trained, train_policy
-    from services.common.options import OptionError, options_from_args
     from worlds.config import observation_settings
 
     try:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
+from pathlib import Path
 
 from agents.nnql.config import NNQLConfig
 from services.common.options import add_options
@@ -94,9 +96,6 @@ def main(args: argparse.Namespace) -> int:
 
 def config_file(path: str | None, cls: type) -> dict:
     """The fields of ``cls`` a JSON config file holds ({} without one); unknown fields are an error."""
-    import json
-    from pathlib import Path
-
     if not path:
         return {}
     loaded = json.loads(Path(path).read_text())

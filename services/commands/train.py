@@ -12,8 +12,8 @@ import sys
 
 from agents.nnql.config import CNN_FIELDS, NNQLConfig
 from agents.nnql.train_config import LocalTrainConfig, TrainObservation
-from services.common.options import add_options
-from worlds.own_env import ENV_TITLE, EnvConfig
+from services.common.options import OptionError, add_options, options_from_args
+from worlds.own_env import ENV_TITLE, EnvConfig, env_spaces
 
 DESCRIPTION = """\
 Train the NNQL policy (neural-network Q-learning, thesis ch. 4) in one process: a vector env of N
@@ -44,9 +44,6 @@ def register(subparsers) -> None:
 def configs(args: argparse.Namespace):
     """(LocalTrainConfig, NNQLConfig, NavConfig, EnvConfig) from the parsed flags; OptionError or
     ValueError naming the flag for anything wrong."""
-    from services.common.options import OptionError, options_from_args
-    from worlds.own_env import env_spaces
-
     run = options_from_args(LocalTrainConfig, args, "NAVLEARN_TRAIN")
     nav = options_from_args(TrainObservation, args, "NAVLEARN_TRAIN").nav()
     # SARSA bootstraps on the action taken: double Q-learning does not apply unless asked for
@@ -76,7 +73,6 @@ def configs(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from agents.device import resolve_device
-    from services.common.options import OptionError
     from worlds.tasks import parse_map_spec
 
     if not args.local:
