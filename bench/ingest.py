@@ -197,6 +197,14 @@ def measure(session, setting: str, seq: int, label: str, offered: float, args) -
     return figures, quiesce(session, run, last.seq)
 
 
+def ratios(numerators: list[float], denominators: list[float]) -> dict | None:
+    """summary() of the per-round ratios; None when a setting stored nothing in some round (the
+    figures above say which), so the other figures still get printed."""
+    if not all(denominators):
+        return None
+    return summary([n / d for n, d in zip(numerators, denominators, strict=True)])
+
+
 def summary(values: list[float]) -> dict:
     return {
         "median": round(statistics.median(values), 3),
@@ -268,10 +276,11 @@ def run_ingest(args: argparse.Namespace, root: Path) -> dict:
         for o in args.offered:
             per_load = {k: summary([f[setting, o][k] for f in rounds]) for k in rounds[0][setting, o]}
             result[f"at_{o:.0f}/{setting}"] = {k: v["median"] for k, v in per_load.items()}
-    result["ratio_acks_wal_vs_off"] = summary([w / o for w, o in zip(wal, off, strict=True)])
-    result["ratio_acks_vs_off"] = summary([a / o for a, o in zip(acks, off, strict=True)])
-    result["ratio_acks_wal_vs_acks"] = summary([w / a for w, a in zip(wal, acks, strict=True)])
-    result["aim_met"] = result["ratio_acks_wal_vs_off"]["median"] >= 0.7
+    result["ratio_acks_wal_vs_off"] = ratios(wal, off)
+    result["ratio_acks_vs_off"] = ratios(acks, off)
+    result["ratio_acks_wal_vs_acks"] = ratios(wal, acks)
+    wal_vs_off = result["ratio_acks_wal_vs_off"]
+    result["aim_met"] = wal_vs_off is not None and wal_vs_off["median"] >= 0.7
     return result
 
 
@@ -284,6 +293,9 @@ def report(result: dict) -> None:
         )
     for name in ("ratio_acks_wal_vs_off", "ratio_acks_vs_off", "ratio_acks_wal_vs_acks"):
         r = result[name]
+        if r is None:
+            print(f"{name}: none (a setting stored nothing in some round)")
+            continue
         print(
             f"{name}: median {r['median']:.2f} (range {r['min']:.2f}-{r['max']:.2f}, per round {r['values']})"
         )
