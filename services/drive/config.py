@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from services.drive.wire import DISTROS
+DISTROS = ("humble", "jazzy", "kilted", "rolling")
+"""ROS 2 distributions whose rmw_zenoh wire services.drive.wire writes (kept here, free of Zenoh
+imports, so that building the CLI parser stays light)"""
 
 
 def _ros(default: object, env: str | None = None, **more: object):

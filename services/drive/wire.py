@@ -32,6 +32,8 @@ import numpy as np
 from zenoh import ZBytes
 from zenoh.ext import Int64, ZDeserializeError, z_deserialize, z_serialize
 
+from services.drive.config import DISTROS
+
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
@@ -40,7 +42,6 @@ TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 ADMIN_SPACE = "@ros2_lv"
 HUMBLE_HASH = "TypeHashNotSupported"
 """the hash chunk of every data key and token of rmw_zenoh on Humble (no type hashes there)"""
-DISTROS = ("humble", "jazzy", "kilted", "rolling")
 GID_SIZE = 16
 
 
