@@ -86,7 +86,8 @@ def measure(spec: str, episodes: int, seed: int) -> dict:
         expert_s = _since(t)
         rows.append((length, astar_s, plan_s, expert_s, outcome, steps))
         print(
-            f"  {grid.name} episode {i}: A* {length:6.1f} m in {astar_s[0]:.3f} s; one plan {plan_s[0]:.3f} s; "
+            f"  {grid.name} episode {i}: A* {length:6.1f} m in {astar_s[0]:.3f} s; "
+            f"one plan {plan_s[0]:.3f} s; "
             f"expert {Outcome(outcome).name.lower()} in {steps} steps, {expert_s[0]:.2f} s wall "
             f"({expert_s[1]:.2f} s CPU)"
         )
