@@ -183,6 +183,12 @@ def _generated(parts: list[tuple[str, int, int]]) -> TaskSampler:
     )  # fmt: skip
 
 
+def names_files(spec: str) -> bool:
+    """Does ``spec`` name map files (not only generated maps)? Read from the text alone."""
+    items = [p.strip() for p in spec.split(",") if p.strip() and "=" not in p]
+    return any(_GENERATED.match(p) is None for p in items)
+
+
 def parse_options(items: list[str], spec: str) -> MapOptions:
     """The :class:`MapOptions` of a spec's ``key=value`` items."""
     fields = {f.name: f for f in dataclasses.fields(MapOptions)}

@@ -283,7 +283,8 @@ class NIRLRun:
     envs: int = 16
     """robots stepped together when collecting experience"""
     maps: str = "mixed:16"
-    """map spec of the experience-collection maps (worlds.tasks.parse_map_spec)"""
+    """map spec of the experience-collection maps (worlds.tasks.parse_map_spec: generated, or map files
+    such as a map_server .yaml; docs/maps.md)"""
     moving_discs: int = 0
     """NIRL's own rounds: each experience episode has 0..moving_discs moving discs (0: none; NNQL's
     trainer in the policy_steps phase has its own 0..6 mix)"""

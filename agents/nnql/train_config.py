@@ -20,7 +20,9 @@ class LocalTrainConfig:
     envs: int = 16
     """robots stepped together in the vector env"""
     maps: str = "mixed:16"
-    """training map spec (worlds.tasks.parse_map_spec)"""
+    """training map spec (worlds.tasks.parse_map_spec): mixed:16, mixed:16,mixed:32, or map files (a
+    map_server .yaml, a MovingAI .map/.scen, an ASCII map, a directory) with key=value options such as
+    min_distance=5,unknown=free (docs/maps.md); the cell size chosen is printed"""
     moving_discs: int = TRAINING_DISCS
     """each training episode has 0..moving_discs moving discs, uniform (0: none; the dynamic set has 4)"""
     seed: int = 0

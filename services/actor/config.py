@@ -16,7 +16,8 @@ class ActorConfig:
     envs: int = 8
     """robots stepped together in the vector env"""
     maps: str = "mixed:16"
-    """training map spec (worlds.tasks): rooms:16, rects:24x32, maze:15, mixed:16, a .map/.scen path"""
+    """training map spec (worlds.tasks): rooms:16, mixed:16,mixed:32, or map files (a map_server .yaml,
+    a MovingAI .map/.scen, an ASCII map, a directory) with key=value options; docs/maps.md"""
     moving_discs: int = TRAINING_DISCS
     """each episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
     observation: str = observation_field()

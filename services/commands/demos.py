@@ -24,7 +24,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "start, goal, source, seed), as a Minari dataset in the directory --out.",
     )
     gen.add_argument(
-        "--maps", default="mixed:16", help="map spec: FAMILY:N[xM], mixed:N, a .map/.scen/ASCII path"
+        "--maps",
+        default="mixed:16",
+        help="map spec: FAMILY:N[xM], mixed:N, or map files (a map_server .yaml, a MovingAI "
+        ".map/.scen, an ASCII map, a directory) with key=value options (docs/maps.md)",
     )
     gen.add_argument("--episodes", type=int, default=200, help="number of expert episodes to run")
     gen.add_argument(
@@ -92,7 +95,8 @@ def generate(args: argparse.Namespace) -> int:
         print(f"navlearn demos generate: {out} exists (use --overwrite)", file=sys.stderr)
         return 2
     try:
-        parse_map_spec(args.maps)
+        for mf in parse_map_spec(args.maps).maps:
+            print(mf.note)
         dataset_location(out)
     except ValueError as exc:  # DemoFormatError is a ValueError
         print(f"navlearn demos generate: {exc}", file=sys.stderr)

@@ -121,7 +121,8 @@ def run_train(args: argparse.Namespace) -> int:
         resolve_device(run.device)  # cuda without a GPU: one sentence, before anything starts
         if run.envs < 1:
             raise OptionError("--envs must be positive")
-        parse_map_spec(run.maps)
+        for mf in parse_map_spec(run.maps).maps:
+            print(mf.note)
         nav = OBSERVATIONS[args.observation]
         demos = load_demonstrations(args.demos, nav)
     except (OptionError, DemoFormatError, ValueError) as exc:

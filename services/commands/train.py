@@ -81,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         run_config, nnql, nav, env = configs(args)
         resolve_device(run_config.device)
-        parse_map_spec(run_config.maps)
+        for mf in parse_map_spec(run_config.maps).maps:
+            print(mf.note)
     except (OptionError, ValueError) as err:
         print(f"navlearn train: {err}", file=sys.stderr)
         return 2

@@ -15,8 +15,10 @@ sectors and its subgoal (2.5 m along A* on the map its rays have built) as a sta
 its own beams, drawn beside the map at the last step (occupancy and visits, heading up).
 
 --map takes a map spec: FAMILY:N or FAMILY:HxW with FAMILY one of rects, discs, rooms, maze,
-mixed (e.g. rooms:16, rects:24x32), or the path of a MovingAI .map/.scen file or an ASCII
-map (# blocked, . free, optional S and G markers).
+mixed (e.g. rooms:16, rects:24x32), or a map file: a ROS map_server .yaml (with its PGM/PNG
+image), a MovingAI .map/.scen file or an ASCII map (# blocked, . free, optional S and G
+markers), with key=value options (docs/maps.md). The cell size chosen for a map file is printed.
+--policy DIR drives the robot with a saved policy (NNQL, NIRL, imitation) instead.
 """
 
 
@@ -37,7 +39,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--map", default="mixed:16", metavar="PATH|SPEC", help="map spec or file (default mixed:16)"
     )
     show.add_argument("--out", default="world.png", help="PNG file to write (default world.png)")
-    show.add_argument("--steps", type=int, default=100, help="most steps to drive (default 100)")
+    show.add_argument(
+        "--steps",
+        type=int,
+        default=100,
+        help="least step limit (default 100); longer paths get 4 times their A* path's steps",
+    )
+    show.add_argument("--policy", metavar="DIR", help="drive with this saved policy (default: goal-seeking)")
     show.add_argument(
         "--seed", type=int, default=0, help="seed of the map, start, goal and noise (default 0)"
     )
@@ -84,6 +92,7 @@ def show_main(args: argparse.Namespace) -> int:
     from worlds.outcomes import OUTCOME_NAMES
     from worlds.perception import frame_layout
     from worlds.render import draw_patch, draw_robot
+    from worlds.tasks import parse_map_spec
 
     observation = LEARNING_NAV.observation if args.learning else NavConfig().observation
     config = NavConfig(
@@ -94,25 +103,39 @@ def show_main(args: argparse.Namespace) -> int:
         pool_size=8,
         pool_seed=args.seed,
     )
+    policy = goal_seeking_policy(config)
+    driver = "random" if args.random else "goal-seeking"
     try:
-        env = NavigationEnv(config, maps=args.map)
+        if args.policy:
+            from agents.evaluation.policies import GreedyMLPPolicy, PolicyFormatError, load_policy_or_baseline
+
+            try:
+                policy = load_policy_or_baseline(args.policy, config)
+            except PolicyFormatError as exc:
+                raise ValueError(str(exc)) from None
+            if isinstance(policy, GreedyMLPPolicy):  # its env observes what it was trained to
+                config = replace(policy.nav_config(config), obstacles=config.obstacles)
+            driver = f"policy {args.policy}"
+        sampler = parse_map_spec(args.map)
+        for mf in sampler.maps:
+            print(mf.note)
+        env = NavigationEnv(config, maps=sampler)
     except ValueError as exc:  # bad spec or map file (MapFormatError is a ValueError)
         print(f"navlearn world show: {exc}", file=sys.stderr)
         return 2
     obs, info = env.reset(seed=args.seed)
-    policy = goal_seeking_policy(config)
     rng = np.random.default_rng(args.seed)
     trajectory = [tuple(info["pose"][:2])]
     done = False
     while not done:
-        action = int(rng.integers(config.robot.n_actions)) if args.random else int(policy(obs)[0])
+        action = int(rng.integers(config.robot.n_actions)) if args.random else int(policy(obs[None])[0])
         obs, _, terminated, truncated, info = env.step(action)
         trajectory.append(tuple(info["pose"][:2]))
         done = terminated or truncated
     task = env.batch.task(0)
     title = (
         f"{task.map_id}: {OUTCOME_NAMES[info['outcome']]} after {info['steps']} steps, "
-        f"{info['path_length']:.1f} m ({'random' if args.random else 'goal-seeking'} robot)"
+        f"{info['path_length']:.1f} m ({driver} robot)"
     )
     fig = draw_robot(None, env.batch, 0, trajectory, title=title)
     if args.patch:

@@ -18,7 +18,8 @@ class DemonstratorConfig:
     id: str = ""
     """demonstrator id (token alive/demonstrator/<id>); empty: <source>-<pid>"""
     maps: str = "mixed:16"
-    """map spec of the astar and human episodes (worlds.tasks): mixed:16, rooms:20, x.map, x.txt ..."""
+    """map spec of the astar and human episodes (worlds.tasks): mixed:16, rooms:20, or map files (a
+    map_server .yaml, a MovingAI .map, an ASCII map, a directory); docs/maps.md"""
     rate: float = 1.0
     """astar: expert episodes per second (0: as fast as the expert runs)"""
     episodes: int = 0

@@ -18,6 +18,10 @@ class EvaluatorConfig:
     families: tuple[str, ...] = ("unseen", "dynamic")
     """evaluation sets (agents.evaluation): unseen (held-out generated maps), dynamic (the same with
     moving discs), movingai (the arena map's scenarios)"""
+    maps: str = ""
+    """map files evaluated beside --families, as a map spec (a map_server .yaml, a MovingAI .map, an
+    ASCII map, a directory, with key=value options; worlds.tasks): their scenarios or pairs drawn
+    from --eval-seed, never the training pool's; empty: none"""
     episodes: int = 50
     """episodes per family (the same fixed, seeded tasks for every version)"""
     eval_seed: int = 0

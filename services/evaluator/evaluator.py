@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation import evaluate, make_eval_set, make_map_eval_set
 from agents.evaluation.env_returns import evaluate_env, table
 from agents.evaluation.plots import REFERENCE, plot_evaluations
 from agents.evaluation.policies import load_policy
@@ -214,8 +214,10 @@ def run_evaluator(
         start = time.perf_counter()
         log.info("evaluator %s: building the evaluation sets (%s)", config.id, COMPILE_NOTE)
         eval_sets = [make_eval_set(f, config.episodes, seed=config.eval_seed) for f in config.families]
+        if config.maps:
+            eval_sets.append(make_map_eval_set(config.maps, config.episodes, seed=config.eval_seed))
         seconds = time.perf_counter() - start
-        log.info("evaluation sets %s ready in %.1f s", ", ".join(config.families), seconds)
+        log.info("evaluation sets %s ready in %.1f s", ", ".join(s.family for s in eval_sets), seconds)
         limits = Limits(n_actions=NavConfig().robot.n_actions)
     else:
         if config.imitation:

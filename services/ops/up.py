@@ -35,6 +35,7 @@ from services.learner.checkpoint import CheckpointDir
 from services.ops.status import query_alive, query_status, status_dict
 from services.ops.up_config import UpConfig
 from worlds.own_env import EnvConfig
+from worlds.tasks import names_files
 
 log = logging.getLogger("navlearn.up")
 PR_SET_PDEATHSIG = 1
@@ -117,6 +118,7 @@ class Up:
         """``env``: a Gymnasium env every process runs instead of navlearn's world (its flags passed on)."""
         self.config = config
         self.env = env or EnvConfig()
+        self.map_files = self.env.own_world and names_files(config.maps)  # the evaluator measures them too
         self.out = Path(config.out or f"runs/{config.run}")
         port = config.port or free_port()
         self.endpoint = f"tcp/127.0.0.1:{port}"
@@ -210,6 +212,7 @@ class Up:
                 cfg.observation,
                 *(["--compare", "nirl"] if cfg.nirl else []),
                 *(["--imitation", cfg.imitation] if cfg.imitation else []),
+                *(["--maps", cfg.maps] if self.map_files else []),
                 *self.env.flags(),
             ],
             base,

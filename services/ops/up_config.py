@@ -25,7 +25,8 @@ class UpConfig:
     envs: int = 8
     """robots per actor"""
     maps: str = "mixed:16"
-    """training map spec for the actors (worlds.tasks)"""
+    """training map spec for the actors (worlds.tasks): generated (mixed:16) or map files (a map_server
+    .yaml, a MovingAI .map, an ASCII map, a directory; docs/maps.md), which the evaluator measures too"""
     moving_discs: int = TRAINING_DISCS
     """each actor episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
     observation: str = observation_field()

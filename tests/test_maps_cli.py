@@ -1,0 +1,95 @@
+"""Map files through the real CLI: evaluate --map on a map_server map, a MovingAI map with its
+scenarios and an ASCII map; world show --map; train --local --maps; demos generate --maps."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from services.cli import main
+from tests.test_worlds_mapfiles import write_pgm, write_yaml
+
+PRETRAINED = Path(__file__).resolve().parents[1] / "pretrained" / "nnql"
+
+
+def office(tmp_path: Path) -> Path:
+    """A 6 m x 4 m map_server office at 0.05 m: outer walls, a wall with a 1 m door, a pillar."""
+    pixels = np.full((80, 120), 254, dtype=np.uint8)
+    pixels[:2, :] = pixels[-2:, :] = pixels[:, :2] = pixels[:, -2:] = 0
+    pixels[:, 60:62] = 0
+    pixels[30:50, 60:62] = 254  # the door
+    pixels[20:26, 90:96] = 0  # a pillar
+    write_pgm(tmp_path / "office.pgm", pixels.tolist())
+    return write_yaml(tmp_path, image="office.pgm", name="office.yaml", origin=[-3.0, -2.0, 0.0])
+
+
+def movingai(tmp_path: Path) -> Path:
+    rows = ["@" * 20] + ["@" + "." * 18 + "@"] * 18 + ["@" * 20]
+    rows[9] = "@" + "." * 8 + "TT" + "S" * 8 + "@"  # trees block, swamp passes
+    path = tmp_path / "hall.map"
+    path.write_text("type octile\nheight 20\nwidth 20\nmap\n" + "\n".join(rows) + "\n")
+    scen = "version 1\n" + "".join(f"0\thall.map\t20\t20\t2\t{y}\t17\t{y}\t15\n" for y in (2, 5, 14))
+    (tmp_path / "hall.map.scen").write_text(scen)
+    return path
+
+
+def test_evaluate_on_three_map_formats(tmp_path, capsys):
+    ascii_map = tmp_path / "lab.txt"
+    ascii_map.write_text("\n".join(["#" * 14] + ["#" + "." * 12 + "#"] * 8 + ["#" * 14]) + "\n")
+    argv = ["evaluate", "--policy", str(PRETRAINED), "--episodes", "3", "--out", str(tmp_path / "eval")]
+    for path in (office(tmp_path), movingai(tmp_path), ascii_map):
+        argv += ["--map", str(path)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "office.yaml: 120x80 pixels of 0.05 m -> 60x40 cells of 0.1 m" in out
+    assert "hall.map: 20x20 cells of 1 m (MovingAI, not resampled), 3 scenarios" in out
+    report = json.loads((tmp_path / "eval" / "eval.json").read_text())
+    assert set(report["metrics"]) == {"office", "hall", "lab"}
+    hall = report["episodes"]["hall"]
+    assert sorted((e["start"], e["goal"]) for e in hall) == [([y, 2], [y, 17]) for y in (2, 5, 14)]
+    # pairs are at least 2 m apart through cells the robot fits on; the grid A* may hug walls closer
+    assert all(1.0 < e["shortest"] < 8.0 for e in report["episodes"]["office"])
+
+
+def test_map_errors_are_one_line(tmp_path, capsys):
+    bad = write_yaml(tmp_path, image="missing.pgm")
+    assert main(["evaluate", "--policy", str(PRETRAINED), "--map", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "m.yaml" in err and "field 'image'" in err
+
+
+def test_world_show_draws_a_map_file(tmp_path, capsys):
+    out = tmp_path / "office.png"
+    argv = [
+        "world",
+        "show",
+        "--map",
+        f"{office(tmp_path)},unknown=free",
+        "--out",
+        str(out),
+        "--obstacles",
+        "0",
+    ]
+    assert main([*argv, "--policy", str(PRETRAINED)]) == 0
+    printed = capsys.readouterr().out
+    assert "cells of 0.1 m" in printed and "policy" in printed and out.stat().st_size > 10_000
+
+
+def test_train_on_a_map_file(tmp_path, capsys):
+    spec = str(office(tmp_path))
+    run = tmp_path / "run"
+    argv = ["train", "--local", "--steps", "400", "--envs", "4", "--maps", spec, "--out", str(run)]
+    argv += ["--eval-every", "0", "--final-eval-episodes", "0", "--hidden", "16", "--no-progress"]
+    assert main(argv) == 0
+    assert "cells of 0.1 m" in capsys.readouterr().out
+    assert json.loads((run / "summary.json").read_text())["env_steps"] == 400
+
+
+def test_demos_on_a_map_file(tmp_path, capsys):
+    spec = str(office(tmp_path))
+    demos = tmp_path / "office-v0"
+    assert main(["demos", "generate", "--maps", spec, "--episodes", "2", "--out", str(demos)]) == 0
+    out = capsys.readouterr().out
+    assert "cells of 0.1 m" in out and "2 episodes" in out
