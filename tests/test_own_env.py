@@ -108,6 +108,8 @@ def test_the_env_is_named_by_id_module_id_or_callable_and_bad_names_say_the_fix(
     assert make_env(EnvConfig(env=f"{user_module}:make_box", env_kwargs='{"limit": 7}')).unwrapped.limit == 7
     with pytest.raises(EnvError, match="not a registered Gymnasium id; give --env-module"):
         make_env(EnvConfig(env="NoSuchEnv-v0"))
+    with pytest.raises(EnvError, match=r"Taxi-v2: not a registered Gymnasium id \(did you mean Taxi-v4\?\)"):
+        make_env(EnvConfig(env="Taxi-v2"))
     with pytest.raises(EnvError, match="cannot import module 'no_such_module_xyz'"):
         make_env(EnvConfig(env="no_such_module_xyz:make"))
     with pytest.raises(EnvError, match=f"module '{user_module}' has no 'nothing'"):

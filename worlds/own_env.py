@@ -25,6 +25,7 @@ learner) and records it with :meth:`EnvConfig.record` (in the weights and in sav
 
 from __future__ import annotations
 
+import difflib
 import functools
 import hashlib
 import importlib
@@ -165,9 +166,11 @@ def _factory(config: EnvConfig):
             return target
         name = attr
     if name not in gym.registry:
+        close = difflib.get_close_matches(name, list(gym.registry), n=1)
+        hint = f" (did you mean {close[0]}?)" if close else ""
         raise EnvError(
-            f"--env {name}: not a registered Gymnasium id; give --env-module PKG when a package registers it "
-            "on import, module:Id, or module:callable"
+            f"--env {name}: not a registered Gymnasium id{hint}; give --env-module PKG when a package "
+            "registers it on import, module:Id, or module:callable"
         )
     return functools.partial(gym.make, name)
 
@@ -218,8 +221,10 @@ def make_env(config: EnvConfig) -> Any:
     except (NotImplementedError, TypeError, ValueError) as exc:
         env.close()
         raise EnvError(
-            f"--env {config.env}: its observation space {obs} cannot be flattened to a vector ({exc}); "
-            "wrap it so it observes a Box, Dict, Tuple or Discrete"
+            f"--env {config.env}: gymnasium cannot flatten its observation space {obs} to a vector "
+            f"({type(exc).__name__}{': ' if str(exc) else ''}{exc}); wrap it so it observes only Box, Discrete, "
+            "MultiBinary, Dict or Tuple parts (a Text part such as MiniGrid's mission cannot be: its "
+            "ImgObsWrapper drops it)"
         ) from None
 
 
