@@ -222,9 +222,9 @@ def make_env(config: EnvConfig) -> Any:
         env.close()
         raise EnvError(
             f"--env {config.env}: gymnasium cannot flatten its observation space {obs} to a vector "
-            f"({type(exc).__name__}{': ' if str(exc) else ''}{exc}); wrap it so it observes only Box, Discrete, "
-            "MultiBinary, Dict or Tuple parts (a Text part such as MiniGrid's mission cannot be: its "
-            "ImgObsWrapper drops it)"
+            f"({type(exc).__name__}{': ' if str(exc) else ''}{exc}); wrap it so it observes only Box, "
+            "Discrete, MultiBinary, Dict or Tuple parts (a Text part such as MiniGrid's mission cannot "
+            "be: its ImgObsWrapper drops it)"
         ) from None
 
 
