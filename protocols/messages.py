@@ -399,7 +399,8 @@ class StatusReport(Message):
     """The newest evaluation summary (JSON-like), if any."""
     observation: str | None = text(optional=True, default=None)
     """The learner's observation (``--observation``, a name of ``worlds.config.OBSERVATIONS``): what
-    its networks take, and so what its actors and evaluator must run. None: not said (an actor)."""
+    its networks take, and so what its actors and evaluator must run; ``env <signature>`` for a learner
+    on a Gymnasium ``--env``. None: not said (an actor)."""
     robot: dict[str, Any] | None = json_map(optional=True, default=None)
     """A process facing a robot: ``navlearn drive``'s state (goal, distance, last action, stale
     inputs, ...) or ``navlearn ros2-sim``'s (pose, collision, path length); None for the others."""

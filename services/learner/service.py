@@ -406,9 +406,9 @@ class LearnerService:
 
     def status(self) -> StatusReport:
         self.status_seq += 1
-        return build_status(
-            self.parts, self.config.model, self.config.observation, self.sender, self.status_seq
-        )
+        # a Gymnasium --env has no navlearn observation: the status says the env instead
+        observation = self.config.observation if self.env == OWN_WORLD else f"env {self.env}"
+        return build_status(self.parts, self.config.model, observation, self.sender, self.status_seq)
 
     def refresh_status(self) -> None:
         status = self.status()
