@@ -13,8 +13,8 @@ import numpy as np
 
 from worlds import kernel, perception
 from worlds.bank import merged_bank, private_copy
-from worlds.config import NavConfig
-from worlds.gridsearch import new_work
+from worlds.config import NavConfig, step_limit
+from worlds.gridsearch import grid_search, new_work
 from worlds.maps import Task
 from worlds.obstacles import DiscObstacles
 from worlds.tasks import TaskSampler
@@ -46,7 +46,7 @@ class NavBatch:
         f8, i8 = np.float64, np.int64
         self.x, self.y, self.theta, self.gx, self.gy = (np.zeros(n, f8) for _ in range(5))
         self.steps, self.ent, self.outcome = np.zeros(n, i8), np.zeros(n, i8), np.zeros(n, i8)
-        self.step_limit = np.zeros(n, i8)  # each robot's episode step limit (worlds.config.step_limit)
+        self.step_limit = np.zeros(n, i8)  # each robot's step limit; minus max_steps until computed
         self._search: list[tuple] = []  # per stepping thread, the kernel's A* work arrays
         self._fit_search()
         self.map_index = np.zeros(n, i8)
@@ -263,6 +263,18 @@ class NavBatch:
 
     def _task(self, entry: int, start: np.ndarray, goal: np.ndarray) -> Task:
         return self.bank.entry_task(entry, (int(start[0]), int(start[1])), (int(goal[0]), int(goal[1])))
+
+    def episode_step_limit(self, i: int) -> int:
+        """Robot ``i``'s step limit this episode (:func:`worlds.config.step_limit`). The kernel computes
+        it only when an episode reaches ``max_steps``; asked earlier, it is computed here with the same
+        A* and kept."""
+        if self.step_limit[i] < 0:
+            task = self.task(i)
+            g, _, _ = grid_search(task.grid.blocked, task.start[0] * task.grid.width + task.start[1],
+                                  task.goal[0] * task.grid.width + task.goal[1], True)  # fmt: skip
+            length = g[task.goal[0] * task.grid.width + task.goal[1]] * task.grid.cell_size
+            self.step_limit[i] = step_limit(self.config, float(length))
+        return int(self.step_limit[i])
 
     def discs(self, i: int) -> np.ndarray:
         """Robot ``i``'s moving discs now, ``(k, 3)``: x, y, radius."""

@@ -156,7 +156,7 @@ class NavigationEnv(gym.Env):
             "path_length": float(b.path_length[0]),
             "outcome": int(b.outcome[0]),
             "steps": int(b.steps[0]),
-            "step_limit": int(b.step_limit[0]),
+            "step_limit": b.episode_step_limit(0),
         }
 
     def render(self):

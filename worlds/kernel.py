@@ -206,7 +206,7 @@ def _step(
     else:
         reward += params[P_RCOLL]
     steps[i] += 1
-    if result == RUNNING and steps[i] >= limit[i]:
+    if result == RUNNING and steps[i] >= abs(limit[i]):
         result = TIMEOUT
     outcome[i] = result
     return reward, c, s
@@ -228,6 +228,23 @@ def _limit(field, off, height, width, cell, sr, sc, gr, gc, params, search) -> i
         return floor
     steps = math.ceil(params[P_STEPFACTOR] * g[goal] * cell / params[P_STEP] - 1e-9)
     return max(floor, steps)
+
+
+@njit(cache=True, inline="always")
+def _settle_limit(i, maps, entries, ent, scell, gcell, mp, outcome, steps, params, limit, search) -> None:
+    """Robot ``i`` timed out at the floor ``max_steps`` before its limit was known (negative): compute
+    it now (:func:`_limit`; kept in the entry's ``E_LIMIT`` when the endpoints are the entry's) and
+    let the episode run on if the path allows more steps. Lazy, because most episodes on small maps
+    end before the floor and a search at every reset cost a third of the world's speed."""
+    field, moff, mh, mw, mcell = maps
+    etab = entries[0]
+    m, j = mp[i], ent[i]
+    sr, sc, gr, gc = scell[i, 0], scell[i, 1], gcell[i, 0], gcell[i, 1]
+    limit[i] = _limit(field, moff[m], mh[m], mw[m], mcell[m], sr, sc, gr, gc, params, search)
+    if sr == etab[j, E_SR] and sc == etab[j, E_SC] and gr == etab[j, E_GR] and gc == etab[j, E_GC]:
+        etab[j, E_LIMIT] = limit[i]  # the same value whoever computes it: a cache
+    if steps[i] < limit[i]:
+        outcome[i] = RUNNING
 
 
 MAX_START_DRAWS = 64
@@ -269,9 +286,10 @@ def _reset(
     negative, with fresh random endpoints if the entry allows), a random initial heading made
     drivable by :func:`start_heading`, new discs unless ``keep_discs``; then observe. A pool
     draw whose start has no drivable heading is redrawn (at most :data:`MAX_START_DRAWS`
-    draws). Its step limit goes to ``limit[i]`` (:func:`_limit`, kept in the entry's ``E_LIMIT``
-    unless its endpoints are resampled). Returns False when the start kept has no drivable heading.
-    (Resets are rare, so the map tables may stay in their tuples here.)"""
+    draws). Its step limit goes to ``limit[i]``: the entry's ``E_LIMIT`` when known, else minus the
+    floor ``max_steps``, computed by :func:`_settle_limit` only if the episode lasts that long.
+    Returns False when the start kept has no drivable heading. (Resets are rare, so the map tables
+    may stay in their tuples here.)"""
     field, moff, mh, mw, mcell = maps
     etab, cand = entries
     ox, oy, orad = moving[0], moving[1], moving[4]
@@ -304,12 +322,7 @@ def _reset(
     th[i] = heading if drivable else _wrap(sampled)
     steps[i] = 0
     own = sr == etab[j, E_SR] and sc == etab[j, E_SC] and gr == etab[j, E_GR] and gc == etab[j, E_GC]
-    if own and etab[j, E_LIMIT] >= 0:
-        limit[i] = etab[j, E_LIMIT]
-    else:
-        limit[i] = _limit(field, moff[m], mh[m], width, cell, sr, sc, gr, gc, params, search)
-        if own:
-            etab[j, E_LIMIT] = limit[i]  # the same value whoever computes it: a cache
+    limit[i] = etab[j, E_LIMIT] if own and etab[j, E_LIMIT] >= 0 else -int(params[P_MAXSTEPS])
     plen[i] = 0.0
     pdist[i] = math.hypot(gx[i] - x[i], gy[i] - y[i])
     outcome[i] = RUNNING
@@ -359,6 +372,8 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
             i, actions[i], field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome,
             moving, ocount[i], params, turns, limit,
         )  # fmt: skip
+        if outcome[i] == TIMEOUT and limit[i] < 0:
+            _settle_limit(i, maps, entries, ent, scell, gcell, mp, outcome, steps, params, limit, search)
         _observe(
             i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beams,
             obs, rays
