@@ -93,3 +93,18 @@ def test_demos_on_a_map_file(tmp_path, capsys):
     assert main(["demos", "generate", "--maps", spec, "--episodes", "2", "--out", str(demos)]) == 0
     out = capsys.readouterr().out
     assert "cells of 0.1 m" in out and "2 episodes" in out
+
+
+def test_evaluate_flags_set_distances_and_the_step_limit(tmp_path, capsys):
+    lab = tmp_path / "lab.txt"
+    lab.write_text("\n".join(["#" * 14] + ["#" + "." * 12 + "#"] * 8 + ["#" * 14]) + "\n")
+    argv = ["evaluate", "--compare", "heuristic", "heuristic", "--map", str(lab), "--episodes", "6"]
+    argv += ["--min-distance", "6", "--step-factor", "0", "--max-steps", "2", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    report = json.loads((tmp_path / "compare.json").read_text())["metrics"]["a"]["lab"]
+    assert report["success"]["value"] == 0.0 and report["timeout"]["value"] > 0.5  # 2 steps reach nothing
+    capsys.readouterr()
+    argv = ["evaluate", "--policy", "heuristic", "--map", str(lab), "--episodes", "6", "--min-distance", "6"]
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 0
+    episodes = json.loads((tmp_path / "b" / "eval.json").read_text())["episodes"]["lab"]
+    assert all(e["shortest"] >= 6.0 for e in episodes)  # 1 m cells: every free cell holds the robot
