@@ -7,6 +7,7 @@ so adding a command never means editing this file.
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
 import pkgutil
 import sys
@@ -60,9 +61,40 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def closest_flag(parser: argparse.ArgumentParser, given: str) -> str | None:
+    """The option of ``parser`` nearest to ``given`` (``--duraton`` -> ``--duration``), or None if
+    none is close (difflib's ratio under 0.6)."""
+    flag = given.split("=", 1)[0]
+    options = [o for action in parser._actions for o in action.option_strings if o.startswith("--")]
+    found = difflib.get_close_matches(flag, options, n=1, cutoff=0.6)
+    return found[0] if found else None
+
+
+def unknown_arguments(parser: argparse.ArgumentParser, extras: list[str]) -> str:
+    """One sentence for arguments ``parser`` does not take, naming the nearest valid flag of each
+    misspelled one."""
+    flags = [extra for extra in extras if extra.startswith("-")]
+    parts = []
+    for extra in flags or extras:  # a misspelled flag's value is not worth naming beside it
+        near = closest_flag(parser, extra) if extra.startswith("-") else None
+        parts.append(f"{extra} (did you mean {near}?)" if near else extra)
+    return f"unrecognized arguments: {', '.join(parts)}; `{parser.prog} --help` lists them all"
+
+
+def parse(parser: argparse.ArgumentParser, argv: list[str] | None) -> argparse.Namespace:
+    """Parse ``argv``; arguments that no parser takes are refused by the sub-command's own parser,
+    so its usage is shown (not the top level's) with the closest valid flag. One place for every
+    sub-command: argparse itself would hand a sub-command's leftovers to the top-level parser."""
+    args, extras = parser.parse_known_args(argv)
+    if extras:
+        sub = parser._subparsers._group_actions[0].choices.get(getattr(args, "command", None), parser)
+        sub.error(unknown_arguments(sub, extras))
+    return args
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse(parser, argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

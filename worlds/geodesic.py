@@ -39,6 +39,9 @@ from worlds.gridsearch import SQRT2
 
 GEN, BUCKET = 0, 1
 """indices into a row of ``meta``"""
+EVERY_CELL = np.int64(-1)
+"""_settle's ``target`` for "settle every reachable cell", a numpy scalar: a literal -1 would
+compile _settle a second time"""
 
 
 def new_fields(n: int, cells: int) -> tuple:
@@ -149,7 +152,7 @@ def start_field(moves, base, stride, goal, geo, i, reuse):
         count[i, slot] = 0
     _offer(g[i], mark[i], ring[i], count[i], gen, goal, 0.0)
     if not reuse:
-        _settle(moves, base, stride, -1, g[i], mark[i], ring[i], count[i], meta[i])
+        _settle(moves, base, stride, EVERY_CELL, g[i], mark[i], ring[i], count[i], meta[i])
 
 
 @njit(cache=True, _nrt=False)

@@ -17,6 +17,13 @@ increment and decrement per robot (about 50 per robot-step: 8 ray casts, 10 Gaus
 ``_step`` and ``_observe`` arguments), measured as a quarter of the step's time. Without it
 numba emits no reference counting, and the arrays stay alive because the caller holds them.
 
+First compile (bench/first_run.py, results/first-run/): every distinct argument type a compiled
+function is called with is one more compile of it, and a plain ``0``, ``-1`` or ``False`` in a
+call is typed as that literal value, so the constants handed to compiled helpers are numpy
+scalars (:data:`FIRST_ROBOT`, :data:`DRAW_ENTRY`, :data:`NEW_DISCS`: one specialisation each, the
+same as a call from Python); and :func:`_reset` (rare: once per episode) is compiled once and
+called, not inlined into both :func:`step_range` and :func:`reset_some`.
+
 numba caches compiled code per source file and does not notice edits to the modules a
 function calls; :func:`_drop_stale_cache` clears the cache when any of them changed.
 """
@@ -74,6 +81,12 @@ HIT_STATIC, HIT_DYNAMIC, TIMEOUT = (
     int(Outcome.TIMEOUT),
 )
 TWO_PI = 2.0 * math.pi
+FIRST_ROBOT = np.int64(0)
+"""step_all's first robot, a numpy scalar: a literal 0 would compile step_range a second time"""
+DRAW_ENTRY = np.int64(-1)
+"""_reset's ``forced`` for "draw a pool entry", a numpy scalar (one compile of _reset)"""
+NEW_DISCS = np.bool_(False)
+"""_reset's ``keep_discs`` for an auto-reset, a numpy scalar (one compile of _reset)"""
 
 
 def make_params(config: NavConfig) -> np.ndarray:
@@ -277,7 +290,7 @@ def start_heading(field, off, height, width, cell, x, y, sampled, params, turns)
     return math.nan
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _reset(
     i, forced, keep_discs, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent, scell,
     gcell, plo, pn, moving, ocount, params, turns, beams, obs, rays, limit, search
@@ -289,7 +302,8 @@ def _reset(
     draws). Its step limit goes to ``limit[i]``: the entry's ``E_LIMIT`` when known, else minus the
     floor ``max_steps``, computed by :func:`_settle_limit` only if the episode lasts that long.
     Returns False when the start kept has no drivable heading. (Resets are rare, so the map tables
-    may stay in their tuples here.)"""
+    may stay in their tuples here, and it is called rather than inlined: one compile serves
+    step_range and reset_some.)"""
     field, moff, mh, mw, mcell = maps
     etab, cand = entries
     ox, oy, orad = moving[0], moving[1], moving[4]
@@ -350,7 +364,7 @@ def step_all(actions, autoreset, maps, entries, robots, discs, params, turns, be
     """Step every robot; with ``autoreset``, a finished robot's terminal observation and results
     go to ``finals`` and it starts its next episode in the same call. Returns the number done."""
     return step_range(
-        0, actions.shape[0], actions, autoreset, maps, entries, robots, discs, params, turns, beams,
+        FIRST_ROBOT, actions.shape[0], actions, autoreset, maps, entries, robots, discs, params, turns, beams,
         obs, rays, reward, terminated, truncated, finals, search,
     )  # fmt: skip
 
@@ -396,8 +410,9 @@ def step_range(lo, hi, actions, autoreset, maps, entries, robots, discs, params,
                 f_scell[i, 0], f_scell[i, 1] = scell[i, 0], scell[i, 1]
                 f_gcell[i, 0], f_gcell[i, 1] = gcell[i, 0], gcell[i, 1]
                 _reset(
-                    i, -1, False, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, ent,
-                    scell, gcell, plo, pn, moving, ocount, params, turns, beams, obs, rays, limit, search,
+                    i, DRAW_ENTRY, NEW_DISCS, maps, entries, mp, x, y, th, gx, gy, rng, steps, plen, pdist,
+                    outcome, ent, scell, gcell, plo, pn, moving, ocount, params, turns, beams, obs, rays,
+                    limit, search,
                 )  # fmt: skip
     return n_done
 

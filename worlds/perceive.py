@@ -30,6 +30,11 @@ replan, the whole field per reset)"""
 RATE_PARAM = 11
 """index in :attr:`worlds.perception.Perception.params` of the range rates' frame offset (-1: absent)"""
 LENGTH_PARAM = 12
+FRESH, STEPPED = np.bool_(True), np.bool_(False)
+"""_robot's ``fresh``, numpy scalars: literal True / False would compile _robot (and what it calls)
+once for each (a cold first compile's seconds, bench/first_run.py)"""
+NO_ACTION = np.int64(-1)
+"""_robot's ``action`` on a fresh episode, a numpy scalar for the same reason"""
 """index in :attr:`worlds.perception.Perception.params` of the plan length's frame offset (-1: absent)"""
 
 
@@ -198,8 +203,8 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
 def _first(i, robots, obs, world, mem, work, params, ray_c, ray_s):
     """The first frame of robot ``i``'s new episode (the batch's current state), into ``obs[i]``."""
     x, y, theta, gx, gy, goal_cell, map_index, base_obs, rays = robots
-    _robot(i, True, -1, map_index[i], x[i], y[i], theta[i], gx[i], gy[i], goal_cell[i, 0], goal_cell[i, 1],
-           base_obs[i], rays[i], obs[i], world, mem, work, params, ray_c, ray_s)  # fmt: skip
+    _robot(i, FRESH, NO_ACTION, map_index[i], x[i], y[i], theta[i], gx[i], gy[i], goal_cell[i, 0],
+           goal_cell[i, 1], base_obs[i], rays[i], obs[i], world, mem, work, params, ray_c, ray_s)  # fmt: skip
 
 
 @njit(cache=True, _nrt=False)
@@ -224,11 +229,11 @@ def perceive_step(actions, autoreset, world, emap, robots, finals, mem, work, pa
             m = emap[f_entry[i]]
             fr, fc = f_goal[i, 0], f_goal[i, 1]
             fx, fy = (fc + 0.5) * mcell[m], (fr + 0.5) * mcell[m]
-            shaped, shaping = _robot(i, False, actions[i], m, f_pose[i, 0], f_pose[i, 1], f_pose[i, 2], fx,
+            shaped, shaping = _robot(i, STEPPED, actions[i], m, f_pose[i, 0], f_pose[i, 1], f_pose[i, 2], fx,
                                      fy, fr, fc, f_base[i], f_rays[i], final_obs[i], world, mem, work, params,
                                      ray_c, ray_s)  # fmt: skip
         else:
-            shaped, shaping = _robot(i, False, actions[i], map_index[i], x[i], y[i], theta[i], gx[i], gy[i],
+            shaped, shaping = _robot(i, STEPPED, actions[i], map_index[i], x[i], y[i], theta[i], gx[i], gy[i],
                                      goal_cell[i, 0], goal_cell[i, 1], base_obs[i], rays[i], obs[i], world,
                                      mem, work, params, ray_c, ray_s)  # fmt: skip
         if shaped:

@@ -51,8 +51,49 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--timeout", type=float, default=3.0, help="seconds to wait for the learner's answer (default 3)"
     )
+    parser.add_argument(
+        "--dir",
+        metavar="DIR",
+        help="the run directory of a `navlearn up` (its --out): ask the run it records in DIR/up.json. "
+        "Without --dir, --connect or --run, the live `up` run recorded in this directory or in "
+        "runs/* below it is asked (default: that one, if any)",
+    )
     add_zenoh_args(parser, default_mode="client", connect_timeout=3.0)
     parser.set_defaults(func=main)
+
+
+def recorded_run(args: argparse.Namespace) -> tuple[dict, str]:
+    """Settings overrides (connect, run) from a `navlearn up` run directory, and a note for the
+    failure message: --dir's record, or with no --connect/--run (flags or environment) the live run
+    found here (services.ops.run_record); none when the endpoint and run were given."""
+    import os
+
+    from services.ops.run_record import choose_record, find_records
+
+    given = (
+        args.zenoh_connect
+        or args.zenoh_run
+        or os.environ.get("NAVLEARN_CONNECT")
+        or os.environ.get("NAVLEARN_RUN")
+    )
+    if given and not args.dir:
+        return {}, ""
+    record = choose_record(args.dir)
+    if record is None:
+        stale = find_records()
+        note = (
+            f" (the newest `navlearn up` here, in {stale[0].out}, has exited; its run was {stale[0].run})"
+            if stale
+            else ""
+        )
+        return {}, note
+    overrides = {"connect": [record.endpoint], "run": record.run}
+    if args.zenoh_connect:
+        overrides.pop("connect")
+    if args.zenoh_run:
+        overrides.pop("run")
+    live = "" if record.live() else f" (the `navlearn up` of {record.out} has exited)"
+    return overrides, live
 
 
 def main(args: argparse.Namespace) -> int:
@@ -72,11 +113,13 @@ def main(args: argparse.Namespace) -> int:
         status_dict,
     )
 
+    note = ""
     try:
-        settings = settings_from_args(args)
+        overrides, note = recorded_run(args)
+        settings = settings_from_args(args, **overrides)
         session = open_session(settings)
-    except TransportError as exc:
-        print(f"navlearn status: {exc}", file=sys.stderr)
+    except (TransportError, ValueError) as exc:
+        print(f"navlearn status: {exc}{note}", file=sys.stderr)
         return 2
 
     def snapshot() -> dict:
@@ -119,7 +162,7 @@ def main(args: argparse.Namespace) -> int:
                     )
                     print(
                         f"navlearn status: no answer on navlearn/{settings.run}/status/learner via "
-                        f"{settings.where()} within {args.timeout:g} s; {hint}",
+                        f"{settings.where()} within {args.timeout:g} s; {hint}{note}",
                         file=sys.stderr,
                     )
                     return 1

@@ -68,7 +68,7 @@ def main(args: argparse.Namespace) -> int:
     from services.common.process import stop_on_signals
     from services.common.warmup import compile_world
     from services.ops.status import progress_line
-    from services.ops.up import ChildFailed, Up, checkpoint_number
+    from services.ops.up import ChildFailed, Up, checkpoint_number, local_dir
     from services.ops.up_config import check_config
 
     try:
@@ -82,6 +82,11 @@ def main(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(name)s %(levelname)s %(message)s")
     console = Console()
     up = Up(config, nnql, env)
+    try:  # one `up` per run directory, held until this process ends (before anything is written)
+        record = up.claim()
+    except ValueError as exc:
+        print(f"navlearn up: {exc}", file=sys.stderr)
+        return 2
     limits = [
         f"{config.duration:.0f} s" * bool(config.duration),
         f"{config.updates} updates" * bool(config.updates),
@@ -98,6 +103,12 @@ def main(args: argparse.Namespace) -> int:
         f"budget {budget} from the first transition; "
         f"outputs in {up.out}/",
         soft_wrap=True,
+    )
+    console.print(
+        f"status from another terminal: [bold]{record.status_command()}[/bold] "
+        f"(or, from this directory, `navlearn status{local_dir(up.out)}`)",
+        soft_wrap=True,
+        highlight=False,
     )
     # Compiled once here, before the processes start, rather than by each of them at once.
     with (

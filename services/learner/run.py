@@ -1,4 +1,5 @@
-"""The learner process: builds the NNQL learner, its buffers and inbox, opens the Zenoh session
+"""The learner process: locks its checkpoint directory (one writer per run), builds the NNQL
+learner, its buffers and inbox, opens the Zenoh session
 (hosting the router unless told to connect), resumes from the newest intact checkpoint, replays
 the write-ahead log, then runs services.learner.service.LearnerService until ``stop``."""
 
@@ -13,6 +14,7 @@ from agents.nirl.config import NIRLConfig
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from protocols.limits import Limits
+from services.common.dirlock import DirLock
 from services.common.transport import ZenohSettings, declare_alive, open_session
 from services.learner.config import LearnerConfig
 from services.learner.demo_buffer import DemoBuffer
@@ -37,8 +39,37 @@ def run_learner(
 ) -> int:
     """Process set-up around the learner loop; returns the exit code. ``nirl`` configures NIRL
     when ``config.nirl`` is on (its defaults otherwise); ``env``: a Gymnasium env the actors run
-    instead of navlearn's world (its spaces size the networks and the wire's limits)."""
-    env = env or EnvConfig()
+    instead of navlearn's world (its spaces size the networks and the wire's limits).
+    A checkpoint directory another live learner holds is refused
+    (services.common.dirlock.DirectoryInUse, a ValueError) before anything in it is read or written."""
+    with contextlib.ExitStack() as held:
+        if config.checkpoint_dir:
+            held.enter_context(learner_lock(config.checkpoint_dir))
+        return _run_learner(config, nnql, settings, stop, nirl, env or EnvConfig())
+
+
+def learner_lock(checkpoint_dir: str) -> DirLock:
+    """The lock a learner holds on its checkpoint directory (checkpoints and write-ahead log)."""
+    return DirLock(
+        checkpoint_dir,
+        LOCK_NAME,
+        "checkpoint directory",
+        "give this learner another --checkpoint-dir (with `navlearn up`: another --run or --out)",
+    )
+
+
+LOCK_NAME = "learner.lock"
+"""the file in the checkpoint directory whose OS lock the learner holds for its lifetime"""
+
+
+def _run_learner(
+    config: LearnerConfig,
+    nnql: NNQLConfig,
+    settings: ZenohSettings,
+    stop: threading.Event,
+    nirl: NIRLConfig | None,
+    env: EnvConfig,
+) -> int:
     nav = OBSERVATIONS[config.observation]  # what the actors observe
     if env.own_world:
         obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions

@@ -32,6 +32,7 @@ from typing import Any
 
 from services.common.transport import TransportError, ZenohSettings, free_port, open_session
 from services.learner.checkpoint import CheckpointDir
+from services.ops.run_record import RunRecord, run_lock, write_record
 from services.ops.status import query_alive, query_status, status_dict
 from services.ops.up_config import UpConfig
 from worlds.own_env import EnvConfig
@@ -133,6 +134,14 @@ class Up:
         self.first_transition_s: float | None = None
         """seconds from the processes' start to the first transition the learner received"""
         self._started_at = time.monotonic()
+        self.lock = None
+        """the OS lock on ``out`` (services.common.dirlock), held from claim() to the process's end"""
+
+    def claim(self) -> RunRecord:
+        """Lock the run directory (DirectoryInUse, a ValueError naming the holder's pid, if another
+        `up` holds it) and record where this run listens (``up.json``, for `navlearn status`)."""
+        self.lock = run_lock(self.out).acquire()
+        return write_record(self.out, self.config.run, self.endpoint)
 
     def start(self) -> None:
         cfg, out = self.config, self.out
@@ -364,6 +373,14 @@ class Up:
         }
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         return summary
+
+
+def local_dir(out: Path) -> str:
+    """The `navlearn status` flags that find ``out`` from the current directory: none where status
+    looks by itself (here, or runs/<name> below), else ``--dir OUT``."""
+    here = Path.cwd().resolve()
+    where = out.resolve()
+    return "" if where == here or where.parent == here / "runs" else f" --dir {out}"
 
 
 def demonstrator_argv(config: UpConfig) -> list[str]:
