@@ -291,3 +291,36 @@ def test_storage_guard_backs_off_and_recovers(caplog):
     guard.succeeded()
     assert not guard.blocked(17.5) and guard.counters()["storage_error"] == 0
     assert "storage recovered" in caplog.text
+
+
+def test_a_stored_batch_with_a_rewritten_sender_is_a_duplicate_by_content(tmp_path):
+    """Issue 43: duplicates were recognised by (sender, seq) only, so a copy of an acknowledged batch
+    whose sender field was rewritten was stored a second time."""
+    durable = DurableIngest(tmp_path, "always")
+    list(durable.replay())
+    batch = _batch(1, [1.0, 2.0])
+    assert durable.admit(batch, encode(batch))
+    durable.sync()
+    for sender, seq in (("a1#2", 1), ("someone-else#7", 5), ("a1#1", 9)):
+        rewritten = _batch(seq, [1.0, 2.0])
+        rewritten.sender = sender
+        assert not durable.admit(rewritten, encode(rewritten)), (sender, seq)
+    assert durable.counters["duplicates_by_content"] == 3 and durable.counters["duplicates_dropped"] == 3
+    other = _batch(2, [1.0, 3.0])  # other content from the same sender: new
+    assert durable.admit(other, encode(other))
+    durable.sync()
+    # the content index survives a checkpoint and a restart, and the log's replay rebuilds it
+    state = durable.checkpoint_state()
+    durable.close()
+    again = DurableIngest(tmp_path, "always")
+    again.load_state(state)
+    list(again.replay())
+    copy = _batch(3, [1.0, 3.0])
+    copy.sender = "x#1"
+    assert not again.admit(copy, encode(copy))
+    again.close()
+    replayed = DurableIngest(tmp_path, "always")  # no checkpoint: everything from the log
+    assert len(list(replayed.replay())) == 2
+    copy.sender = "y#1"
+    assert not replayed.admit(copy, encode(copy))
+    replayed.close()

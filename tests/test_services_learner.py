@@ -165,3 +165,32 @@ def test_learner_serves_weights_rejects_bad_input_trains_acks_and_checkpoints(le
     assert saved["counters"]["transitions_received"] == 256
     assert saved["inbox_counts"]["rejected/malformed"] == 1
     assert saved["limiter"]["updates"] >= status.versions["nnql"]
+
+
+def test_a_replayed_batch_with_a_rewritten_sender_is_acknowledged_not_stored_again(learner):
+    """Issue 43's attack: an old, acknowledged batch replayed with its ``sender`` rewritten."""
+    _process, session, run, _tmp_path = learner
+    wait_status(session, run, lambda s: True)
+    key = keys.transitions(run, "a1")
+    acks = []
+    sub = session.declare_subscriber(
+        keys.acks(run, "a1"), lambda s: acks.append(decode(s.payload.to_bytes()))
+    )
+    time.sleep(0.5)
+    original = batch("a1", 1)
+    original.sender = "a1#1000"
+    session.put(key, encode(original))
+    wait_status(session, run, lambda s: s.replay_sizes["transitions"] == 32)
+    for n, sender in enumerate(("a1#2000", "mallory#1", "a1#1000x"), start=2):
+        copy = batch("a1", 1)  # the same content (same seed), another sender
+        copy.sender = sender
+        session.put(key, encode(copy))
+        status = wait_status(session, run, lambda s, n=n: s.counters.get("duplicates_by_content", 0) == n - 1)
+    assert status.replay_sizes["transitions"] == 32 and status.counters["duplicates_dropped"] == 3
+    session.put(key, encode(batch("a1", 2)))  # new content is still taken
+    status = wait_status(session, run, lambda s: s.replay_sizes["transitions"] == 64)
+    deadline = time.monotonic() + 10
+    while len(acks) < 5 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert {a.actor for a in acks} >= {"a1#1000", "a1#2000", "mallory#1"}  # each sender hears "stored"
+    sub.undeclare()

@@ -1,4 +1,5 @@
-"""Durable, de-duplicated ingest for the learner: write-ahead log + (sender, seq) de-duplication.
+"""Durable, de-duplicated ingest for the learner: write-ahead log + de-duplication by (sender, seq)
+and by content (services.learner.dedup).
 
 The learner calls ``admit`` for every decoded batch before inserting it: a
 duplicate (an actor's resend of a batch already stored) is counted and must
@@ -26,7 +27,7 @@ from protocols.codec import decode
 from protocols.errors import ProtocolError
 from protocols.limits import Limits
 from protocols.messages import DemoBatch, Message, TransitionBatch
-from services.learner.dedup import Deduplicator
+from services.learner.dedup import ContentIndex, Deduplicator, content_digest
 from services.learner.wal import WriteAheadLog
 
 log = logging.getLogger("navlearn.durable")
@@ -53,20 +54,34 @@ class DurableIngest:
     def __init__(self, directory: str | Path, fsync: str = "always", limits: Limits | None = None) -> None:
         self.wal = WriteAheadLog(directory, fsync)
         self.dedup = Deduplicator()
+        self.content = ContentIndex()
         self.limits = limits or Limits()
         self.checkpoint_seq = 0
-        self._group: list[tuple[str, int]] = []  # dedup keys admitted since the last sync
-        self.counters = {"duplicates_dropped": 0, "wal_replayed": 0, "wal_undecodable": 0}
+        self._group: list[tuple[str, int, bytes]] = []  # dedup keys and digests admitted since the last sync
+        self.counters = {
+            "duplicates_dropped": 0,
+            "duplicates_by_content": 0,
+            "wal_replayed": 0,
+            "wal_undecodable": 0,
+        }
 
     def admit(self, message: Message, payload: bytes) -> bool:
-        """False for a duplicate (counted); else log ``payload`` (the accepted bytes of ``message``)
-        and return True. It is durable once ``sync()`` has returned: one fsync for the group of
-        batches admitted before it. OSError: nothing of the group is logged (see ``sync``)."""
+        """False for a duplicate (counted): a (sender, seq) seen before, or content stored before under
+        another sender (also counted as ``duplicates_by_content``); else log ``payload`` (the accepted
+        bytes of ``message``) and return True. It is durable once ``sync()`` has returned: one fsync
+        for the group of batches admitted before it. OSError: nothing of the group is logged (see
+        ``sync``)."""
         key = dedup_key(message)
         if self.dedup.seen(key, message.seq):
             self.counters["duplicates_dropped"] += 1
             return False
-        self._group.append((key, message.seq))
+        digest = content_digest(message)
+        if self.content.seen(digest):
+            self.dedup.forget(key, message.seq)  # not stored under this (sender, seq) either
+            self.counters["duplicates_dropped"] += 1
+            self.counters["duplicates_by_content"] += 1
+            return False
+        self._group.append((key, message.seq, digest))
         try:
             self.wal.append(payload, sync=False)
         except OSError:
@@ -84,8 +99,9 @@ class DurableIngest:
         self._group.clear()
 
     def _forget_group(self) -> None:
-        for key, seq in self._group:
+        for key, seq, digest in self._group:
             self.dedup.forget(key, seq)
+            self.content.forget(digest)
         self._group.clear()
 
     @property
@@ -94,7 +110,12 @@ class DurableIngest:
         return self.wal.dir
 
     def checkpoint_state(self) -> dict:
-        return {"wal_seq": self.wal.last_seq, "dedup": self.dedup.state(), "counters": self.counters}
+        return {
+            "wal_seq": self.wal.last_seq,
+            "dedup": self.dedup.state(),
+            "content": self.content.state(),
+            "counters": self.counters,
+        }
 
     def checkpointed(self, keep_after: int | None = None) -> None:
         """The checkpoint holding ``checkpoint_state()`` is in place: start a new log segment, keeping
@@ -106,6 +127,7 @@ class DurableIngest:
         if state:
             self.checkpoint_seq = int(state["wal_seq"])
             self.dedup.load_state(state["dedup"])
+            self.content.load_state(state.get("content", ""))  # absent from older checkpoints
             self.counters.update({k: int(v) for k, v in state.get("counters", {}).items()})
 
     def replay(self) -> Iterator[Replayed]:
@@ -124,6 +146,7 @@ class DurableIngest:
             else:
                 continue
             self.dedup.seen(dedup_key(message), message.seq)
+            self.content.seen(content_digest(message))
             self.counters["wal_replayed"] += 1
             yield Replayed(channel, name, message)
 
