@@ -4,6 +4,7 @@ replay after a checkpoint, a failed write or sync cut back, the storage back-off
 from __future__ import annotations
 
 import errno
+import itertools
 import logging
 import os
 import struct
@@ -291,6 +292,28 @@ def test_storage_guard_backs_off_and_recovers(caplog):
     guard.succeeded()
     assert not guard.blocked(17.5) and guard.counters()["storage_error"] == 0
     assert "storage recovered" in caplog.text
+
+
+def test_periodic_checkpoints_on_a_full_disk_retry_on_the_schedule_the_log_announces(caplog):
+    """Issue 43: with --checkpoint-every 2 the log announced retries in 2, 4, 8, 16, 30 s but a
+    checkpoint was tried every 2 s. The service's loop, as in LearnerService.run: a checkpoint is
+    tried when due (guard.due), and a failed one is retried once the guard stops blocking."""
+    caplog.set_level(logging.INFO, logger="navlearn.storage")
+    guard = StorageGuard(first=1.0, longest=30.0)
+    failure = OSError(28, "No space left on device")
+    every, next_checkpoint, attempts = 2.0, 2.0, []
+    for tick in range(0, 120_00, 5):  # 120 s in steps of 50 ms
+        now = tick / 100
+        if guard.what == "checkpoint" and not guard.blocked(now):
+            next_checkpoint = now  # retry the checkpoint that failed
+        if guard.due(now, next_checkpoint):
+            attempts.append(now)
+            guard.failed("checkpoint", "/x/ckpt", failure, now)
+            next_checkpoint = now + every
+    announced = [float(r.getMessage().rsplit(" in ", 1)[1].split()[0]) for r in caplog.records]
+    gaps = [round(b - a, 2) for a, b in itertools.pairwise(attempts)]
+    assert gaps[:6] == [1.0, 2.0, 4.0, 8.0, 16.0, 30.0], gaps
+    assert gaps == announced[: len(gaps)]
 
 
 def test_a_stored_batch_with_a_rewritten_sender_is_a_duplicate_by_content(tmp_path):

@@ -202,7 +202,7 @@ class LearnerService:
             if now >= next_log:
                 self._log_progress()
                 next_log = now + cfg.log_every
-            if now >= next_checkpoint:
+            if self.storage.due(now, next_checkpoint):  # not while a failure waits for its retry
                 self.save_checkpoint()
                 next_checkpoint = time.monotonic() + cfg.checkpoint_every
         self.broadcast()

@@ -57,6 +57,13 @@ class StorageGuard:
         """True while a failure waits for its retry (nothing is taken in or acknowledged)."""
         return self.error is not None and now < self.retry_at
 
+    def due(self, now: float, scheduled: float) -> bool:
+        """Is a write scheduled for ``scheduled`` (a periodic checkpoint) to be tried at ``now``? Not
+        while a failure waits for its retry: a periodic write tried sooner would fail again and
+        push the back-off on, so the retries would follow the period, not the schedule the log
+        announced ("retrying in 1 s", "next in 2 s", 4, 8, ... ``longest``)."""
+        return now >= scheduled and not self.blocked(now)
+
     def succeeded(self) -> None:
         """A write worked: acknowledge again."""
         if self.error is not None:
