@@ -252,3 +252,43 @@ def test_status_shows_nirl_version_and_demonstrations_per_source():
     text = console.export_text()
     assert "demos per source" in text and "policy version (nirl)" in text
     assert "loss: nirl/iq_loss" in text and "human" in text
+
+
+@pytest.fixture
+def router_with_passwords(tmp_path):
+    """A router (this process) that takes only alice:secret (usrpwd authentication)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    (tmp_path / "users").write_text("alice:secret\n")
+    settings = ZenohSettings(mode="router", listen=[endpoint], auth_dictionary=str(tmp_path / "users"))
+    with open_session(settings):
+        yield endpoint, tmp_path
+
+
+@pytest.mark.parametrize(
+    ("line", "sent"), [("alice:wrong", "as user 'alice'"), ("bob:secret", "as user 'bob'")]
+)
+def test_wrong_credentials_are_told_apart_from_a_missing_router(router_with_passwords, line, sent, capsys):
+    """Issue 43: a wrong password or unknown user was told "no Zenoh router answered ... start the
+    learner"; Zenoh says "Unable to connect" either way, but the router's port does answer."""
+    endpoint, tmp_path = router_with_passwords
+    (tmp_path / "mine").write_text(line + "\n")
+    argv = ["status", "--connect", endpoint, "--run", "r", "--connect-timeout", "1"]
+    assert main([*argv, "--credentials", str(tmp_path / "mine")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert f"no Zenoh session at {endpoint} within 1 s (run 'r'): a router listens at {endpoint}" in err
+    assert f"refused this session {sent}: the user or password is wrong;" in err
+    assert "--auth-dictionary" in err and "start the learner" not in err and not RUST.search(err)
+    assert main(argv) == 2  # no credentials at all
+    assert "refused this session without a user and password" in capsys.readouterr().err
+    (tmp_path / "mine").write_text("alice:secret\n")  # the right ones: the session opens
+    assert main([*argv, "--credentials", str(tmp_path / "mine"), "--timeout", "0.5"]) == 1
+
+
+def test_a_missing_router_is_not_blamed_on_credentials(tmp_path, capsys):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    (tmp_path / "mine").write_text("alice:secret\n")
+    argv = ["status", "--connect", endpoint, "--connect-timeout", "1"]
+    assert main([*argv, "--credentials", str(tmp_path / "mine")]) == 2
+    err = capsys.readouterr().err
+    assert f"no Zenoh router answered at {endpoint} within 1 s (run 'default'): nothing listens there;" in err
+    assert "refused" not in err and "credentials" not in err

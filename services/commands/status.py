@@ -92,8 +92,14 @@ def recorded_run(args: argparse.Namespace) -> tuple[dict, str]:
         overrides.pop("connect")
     if args.zenoh_run:
         overrides.pop("run")
-    live = "" if record.live() else f" (the `navlearn up` of {record.out} has exited)"
-    return overrides, live
+    if record.live():
+        note = (
+            f" (the `navlearn up` of {record.out}, pid {record.pid}, is running: its learner answers "
+            "once the world is compiled and it has started)"
+        )
+    else:
+        note = f" (the `navlearn up` of {record.out} has exited)"
+    return overrides, note
 
 
 def main(args: argparse.Namespace) -> int:

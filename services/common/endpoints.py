@@ -78,3 +78,38 @@ def plain_zenoh_error(exc: BaseException) -> str:
         text = text.split('msg: "', 1)[1]
     text = re.split(r" at /\S+\.rs:\d+|\s+at /|\\?\", location", text)[0]
     return text.strip().rstrip(".!") or type(exc).__name__
+
+
+def listening(endpoint: str, timeout: float = 0.5) -> bool | None:
+    """Does something accept TCP connections at ``endpoint`` (tcp/ or tls/ ``host:port``)? None
+    where that cannot be told from here (udp/, quic/, ws/, unix sockets, a bad address)."""
+    locator = re.split(r"[?#]", endpoint, maxsplit=1)[0]
+    protocol, _, address = locator.partition("/")
+    match = _HOST_PORT.match(address)
+    if protocol not in ("tcp", "tls") or match is None or not match["port"].isdigit():
+        return None
+    try:
+        with socket.create_connection((match["v6"] or match["host"], int(match["port"])), timeout):
+            return True
+    except OSError:
+        return False
+
+
+def refusal(endpoints: list[str], user: str | None) -> str | None:
+    """Why a client could not open a session, told from the endpoints themselves: a router that
+    listens but refused the session turned down its credentials (``user``: the user it sent, None if
+    none), and nothing listening means no router; None when neither can be told (Zenoh's error says
+    "Unable to connect" in both cases)."""
+    probes = {endpoint: listening(endpoint) for endpoint in endpoints}
+    open_ = [e for e, up in probes.items() if up]
+    if open_:
+        sent = f"as user {user!r}" if user else "without a user and password"
+        tls = " (or, on tls/, its TLS certificates do not match ours)" if open_[0].startswith("tls/") else ""
+        return (
+            f"a router listens at {open_[0]} but refused this session {sent}: the user or password is "
+            f"wrong{' or missing' if not user else ''}{tls}; check --credentials (or NAVLEARN_ZENOH_USER "
+            "and NAVLEARN_ZENOH_PASSWORD) against the router's --auth-dictionary"
+        )
+    if probes and all(up is False for up in probes.values()):
+        return "nothing listens there"
+    return None

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from protocols import keys
-from services.common.endpoints import TransportError, check_endpoints, plain_zenoh_error
+from services.common.endpoints import TransportError, check_endpoints, plain_zenoh_error, refusal
 from services.common.options import OptionError, add_options, options_from_args
 from services.common.waiting import WaitLog
 
@@ -271,6 +271,8 @@ def open_session(
         settings.run,
     )
     delay = 0.05
+    why: str | None = None
+    """why the session does not open, where the endpoints tell (services.common.endpoints.refusal)"""
     while True:
         try:
             return zenoh.open(build_config(settings))
@@ -282,12 +284,12 @@ def open_session(
                     f"cannot listen on {listen} ({plain_zenoh_error(exc)}): another router or learner "
                     "may hold that port; stop it or give --listen another endpoint"
                 ) from None
+        if why is None:  # once: a router that refuses this session is no missing router
+            why = refusal(config_endpoints(conf, "connect"), (read_credentials(settings) or (None,))[0]) or ""
+            if why.startswith("a router listens"):
+                log.error("%s (run %r)", why, settings.run)
         if settings.connect_timeout and waiting.waited >= settings.connect_timeout:
-            raise TransportError(
-                f"no Zenoh router answered at {where} within {settings.connect_timeout:g} s "
-                f"(run {settings.run!r}): start the learner (navlearn learner or navlearn up) or "
-                "`navlearn router` there, or point --connect at one; wrong credentials look the same"
-            )
+            raise TransportError(no_session(where, settings, why))
         waiting.tick()
         if stop is not None:
             if stop.wait(delay):
@@ -295,6 +297,26 @@ def open_session(
         else:
             time.sleep(delay)
         delay = min(2 * delay, 1.0)
+
+
+def no_session(where: str, settings: ZenohSettings, why: str) -> str:
+    """The one sentence for a client that found no session in ``connect_timeout`` seconds: refused
+    credentials, nothing listening, or (where the endpoints cannot tell) both causes and how to
+    tell them apart."""
+    waited = f"within {settings.connect_timeout:g} s (run {settings.run!r})"
+    start = (
+        "start the learner (navlearn learner or navlearn up) or `navlearn router` there, or point "
+        "--connect at one"
+    )
+    if why.startswith("a router listens"):
+        return f"no Zenoh session at {where} {waited}: {why}"
+    if why:
+        return f"no Zenoh router answered at {where} {waited}: {why}; {start}"
+    return (
+        f"no Zenoh router answered at {where} {waited}: {start}; or, if a router runs there, it refused "
+        "our credentials (Zenoh reports both the same way over this protocol: a router that logs "
+        "an authentication failure, or a tcp/ endpoint, tells them apart)"
+    )
 
 
 def declare_alive(session, run: str, role: str, ident: str):
