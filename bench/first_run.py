@@ -10,6 +10,9 @@ otherwise: 2 actors x 8 robots) on another empty cache and reports the compile s
 seconds from the processes' start to the first transition, and the seconds trained.
 
     python -m bench.first_run --rounds 2 --up 30   # human lines, then one JSON object on the last line
+
+With ``--before DIR`` (another checkout, e.g. ``git archive main | tar -x -C DIR``) each round also
+times a cold compile of that tree, alternating which goes first, so that both see the same load.
 """
 
 from __future__ import annotations
@@ -30,11 +33,11 @@ CHILD = (
 )
 
 
-def timed(cache: str, maps: str) -> tuple[float, bool]:
-    env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+def timed(cache: str, maps: str, repo: Path = REPO) -> tuple[float, bool]:
+    env = {**os.environ, "NUMBA_CACHE_DIR": cache, "PYTHONPATH": str(repo)}
     done = subprocess.run(
         [sys.executable, "-c", CHILD.format(maps=maps)],
-        cwd=REPO,
+        cwd=repo,
         env=env,
         capture_output=True,
         text=True,
@@ -76,19 +79,29 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=2, help="cold + warm pairs")
     parser.add_argument("--maps", default="mixed:16", help="map spec compiled for")
+    parser.add_argument("--before", default="", help="another checkout to time a cold compile of too")
     parser.add_argument("--up", type=float, default=0.0, help="also a cold `navlearn up` of this budget (s)")
     args = parser.parse_args()
-    cold, warm = [], []
+    cold, warm, before = [], [], []
     for round_ in range(args.rounds):
-        with tempfile.TemporaryDirectory(prefix="navlearn-numba-") as cache:
-            load = os.getloadavg()[0]
-            seconds, compiled = timed(cache, args.maps)
-            assert compiled, "a cold cache compiled nothing: NUMBA_CACHE_DIR was not honoured"
-            cold.append(seconds)
-            again, compiled_again = timed(cache, args.maps)
-            assert not compiled_again, "the warm run compiled again: the cache was not used"
-            warm.append(again)
-            print(f"round {round_ + 1}: cold {seconds:.1f} s, warm {again:.2f} s (load {load:.1f})")
+        order = ["after", "before"] if round_ % 2 else ["before", "after"]
+        for which in order if args.before else ["after"]:
+            with tempfile.TemporaryDirectory(prefix="navlearn-numba-") as cache:
+                load = os.getloadavg()[0]
+                if which == "before":
+                    seconds, compiled = timed(cache, args.maps, Path(args.before).resolve())
+                    assert compiled, "a cold cache compiled nothing: NUMBA_CACHE_DIR was not honoured"
+                    before.append((seconds, load))
+                    print(f"round {round_ + 1}: before cold {seconds:.1f} s (load {load:.1f})", flush=True)
+                    continue
+                seconds, compiled = timed(cache, args.maps)
+                assert compiled, "a cold cache compiled nothing: NUMBA_CACHE_DIR was not honoured"
+                cold.append((seconds, load))
+                again, compiled_again = timed(cache, args.maps)
+                assert not compiled_again, "the warm run compiled again: the cache was not used"
+                warm.append(again)
+                line = f"round {round_ + 1}: cold {seconds:.1f} s, warm {again:.2f} s (load {load:.1f})"
+                print(line, flush=True)
     up = cold_up(args.up) if args.up else None
     if up:
         print(
@@ -98,7 +111,11 @@ def main() -> None:
     result = {
         "bench": "first_run",
         "maps": args.maps,
-        "cold_s": [round(x, 1) for x in cold],
+        "cold_s": [round(x, 1) for x, _ in cold],
+        "cold_load_1min": [round(x, 2) for _, x in cold],
+        "before": str(args.before) if args.before else None,
+        "before_cold_s": [round(x, 1) for x, _ in before],
+        "before_load_1min": [round(x, 2) for _, x in before],
         "warm_s": [round(x, 2) for x in warm],
         "up": up,
         "load_average_1min": round(os.getloadavg()[0], 2),

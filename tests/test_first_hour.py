@@ -81,7 +81,7 @@ def test_a_flag_nothing_resembles_gets_no_suggestion():
 
 
 @pytest.mark.integration
-@pytest.mark.timeout(120)
+@pytest.mark.timeout(300)
 def test_a_second_learner_on_the_same_checkpoint_directory_is_refused_and_touches_nothing(tmp_path):
     ckpt = tmp_path / "ckpt"
     common = ["--checkpoint-dir", str(ckpt), "--hidden-sizes", "16", "--checkpoint-every", "600"]
@@ -93,7 +93,9 @@ def test_a_second_learner_on_the_same_checkpoint_directory_is_refused_and_touche
         before, log_before = snapshot(ckpt), (tmp_path / "first.log").read_bytes()
         assert (ckpt / "wal").is_dir() and before  # its write-ahead log is there to be protected
         other = free_port()
-        second = navlearn("learner", "--listen", f"tcp/127.0.0.1:{other}", "--run", f"lock{port}", *common)
+        second = navlearn(
+            "learner", "--listen", f"tcp/127.0.0.1:{other}", "--run", f"lock{port}", *common, timeout=180
+        )
         assert second.returncode == 2, second.stdout + second.stderr
         message = second.stderr.strip().splitlines()[-1]
         assert f"checkpoint directory {ckpt} is in use by process {first.pid}" in message, message

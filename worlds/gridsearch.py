@@ -38,6 +38,9 @@ from numba import njit
 from worlds.fields import BLOCKED
 
 SQRT2 = math.sqrt(2.0)
+DIAGONAL = np.bool_(True)
+"""``diagonal`` for the 8-connected searches of compiled callers, a numpy scalar: a literal True
+would compile search_start and search_run a second time beside grid_search's ``bool``"""
 CLOSED = -2
 """``pos`` of an expanded cell"""
 GEN, SIZE = 0, 1

@@ -39,7 +39,7 @@ from numba import njit
 
 from worlds.bank import E_CN, E_COFF, E_GC, E_GR, E_LIMIT, E_MAP, E_MIN_D2, E_RESAMPLE, E_SC, E_SR
 from worlds.config import NavConfig
-from worlds.gridsearch import GEN, search_run, search_start
+from worlds.gridsearch import DIAGONAL, GEN, search_run, search_start
 from worlds.obstacles import move_disc, place_discs, swept_contact
 from worlds.outcomes import Outcome
 from worlds.rng import gauss, randint, uniform
@@ -235,8 +235,8 @@ def _limit(field, off, height, width, cell, sr, sc, gr, gc, params, search) -> i
     g, parent, pos, seen, heap, key_f, key_g, order, meta = search
     stride = width + 2
     start, goal = (sr + 1) * stride + sc + 1, (gr + 1) * stride + gc + 1
-    search_start(start, goal, stride, True, g, parent, pos, seen, heap, key_f, key_g, order, meta)
-    search_run(field, off, stride, goal, True, g, parent, pos, seen, heap, key_f, key_g, order, meta)
+    search_start(start, goal, stride, DIAGONAL, g, parent, pos, seen, heap, key_f, key_g, order, meta)
+    search_run(field, off, stride, goal, DIAGONAL, g, parent, pos, seen, heap, key_f, key_g, order, meta)
     if seen[goal] != meta[GEN] or pos[goal] != -2:  # not reached: the floor
         return floor
     steps = math.ceil(params[P_STEPFACTOR] * g[goal] * cell / params[P_STEP] - 1e-9)

@@ -13,7 +13,7 @@ import math
 from numba import njit
 
 from worlds.fields import BLOCKED
-from worlds.gridsearch import GEN, search_run, search_start
+from worlds.gridsearch import DIAGONAL, GEN, search_run, search_start
 
 UNKNOWN, FREE, SEEN_BLOCKED = 0, 1, 2
 """cell states of the robot's own map"""
@@ -132,8 +132,8 @@ def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam,
         return -1, False, -1.0
     was = plan[goal]
     plan[goal] = 0
-    search_start(start, goal, stride, True, *work)
-    expanded = search_run(plan, 0, stride, goal, True, *work)
+    search_start(start, goal, stride, DIAGONAL, *work)
+    expanded = search_run(plan, 0, stride, goal, DIAGONAL, *work)
     plan[goal] = was
     for k in range(expanded):
         exam[order[k]] = exam_id

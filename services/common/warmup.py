@@ -24,7 +24,7 @@ COMPILE_NOTE = (
 )
 STAGES = ("the robots' reset", "the robots' step", "the evaluation's planners")
 """what compile_world compiles, in order (each stage's kernels, then the next)"""
-KERNELS = 26
+KERNELS = 28
 """the navlearn kernels a cold compile_world compiles (worlds/ and agents/ functions, each with the
 helpers it calls), counted by the numba:compile events: the "k of N" of the progress line"""
 
