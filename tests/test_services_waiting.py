@@ -202,7 +202,9 @@ def test_the_progress_line_fits_an_80_column_terminal():
     assert "actors 1/2" in line
 
 
-def test_the_learning_curve_starts_at_launch_and_does_not_join_a_resumed_run(tmp_path):
+def test_the_learning_curve_lays_launches_end_to_end_and_does_not_join_a_resumed_run(tmp_path):
+    """Issue 43: on wall time since the first launch, a few resumes left clumps in empty space; the
+    time panel now counts training time, each launch starting where the one before ended."""
     import matplotlib.pyplot as plt
 
     from agents.evaluation.plots import evaluations_figure, plot_evaluations
@@ -219,10 +221,15 @@ def test_the_learning_curve_starts_at_launch_and_does_not_join_a_resumed_run(tmp
     fig = evaluations_figure(points)
     wall = fig.axes[1]  # success against wall time
     segments = [line.get_xdata() for line in wall.get_lines() if line.get_marker() == "o"]
-    assert [list(x) for x in segments] == [[1.0, 2.0], [15.0, 16.0]]  # minutes since launch, two pieces
+    # minutes of training: the second launch (10 min after the first) continues at 2 min, 5 min in
+    assert [list(x) for x in segments] == [[1.0, 2.0], [7.0, 8.0]]
     marks = [line.get_xdata()[0] for line in wall.get_lines() if line.get_linestyle() == ":"]
-    assert marks == [10.0]  # the resume, at its launch
-    assert "since launch" in fig.axes[3].get_xlabel()
+    assert marks == [2.0]  # the resume, where the first launch's training ended
+    assert "launches end to end" in fig.axes[3].get_xlabel()
+    legend = fig.axes[1].get_legend()  # beside the panels, not over the curves
+    fig.canvas.draw()
+    box, panel = legend.get_window_extent(), fig.axes[1].get_window_extent()
+    assert box.x0 >= panel.x1
     plt.close(fig)
     assert plot_evaluations(points, tmp_path / "curve.png").stat().st_size > 10_000
 

@@ -80,7 +80,8 @@ def draw(
     if obstacles is not None and len(np.asarray(obstacles).reshape(-1, 3)):
         handles.append(Circle((0, 0), 1, color="tab:orange", label="moving disc"))
     if handles:
-        ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.8)
+        # beside the map, never over it (a legend inside once covered a goal)
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0, fontsize=7)
     ax.set_xlim(0, grid.width * cs)
     ax.set_ylim(grid.height * cs, 0)
     ax.set_aspect("equal")
@@ -155,6 +156,12 @@ def draw_patch(fig: Figure, values: np.ndarray, size: int) -> None:
     titles = ("own map: occupancy", "own map: visits")
     for k, (title, cmap) in enumerate(zip(titles, ("Greys", "Blues"), strict=True)):
         ax = fig.add_axes((1.02 + 0.42 * k, 0.3, 0.38, 0.38))
-        ax.imshow(patch[:, :, k], cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
+        image = ax.imshow(patch[:, :, k], cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
         ax.plot([(size - 1) / 2], [(size - 1) / 2], marker="^", color="tab:purple", ms=7)
         ax.set(title=title, xticks=[], yticks=[])
+        key = fig.colorbar(image, ax=ax, orientation="horizontal", fraction=0.08, pad=0.04)  # colour key
+        if k == 0:  # occupancy values (worlds.perceive.PATCH_VALUE)
+            key.set_ticks([0.0, 0.5, 1.0], labels=["seen free", "unknown", "seen blocked"], fontsize=6)
+        else:  # 1 - 1 / (1 + visits)
+            key.set_ticks([0.0, 0.5, 0.75, 1.0], labels=["0", "1", "3", "many"], fontsize=6)
+            key.set_label("visits", fontsize=6)

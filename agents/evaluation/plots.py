@@ -39,12 +39,27 @@ def _pick(episodes: Sequence[EpisodeRecord], n: int) -> list[EpisodeRecord]:
 def plot_paths(
     result: EvalResult, family: str, out: str | Path, n_episodes: int = 6, label: str = "learned"
 ) -> Path:
-    """One PNG for ``family``: for each of ``n_episodes`` episodes, the policy's path (coloured by
-    outcome) in one panel and grid A*'s shortest path beside it."""
+    """One PNG for ``family`` (:func:`paths_figure`)."""
+    import matplotlib.pyplot as plt
+
+    fig = paths_figure(result, family, n_episodes, label)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def paths_figure(result: EvalResult, family: str, n_episodes: int = 6, label: str = "learned"):
+    """For each of ``n_episodes`` episodes of ``family``, the policy's path (coloured by outcome) in
+    one panel, with the moving discs' tracks on a dynamic set, and grid A*'s shortest path beside
+    it; the key below the panels (never over a map)."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle
 
     episodes = _pick(result.episodes[family], n_episodes)
     if not episodes:
@@ -62,6 +77,7 @@ def plot_paths(
         draw(left, grid, start=task.start, goal=task.goal)
         colour = OUTCOME_COLOURS.get(Outcome(ep.outcome), "black")
         left.plot(ep.trajectory[:, 0], ep.trajectory[:, 1], "-", color=colour, lw=1.6)
+        draw_disc_tracks(left, ep.disc_tracks)
         left.set_title(f"{label}: {OUTCOME_NAMES[ep.outcome]}, {ep.path_length:.1f} m", fontsize=8)
         draw(right, grid, start=task.start, goal=task.goal)
         path = astar(grid, task.start, task.goal).path or []
@@ -78,12 +94,30 @@ def plot_paths(
         f"{family}: success {100 * metrics.success.value:.0f}% of {metrics.episodes}, SPL {metrics.spl:.2f}",
         fontsize=10,
     )
-    fig.tight_layout()
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    handles = [
+        Line2D([], [], color=colour, lw=1.6, label=f"{label}: {OUTCOME_NAMES[outcome]}")
+        for outcome, colour in OUTCOME_COLOURS.items()
+    ]  # the key below the panels, never over a map
+    handles.append(Line2D([], [], color="tab:green", ls="--", lw=1.6, label="A* shortest path"))
+    if any(ep.disc_tracks is not None for ep in episodes):
+        handles.append(Line2D([], [], color="tab:orange", lw=0.8, alpha=0.6, label="moving disc: track"))
+        handles.append(Circle((0, 0), 1, color="tab:orange", alpha=0.8, label="moving disc: at the end"))
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 4), fontsize=7, frameon=False)
+    return fig
+
+
+def draw_disc_tracks(ax, tracks: np.ndarray | None) -> None:
+    """The moving discs of a dynamic episode on ``ax``: each disc's track (thin line) and the disc
+    where it was when the episode ended (``tracks``: EpisodeRecord.disc_tracks; nothing if None)."""
+    from matplotlib.patches import Circle
+
+    if tracks is None or not tracks.shape[1]:
+        return
+    for k in range(tracks.shape[1]):
+        ax.plot(tracks[:, k, 0], tracks[:, k, 1], "-", color="tab:orange", lw=0.8, alpha=0.6)
+        x, y, r = tracks[-1, k]
+        ax.add_patch(Circle((x, y), r, color="tab:orange", alpha=0.8, label="_disc"))
 
 
 def plot_learning_curves(
@@ -123,7 +157,7 @@ def plot_learning_curves(
     ax.set_xlabel(xlabel)
     ax.set_ylabel(metric)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0)  # off the curves
     fig.tight_layout()
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -160,17 +194,29 @@ def plot_evaluations(points: list[dict[str, Any]], path: Path) -> Path:
 
 def evaluations_figure(points: list[dict[str, Any]]):
     """The evaluator's learning curve: success rate (95% band) and path ratio to A* per family, against
-    policy version and wall time since the first launch. ``points`` are the evaluator's records
-    (``evaluations.jsonl``: time, launch, model, policy_version, metrics per family); each launch of a
-    resumed run is its own segment (no line across the gap), its start marked on the time axis; those
-    of model :data:`REFERENCE` (a fixed saved policy) are drawn as horizontal lines."""
+    policy version and training time with the launches of a resumed run laid end to end (idle
+    time between them left out, so the curve stays readable across resumes). ``points`` are the
+    evaluator's records (``evaluations.jsonl``: time, launch, model, policy_version, metrics per
+    family); each launch of a resumed run is its own segment (no line across the gap), its start
+    marked on the time axis; those of model :data:`REFERENCE` (a fixed saved policy) are drawn as
+    horizontal lines."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
     launches = sorted({p.get("launch", p["time"]) for p in points})
-    start = min(launches[0], min(p["time"] for p in points))
+    offset, elapsed = {}, 0.0  # each launch starts where the one before it ended: no idle gaps
+    for launch in launches:
+        times = [p["time"] for p in points if p.get("launch", p["time"]) == launch]
+        first = min(launch, *times)
+        offset[launch] = elapsed - first
+        elapsed += max(times) - first
+
+    def end_to_end(point: dict[str, Any]) -> float:
+        """Seconds of training before ``point``, the launches laid end to end."""
+        return point["time"] + offset[point.get("launch", point["time"])]
+
     families = sorted({f for p in points for f in p["metrics"]})
     models = sorted({p.get("model", "") for p in points if p.get("model") != REFERENCE})
     series = [(m, f) for m in models for f in families]
@@ -183,7 +229,7 @@ def evaluations_figure(points: list[dict[str, Any]]):
     for col, (xlabel, xof) in enumerate(
         (
             ("policy version (updates)", lambda p: p["policy_version"]),
-            ("wall time since launch (min)", lambda p: (p["time"] - start) / 60),
+            ("training time, launches end to end (min)", lambda p: end_to_end(p) / 60),
         )
     ):
         for model, family in series:
@@ -219,11 +265,12 @@ def evaluations_figure(points: list[dict[str, Any]]):
                     axes[1, col].axhline(metrics["path_ratio"], ls="--", lw=1, color="gray")
         if col == 1:
             for k, launch in enumerate(launches[1:]):  # where a resumed run started again
+                at = (launch + offset[launch]) / 60 if launch + offset[launch] >= 0 else 0.0
                 for ax in axes[:, col]:
-                    ax.axvline((launch - start) / 60, ls=":", lw=1, color="black")
+                    ax.axvline(at, ls=":", lw=1, color="black")
                 axes[0, col].annotate(
                     "resumed" if k == 0 else "",
-                    ((launch - start) / 60, 0.02),
+                    (at, 0.02),
                     fontsize=7,
                     xytext=(2, 0),
                     textcoords="offset points",
@@ -236,7 +283,7 @@ def evaluations_figure(points: list[dict[str, Any]]):
         axes[1, col].set(xlabel=xlabel, ylabel=below if col == 0 else None)
         for ax in axes[:, col]:
             ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=8, loc="upper left")
+    axes[0, 1].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1), borderaxespad=0)  # off the maps
     where = ", ".join(families) if gym else "held-out maps"
     fig.suptitle(f"{', '.join(models).upper() or 'policies'} on {where} (greedy policy)")
     fig.tight_layout()

@@ -175,6 +175,9 @@ class EpisodeRecord:
     """poses ``(steps + 1, 3)``: x, y, theta"""
     map_family: str = ""
     """see :attr:`EvalSet.map_families`"""
+    disc_tracks: np.ndarray | None = None
+    """the moving discs ``(steps + 1, discs, 3)``: x, y, radius at each pose of ``trajectory`` (None
+    without discs), so a picture of a dynamic episode shows what the robot had to avoid"""
 
     def to_dict(self, with_trajectory: bool = False) -> dict:
         out = {
@@ -249,8 +252,11 @@ def _run_wave(policy: Policy, config: NavConfig, tasks: list[Task], seeds: list[
     frames = [env.poses()]  # frames[t][i]: robot i's pose after t steps (final pose at its end)
     dynamic = config.obstacles.count > 0
     disc_gap = np.full(n, np.inf)
+    tracks: list[list[np.ndarray]] = [[] for _ in range(n)]  # robot i's discs at each of its poses
     if dynamic:
         disc_gap = np.array([_disc_gap(env, i, frames[0][i]) for i in range(n)])
+        for i in range(n):
+            tracks[i].append(env.batch.discs(i).copy())
     running = np.ones(n, bool)
     outcome, length, steps = np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64)
     while running.any():
@@ -267,9 +273,13 @@ def _run_wave(policy: Policy, config: NavConfig, tasks: list[Task], seeds: list[
         if dynamic:
             for i in np.flatnonzero(running):
                 disc_gap[i] = min(disc_gap[i], _disc_gap(env, i, poses[i]))
+            for i in np.flatnonzero(running | ended if info else running):
+                # an ended robot's discs were already reset: its last frame repeats the one before
+                tracks[i].append(tracks[i][-1] if info and ended[i] else env.batch.discs(i).copy())
     path = np.stack(frames, axis=1)  # (n, T + 1, 3)
     finals = [(int(outcome[i]), float(length[i]), int(steps[i])) for i in range(n)]
-    return finals, [path[i, : steps[i] + 1] for i in range(n)], disc_gap
+    discs = [np.stack(t[: steps[i] + 1]) if dynamic and len(t[0]) else None for i, t in enumerate(tracks)]
+    return finals, [path[i, : steps[i] + 1] for i in range(n)], disc_gap, discs
 
 
 def _disc_gap(env, i: int, pose: np.ndarray) -> float:
@@ -311,7 +321,7 @@ def _evaluate(policy: Policy, sets: list[EvalSet], base: NavConfig, max_batch: i
         for lo in range(0, len(es), max_batch):
             hi = min(lo + max_batch, len(es))
             tasks, seeds = list(es.tasks[lo:hi]), list(es.seeds[lo:hi])
-            finals, trajectories, disc_gap = _run_wave(
+            finals, trajectories, disc_gap, discs = _run_wave(
                 policy, cfg, tasks, seeds, f"eval:{es.family}:{seeds[0]}"
             )
             for k, task in enumerate(tasks):
@@ -329,6 +339,7 @@ def _evaluate(policy: Policy, sets: list[EvalSet], base: NavConfig, max_batch: i
                         float(min(static, disc_gap[k])),
                         traj,
                         es.map_families[lo + k],
+                        discs[k],
                     )
                 )
         result.episodes[es.family] = records
