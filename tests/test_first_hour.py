@@ -146,3 +146,16 @@ def test_status_with_no_flags_finds_the_up_running_here_and_a_second_up_is_refus
     after = navlearn("status", cwd=tmp_path, timeout=30)
     assert after.returncode != 0
     assert "the newest `navlearn up` here, in runs/local, has exited; its run was local" in after.stderr
+
+
+def test_a_small_final_evaluation_says_it_rests_on_few_episodes_and_its_interval_is_wide():
+    from services.commands.up import small_evaluation
+
+    def final(episodes: int) -> dict:
+        success = {"value": 0.85, "low": 0.64, "high": 0.95}
+        return {"metrics": {"unseen": {"success": success, "episodes": episodes, "spl": 0.6}}}
+
+    line = small_evaluation({"nnql": final(20)})
+    assert line is not None and "20 episodes per family" in line and "wide" in line
+    assert "--eval-episodes 200" in line
+    assert small_evaluation({"nnql": final(500)}) is None

@@ -54,6 +54,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=main)
 
 
+SMALL_EVALUATION = 100
+"""episodes per family under which `up`'s final figures say that their interval is wide"""
+
+
+def small_evaluation(last: dict) -> str | None:
+    """A line saying that the final evaluation rests on few episodes (under SMALL_EVALUATION per
+    family) and that its 95% intervals are too wide to compare with headline figures (500 episodes),
+    or None when it does not."""
+    counts = [m["episodes"] for final in last.values() for m in final["metrics"].values() if "success" in m]
+    if not counts or min(counts) >= SMALL_EVALUATION:
+        return None
+    return (
+        f"  note: {min(counts)} episodes per family: the intervals in [ ] are wide, so these rates "
+        "cannot be told apart from figures within them (the recorded figures rest on 500); for a "
+        "figure to compare, give --eval-episodes 200 or more, or run `navlearn evaluate` on the policy"
+    )
+
+
 def main(args: argparse.Namespace) -> int:
     import logging
     import sys
@@ -186,6 +204,8 @@ def main(args: argparse.Namespace) -> int:
                 f"[{100 * m['success']['low']:.0f}, {100 * m['success']['high']:.0f}], SPL {m['spl']:.2f} "
                 f"(version {final['policy_version']}, {m['episodes']} held-out episodes)"
             )
+    if (few := small_evaluation(summary["last_evaluations"])) is not None:
+        console.print(few, highlight=False)
     for name, path in summary["outputs"].items():
         console.print(f"  {name}: {path}")
     if bad:
