@@ -89,6 +89,11 @@ def batch(actor: str, n: int = 8) -> TransitionBatch:
 def test_the_secure_recipe_trains_and_still_refuses_what_it_must(tmp_path: Path) -> None:
     secrets = tmp_path / "secrets"
     credentials(secrets)
+    compiled = subprocess.run(  # the recipe's compile step: before any process's clock starts
+        [sys.executable, "-m", "services.cli", "world", "compile"],
+        capture_output=True, text=True, timeout=600, check=True, cwd=REPO,
+    )  # fmt: skip
+    assert "robot world" in compiled.stdout, compiled.stdout
     endpoint, router, _ = start_router(
         "--auth-dictionary", str(secrets / "users.txt"), "--acl", str(secrets / "acl.json5")
     )
