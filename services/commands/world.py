@@ -78,8 +78,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Compile the robot world once (actors' and the evaluator's kernels) into numba's cache, "
             "with a progress line, so that processes started afterwards (by hand, as in the secure "
             "recipe of docs/security.md, or under supervisord) load it in about a second instead of "
-            "each compiling it while their clocks run. About 35 s on 2 idle cores, up to twice that "
-            "on busy ones; nothing to do when the cache is current. `navlearn up` does this itself."
+            "each compiling it while their clocks run. About 100 s on 2 cores busy with other work, "
+            "less on idle ones; nothing to do when the cache is current. `navlearn up` does this itself."
         ),
     )
     ahead.add_argument("--maps", default="mixed:16", help="map spec to compile for (default mixed:16)")

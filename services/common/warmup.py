@@ -1,8 +1,7 @@
 """The robot world's numba kernels, compiled once before the processes that use them start.
 
 Every kernel is compiled with ``cache=True``: the first process on a machine (or the first after
-worlds/ changed) compiles them - :data:`TYPICAL_COMPILE` on an idle 2-core machine, up to twice
-that when other work keeps its cores busy (results/first-run/) - and writes numba's cache
+worlds/ changed) compiles them - :data:`TYPICAL_COMPILE` (results/first-run/) - and writes numba's cache
 (``__pycache__`` beside the sources, or ``NUMBA_CACHE_DIR``); later processes load it in about a
 second. ``navlearn up`` calls :func:`compile_world` before it starts its processes, so they do not
 all compile at once while the training clock runs; ``navlearn world compile`` does the same for
@@ -16,11 +15,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-TYPICAL_COMPILE = "about 35 s"
-"""a cold compile of the world on an idle 2-core machine (bench/first_run.py, results/first-run/)"""
+TYPICAL_COMPILE = "about 100 s on 2 busy cores, less when idle"
+"""a cold compile of the world measured on this project's 2-core machine at load 9 (100-118 s,
+bench/first_run.py, results/first-run/); on idle cores it took 41 s before the cut"""
 COMPILE_NOTE = (
-    f"a cold numba cache compiles the world first ({TYPICAL_COMPILE} on 2 idle cores, more when they "
-    "are busy; `navlearn world compile` does it ahead); later starts load it"
+    f"a cold numba cache compiles the world first ({TYPICAL_COMPILE}; `navlearn world compile` does "
+    "it ahead); later starts load it"
 )
 STAGES = ("the robots' reset", "the robots' step", "the evaluation's planners")
 """what compile_world compiles, in order (each stage's kernels, then the next)"""
@@ -54,8 +54,7 @@ def progress_text(stage: int, kernels: int, seconds: float) -> str:
     has taken and how long it usually takes."""
     return (
         f"compiling the robot world (first run only): {STAGES[stage]} ({stage + 1}/{len(STAGES)}), "
-        f"{min(kernels, KERNELS)} of ~{KERNELS} kernels, {seconds:.0f} s so far; usually {TYPICAL_COMPILE} "
-        "on 2 idle cores"
+        f"{min(kernels, KERNELS)} of ~{KERNELS} kernels, {seconds:.0f} s so far; usually {TYPICAL_COMPILE}"
     )
 
 
