@@ -99,6 +99,12 @@ def paths_figure(result: EvalResult, family: str, n_episodes: int = 6, label: st
         for outcome, colour in OUTCOME_COLOURS.items()
     ]  # the key below the panels, never over a map
     handles.append(Line2D([], [], color="tab:green", ls="--", lw=1.6, label="A* shortest path"))
+    marks = {}  # start and goal, drawn by worlds.render.draw with a legend of each panel's own
+    for ax in axes.ravel():
+        marks.update({h.get_label(): h for h in ax.patches if h.get_label() in ("start", "goal")})
+        if ax.get_legend() is not None:
+            ax.get_legend().remove()  # one key for the figure, below the panels
+    handles = [*marks.values(), *handles]
     if any(ep.disc_tracks is not None for ep in episodes):
         handles.append(Line2D([], [], color="tab:orange", lw=0.8, alpha=0.6, label="moving disc: track"))
         handles.append(Circle((0, 0), 1, color="tab:orange", alpha=0.8, label="moving disc: at the end"))
