@@ -106,8 +106,8 @@ def paths_figure(result: EvalResult, family: str, n_episodes: int = 6, label: st
             ax.get_legend().remove()  # one key for the figure, below the panels
     handles = [*marks.values(), *handles]
     if any(ep.disc_tracks is not None for ep in episodes):
-        handles.append(Line2D([], [], color="tab:orange", lw=0.8, alpha=0.6, label="moving disc: track"))
-        handles.append(Circle((0, 0), 1, color="tab:orange", alpha=0.8, label="moving disc: at the end"))
+        handles.append(Line2D([], [], color="tab:purple", lw=0.8, alpha=0.6, label="moving disc: track"))
+        handles.append(Circle((0, 0), 1, color="tab:purple", alpha=0.8, label="moving disc: at the end"))
     fig.tight_layout(rect=(0, 0.1, 1, 1))
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 4), fontsize=7, frameon=False)
     return fig
@@ -121,9 +121,9 @@ def draw_disc_tracks(ax, tracks: np.ndarray | None) -> None:
     if tracks is None or not tracks.shape[1]:
         return
     for k in range(tracks.shape[1]):
-        ax.plot(tracks[:, k, 0], tracks[:, k, 1], "-", color="tab:orange", lw=0.8, alpha=0.6)
+        ax.plot(tracks[:, k, 0], tracks[:, k, 1], "-", color="tab:purple", lw=0.8, alpha=0.6)
         x, y, r = tracks[-1, k]
-        ax.add_patch(Circle((x, y), r, color="tab:orange", alpha=0.8, label="_disc"))
+        ax.add_patch(Circle((x, y), r, color="tab:purple", alpha=0.8, label="_disc"))
 
 
 def plot_learning_curves(
