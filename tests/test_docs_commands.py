@@ -97,6 +97,8 @@ OTHER_PROGRAMS = {
     "--replicas",  # kubectl
     "--short",  # git rev-parse
     "--once",  # ros2 topic
+    "--index-url",  # pip (a CPU-only torch, docs/install.md)
+    "--before",  # bench/first_run.py
     "--tls-",  # the --tls-* family, named as a prefix
 }  # fmt: skip
 """flags the guides name that belong to other programs than navlearn"""
