@@ -5,6 +5,7 @@ learner's, and an env with continuous actions."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import subprocess
@@ -272,9 +273,8 @@ def test_a_continuous_env_is_refused_before_anything_starts(user_module: str, tm
 def test_the_documented_example_env_passes_gymnasiums_checks_and_both_of_its_names_work() -> None:
     from gymnasium.utils.env_checker import check_env
 
-    from examples.own_env.warehouse import WarehouseAisle
-
-    check_env(WarehouseAisle(length=6), skip_render_check=True)
+    example = importlib.import_module("examples.own_env.warehouse")  # a user's file, not a package of ours
+    check_env(example.WarehouseAisle(length=6), skip_render_check=True)
     by_class = EnvConfig(env="examples.own_env.warehouse:WarehouseAisle", env_kwargs='{"length": 6}')
     by_id = EnvConfig(env_module="examples.own_env.warehouse", env="navlearn-example/WarehouseAisle-v0")
     assert env_spaces(by_class) == env_spaces(by_id) == (4, 3)
