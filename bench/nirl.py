@@ -306,7 +306,7 @@ def run_one(
             LocalTrainConfig(steps=args.nnql_steps, eval_every=args.nnql_eval_every,
                              eval_episodes=args.val_episodes, keep_best=args.keep_best,
                              final_eval_episodes=0, out="", seed=seed, progress=False,
-                             moving_discs=args.nnql_discs),
+                             moving_discs=args.nnql_discs, maps="mixed:16", eval_sizes=(16,)),
             NNQLConfig(**{"seed": seed, "dueling": args.nnql_dueling, **args.nnql_overrides}),
             nav=reward_nav,
         )  # fmt: skip

@@ -72,6 +72,7 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
     run = LocalTrainConfig(
         steps=args.steps, envs=16, seed=seed, out=str(out), eval_every=args.steps // 4,
         eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False, moving_discs=discs,
+        maps="mixed:16", eval_sizes=(16,),  # 16x16 maps and validation, as the recorded runs
     )  # fmt: skip
     start = time.perf_counter()
     trained = train_local(run, NNQLConfig(seed=seed, **{"dueling": False, **fields}))  # plain unless named

@@ -219,6 +219,7 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
         steps=args.steps, envs=16, seed=seed, out=str(out), eval_every=args.steps // 4,
         eval_episodes=args.val_episodes, final_eval_episodes=0, progress=False,
         moving_discs=0,  # the variant's nav as it is: static maps, as the recorded runs
+        maps="mixed:16", eval_sizes=(16,),  # 16x16 maps and validation, as the recorded runs
     )  # fmt: skip
     options = {"dueling": False, **NNQL_OPTIONS.get(variant, {}), **getattr(args, "nnql_overrides", {})}
     nnql = NNQLConfig(seed=seed, **options)  # a plain head unless overridden

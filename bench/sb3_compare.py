@@ -67,7 +67,7 @@ class SB3Greedy:
 def train_nnql(steps: int, seed: int, discs: int, out: Path):
     run = LocalTrainConfig(
         steps=steps, envs=16, seed=seed, maps=TRAIN_MAPS, moving_discs=discs, out=str(out),
-        eval_every=steps // 4, eval_episodes=100, final_eval_episodes=0, progress=False,
+        eval_every=steps // 4, eval_episodes=100, final_eval_episodes=0, progress=False, eval_sizes=(16,),
     )  # fmt: skip
     trained = train_local(run)
     info = {

@@ -131,7 +131,11 @@ def test_warm_start_hands_nirls_q_to_nnqls_trainer_in_its_reward_units(nan_env_r
         policy_utd=0.25,
         policy_temperature=0.02,
         seed=0,
+        action_local=0,  # the warm start hands over the plain MLP's layout
+        gamma=GAMMA,
     )
+    with pytest.raises(ValueError, match="--action-local 0"):
+        NIRLConfig(policy_warm_start=2)
     assert config.own_rounds() == 3 and NIRLConfig(iterations=9).own_rounds() == 9
     run = NIRLRun(envs=4, maps="mixed:16", out="", eval_every=0, final_eval_episodes=0, progress=False,
                   policy_eval_every=0)  # fmt: skip

@@ -90,7 +90,7 @@ def test_keep_best_saves_the_weights_that_validated_best(tmp_path, monkeypatch):
     scores = iter([0.2, 0.9, 0.5, 0.1])  # three periodic validations, then the final weights
     seen_versions = []
 
-    def fake_evaluate(policy, episodes, seed, nav=None, dynamic=0):
+    def fake_evaluate(policy, episodes, seed, nav=None, dynamic=0, sizes=(16,)):
         seen_versions.append(policy.version)
         success = next(scores)
         rate = SimpleNamespace(value=success)

@@ -7,7 +7,7 @@ import pytest
 
 from worlds.generators import FAMILIES, generate, generate_task, min_task_distance
 from worlds.maps import GridMap, MapFormatError, components, connected
-from worlds.tasks import DEFAULT_MAPS, MIXED_FAMILIES, parse_map_spec
+from worlds.tasks import DEFAULT_MAPS, MIXED_FAMILIES, TRAINING_MAPS, parse_map_spec
 
 
 @pytest.mark.parametrize("family", FAMILIES)
@@ -81,11 +81,53 @@ def test_file_specs(tmp_path, arena_paths):
     assert sampler.resample and sampler(np.random.default_rng(1)).grid.shape == (4, 6)
 
 
+def test_size_range_spec_draws_every_size_and_keeps_each_maps_distance():
+    from worlds.bank import pool_bank
+
+    sampler = parse_map_spec(TRAINING_MAPS)
+    assert TRAINING_MAPS == "mixed:16-64"
+    sizes = [sampler(np.random.default_rng(k)).grid.shape for k in range(400)]
+    sides = np.array([h for h, w in sizes])
+    assert all(h == w for h, w in sizes) and sides.min() == 16 and sides.max() == 64
+    # log-uniform: about as many maps in 16..31 as in 32..64
+    small, big = (sides < 32).sum(), (sides >= 32).sum()
+    assert 0.7 < small / big < 1.4, (small, big)
+    again = sampler(np.random.default_rng(3))
+    assert again.grid == sampler(np.random.default_rng(3)).grid
+    # resampled endpoints keep each map's own least distance (40% of its side), not the smallest map's
+    bank = pool_bank(sampler, 64, 0)
+    for task, row in zip(bank.pool_tasks, bank.etab, strict=True):
+        least = min_task_distance(task.grid)
+        assert row[-1] == int(np.ceil(least**2 - 1e-9))
+    assert len({int(r[-1]) for r in bank.etab}) > 10
+
+
+def test_size_range_episodes_start_far_enough_apart():
+    from worlds.config import LEARNING_NAV
+    from worlds.vector_env import NavigationVectorEnv
+
+    env = NavigationVectorEnv(8, LEARNING_NAV, maps="mixed:16-64", seed=0)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    seen = 0
+    for _ in range(300):
+        env.step(rng.integers(5, size=8))
+        for i in range(8):
+            task = env.batch.task(i)
+            gap = np.hypot(task.start[0] - task.goal[0], task.start[1] - task.goal[1])
+            assert gap * task.grid.cell_size >= min_task_distance(task.grid) - 1e-9
+            seen += 1
+    env.close()
+    assert seen > 0
+
+
 def test_bad_specs_raise_clear_errors(tmp_path):
     with pytest.raises(ValueError, match="unknown map family 'caves'"):
         parse_map_spec("caves:16")
     with pytest.raises(ValueError, match="between 5 and 1024"):
         parse_map_spec("rooms:3")
+    with pytest.raises(ValueError, match="must go up"):
+        parse_map_spec("mixed:64-16")
     with pytest.raises(ValueError, match="neither FAMILY:N"):
         parse_map_spec("no/such/file.map")
     bad = tmp_path / "bad.txt"

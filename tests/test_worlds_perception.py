@@ -156,6 +156,55 @@ def test_own_map_subgoal_leads_around_a_seen_wall():
     assert sub_bearing > 0.5  # ... the waypoint leads towards +y, round the wall's open end (row 8+)
 
 
+def _segment_clearance(grid: GridMap, a, b) -> float:
+    """The least distance (m) from the segment a -> b to a blocked cell of ``grid`` (cells of 1 m)."""
+    least = math.inf
+    for t in np.linspace(0.0, 1.0, 200):
+        px, py = a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])
+        for r, c in np.argwhere(grid.blocked):
+            dx, dy = max(c - px, 0.0, px - c - 1), max(r - py, 0.0, py - r - 1)
+            least = min(least, math.hypot(dx, dy))
+    return least
+
+
+def _waypoints(
+    grid: GridMap, goal, clearance: float
+) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """(start centre, waypoint) of the known-map subgoal from every free cell of ``grid`` far enough
+    from ``goal``, read back from the observation (distance squashed by the 6 m range, bearing)."""
+    sensors = SensorConfig(n_beams=24, n_rays=96, noise_std=0.0)
+    config = NavConfig(
+        robot=EXACT,
+        sensors=sensors,
+        observation=ObservationConfig(subgoal="known_map", subgoal_clearance=clearance),
+    )
+    at = frame_layout(config)["subgoal"][0]
+    env = NavigationEnv(config)
+    pairs = []
+    for r, c in np.argwhere(~grid.blocked):
+        if math.hypot(r - goal[0], c - goal[1]) < 3:
+            continue
+        obs, info = env.reset(seed=0, options={"task": Task(grid, (int(r), int(c)), goal)})
+        x, y, theta = info["pose"]
+        squashed, sin_b, cos_b = obs[at : at + 3]
+        d = 6.0 * squashed / (1.0 - squashed)
+        bearing = theta + math.atan2(sin_b, cos_b)
+        pairs.append(((x, y), (x + d * math.cos(bearing), y + d * math.sin(bearing))))
+    return pairs
+
+
+def test_subgoal_clearance_keeps_the_waypoint_off_a_doors_jambs():
+    # two rooms joined by a door 2 cells wide in a wall at row 6: from cells beside the door the
+    # waypoint 2.5 m along the path lies through it, and the straight line to it brushes a jamb
+    wall = [(6, c) for c in range(12) if c not in (5, 6)]
+    grid = grid_with(wall, size=12)
+    goal = (2, 9)
+    plain = [_segment_clearance(grid, a, b) for a, b in _waypoints(grid, goal, 0.0)]
+    assert sum(p < 0.25 for p in plain) >= 5  # heading straight for it would scrape a jamb (the radius)
+    kept = [_segment_clearance(grid, a, b) for a, b in _waypoints(grid, goal, 0.4)]
+    assert len(kept) == len(plain) and min(kept) >= 0.4 - 1e-3  # every line keeps its clearance
+
+
 def _grid_path_length(passable: np.ndarray, start, goal) -> float:
     """Dijkstra on 8-connected cells, diagonals only between two passable side cells (cells of 1 m)."""
     dist = {start: 0.0}
@@ -219,6 +268,7 @@ def test_plan_length_is_the_own_map_path_to_the_goal():
         (lambda: ObservationConfig(patch_size=-1), "observation.patch_size"),
         (lambda: ObservationConfig(subgoal="oracle"), "observation.subgoal"),
         (lambda: ObservationConfig(subgoal_distance=0.0), "observation.subgoal_distance"),
+        (lambda: ObservationConfig(subgoal_clearance=-0.1), "observation.subgoal_clearance"),
         (lambda: SensorConfig(n_beams=24, n_rays=12), "sensors.n_rays"),
         (lambda: SensorConfig(n_beams=24, n_rays=50), "sensors.n_rays"),
         (lambda: RewardConfig(geodesic_progress=-0.1), "rewards.geodesic_progress"),

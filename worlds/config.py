@@ -176,6 +176,13 @@ class ObservationConfig:
     every step; "known_map": the same path on the true map (a user-supplied map, not learning alone)"""
     subgoal_distance: float = 2.5
     """path length from the robot to the subgoal waypoint (m); the goal itself when closer"""
+    subgoal_clearance: float = 0.0
+    """> 0: the waypoint is the furthest cell of the path, up to ``subgoal_distance``, that a straight
+    line from the centre of the robot's cell reaches this far (m) from every blocked cell of the plan
+    map (else the path's next cell): it never lies round a corner, so heading for it does not cut a
+    door's jamb. 0: the cell ``subgoal_distance`` along the path, round corners or not (what policies
+    saved before the setting observe). Learned policies use 0.4 (the robot's radius and 0.15 m;
+    issue 39: nearly every collision on bigger room maps was at a jamb)"""
     patch_size: int = 0
     """side of the egocentric, heading-aligned patch of the robot's own map (cells; 0: off), two
     channels: occupancy (1 seen blocked, 0 seen free, 0.5 unknown) and visits (1 - 1/(1+n))"""
@@ -202,6 +209,10 @@ class ObservationConfig:
         _check(self.subgoal in SUBGOALS, f"observation.subgoal={self.subgoal!r}: expected one of {SUBGOALS}")
         _check(
             self.subgoal_distance > 0, f"observation.subgoal_distance={self.subgoal_distance}: must be > 0"
+        )
+        _check(
+            self.subgoal_clearance >= 0,
+            f"observation.subgoal_clearance={self.subgoal_clearance}: must be >= 0 (0: off)",
         )
         _check(self.patch_size >= 0, f"observation.patch_size={self.patch_size}: must be >= 0 (0: off)")
 
@@ -279,6 +290,7 @@ OBSERVATION_FIELDS = (
     "observation.frame_stack",
     "observation.subgoal",
     "observation.subgoal_distance",
+    "observation.subgoal_clearance",
     "observation.patch_size",
     "observation.range_rate",
     "observation.plan_length",
@@ -295,6 +307,7 @@ LEGACY_OBSERVATION = {
     "observation.frame_stack": 1,
     "observation.subgoal": "none",
     "observation.subgoal_distance": 2.5,
+    "observation.subgoal_clearance": 0.0,
     "observation.patch_size": 0,
     "observation.range_rate": False,
     "observation.plan_length": False,
@@ -362,7 +375,7 @@ def _same(a, b) -> bool:
 
 LEARNING_NAV = NavConfig(
     sensors=SensorConfig(n_beams=24, n_rays=96),
-    observation=ObservationConfig(subgoal="own_map"),
+    observation=ObservationConfig(subgoal="own_map", subgoal_clearance=0.4),
     rewards=RewardConfig(progress=0.0, geodesic_progress=0.1),
 )
 """the task as learned policies see it by default (``navlearn train --local``, the actors, learner,

@@ -113,11 +113,40 @@ def plan_from_field(field, base, plan, height, width):
 
 
 @njit(cache=True, _nrt=False)
-def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam, exam_id):
+def _in_clear(plan, stride, height, width, cell, x0, y0, x1, y1, clearance, exam, exam_id):
+    """Does the segment (x0, y0) -> (x1, y1) stay at least ``clearance`` metres from every blocked cell
+    of the padded grid ``plan`` (points every quarter cell, each against the cells around it)? The
+    cells it reads get the stamp ``exam_id`` in ``exam`` (a change there must reach the plan)."""
+    length = math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2)
+    samples = int(length / (0.25 * cell)) + 1
+    for k in range(samples + 1):
+        t = k / samples
+        px, py = x0 + t * (x1 - x0), y0 + t * (y1 - y0)
+        r0, r1 = max(math.floor((py - clearance) / cell), -1), min(int((py + clearance) / cell), height)
+        c0, c1 = max(math.floor((px - clearance) / cell), -1), min(int((px + clearance) / cell), width)
+        for r in range(r0, r1 + 1):
+            for c in range(c0, c1 + 1):
+                at = (r + 1) * stride + c + 1
+                exam[at] = exam_id
+                if plan[at] != BLOCKED:
+                    continue
+                dx = max(c * cell - px, 0.0, px - (c + 1) * cell)
+                dy = max(r * cell - py, 0.0, py - (r + 1) * cell)
+                if dx * dx + dy * dy < clearance * clearance:
+                    return False
+    return True
+
+
+@njit(cache=True, _nrt=False)
+def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam, exam_id, clearance=0.0):
     """A* (8-connected, no corner cutting) on the padded grid ``plan`` from the robot's cell to the
     goal cell (counted free); the centre of the cell ``along`` metres down the path, or the goal
     itself when the path ends first, the robot is off the map or on a blocked cell, or no path
-    exists. ``work``: the search's work arrays (:func:`worlds.gridsearch.new_work`). The cells it
+    exists. With ``clearance`` > 0 the waypoint is the furthest cell of the path up to there that the
+    straight line from the centre of the robot's cell reaches with that clearance from the blocked
+    cells (the next cell of the path when none does): a waypoint never lies round a corner, so
+    heading for it does not cut the corner (a door's jamb). ``work``: the search's work arrays
+    (:func:`worlds.gridsearch.new_work`). The cells it
     expanded get the stamp ``exam_id`` in ``exam`` (a search reads only their 3x3 neighbourhoods,
     so changes elsewhere leave its result as it is). Returns (the waypoint's padded cell, -1 for the
     goal itself; searched; the path's length in metres from the robot's cell to the goal's, -1.0
@@ -144,6 +173,16 @@ def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam,
     node = goal
     while parent[node] >= 0 and g[parent[node]] * cell >= along:
         node = parent[node]
+    if clearance > 0.0 and node != start:
+        sx, sy = (c + 0.5) * cell, (r + 0.5) * cell
+        while parent[node] >= 0 and parent[node] != start:
+            if node == goal:
+                nx, ny = (goal_c + 0.5) * cell, (goal_r + 0.5) * cell
+            else:
+                nx, ny = (node % stride - 1 + 0.5) * cell, (node // stride - 1 + 0.5) * cell
+            if _in_clear(plan, stride, height, width, cell, sx, sy, nx, ny, clearance, exam, exam_id):
+                break
+            node = parent[node]
     return (-1 if node == goal else node), True, g[goal] * cell
 
 

@@ -36,6 +36,8 @@ once for each (a cold first compile's seconds, bench/first_run.py)"""
 NO_ACTION = np.int64(-1)
 """_robot's ``action`` on a fresh episode, a numpy scalar for the same reason"""
 """index in :attr:`worlds.perception.Perception.params` of the plan length's frame offset (-1: absent)"""
+CLEARANCE_PARAM = 13
+"""index in :attr:`worlds.perception.Perception.params` of the subgoal's clearance (m; 0: off)"""
 
 
 @njit(cache=True, _nrt=False)
@@ -79,7 +81,8 @@ def _frame(out, base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions,
 
 
 @njit(cache=True, _nrt=False)
-def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell, along, reuse, plans, work):
+def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell, along, reuse, plans, work,
+             clearance):  # fmt: skip
     """Robot ``i``'s waypoint into ``wpt[i]`` (``plans``). The plan depends on the map, the goal and
     the robot's cell only: it is searched again when one of them changed (``fresh``: a new episode;
     ``dirty``: a cell became blocked or free; ``replan``: one where the last search looked), else
@@ -111,7 +114,7 @@ def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell,
             searches[i] = 0
         searches[i] += 1
         node, searched, path_length[i] = waypoint(
-            plan[i], height, width, cell, x, y, gr, gc, along, work, exam[i], searches[i]
+            plan[i], height, width, cell, x, y, gr, gc, along, work, exam[i], searches[i], clearance
         )
         exam_id[i] = searches[i] if searched else -1
         if on_map:
@@ -142,7 +145,7 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     patch, w_geo, n_actions, per = int(params[6]), params[7], int(params[8]), int(params[9])
     reuse = params[REUSE_PARAM] > 0.0
     rate_at, n_beams = int(params[RATE_PARAM]), ray_c.shape[0] // per
-    len_at = int(params[LENGTH_PARAM])
+    len_at, clearance = int(params[LENGTH_PARAM]), params[CLEARANCE_PARAM]
     field, moff, mh, mw, mcell = world
     occ, visits, plans, moves, geo, pgeo, stack = mem
     plan, wpt, exam, exam_id, path_length = plans[0], plans[1], plans[6], plans[7], plans[10]
@@ -178,7 +181,24 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     wx, wy, length = gx, gy, 0.0
     if sub_kind != SUB_NONE:
         _subgoal(
-            i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell, along, reuse, plans, work
+            i,
+            fresh,
+            dirty,
+            replan,
+            x,
+            y,
+            gx,
+            gy,
+            gr,
+            gc,
+            height,
+            width,
+            cell,
+            along,
+            reuse,
+            plans,
+            work,
+            clearance,
         )
         wx, wy, length = wpt[i, 0], wpt[i, 1], path_length[i]
         if length < 0.0:  # no path on the plan map: the straight line

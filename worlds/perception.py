@@ -152,6 +152,7 @@ class Perception:
                 reuse,
                 layout.get("range_rate", (-1,))[0],  # worlds.perceive.RATE_PARAM
                 layout.get("plan_length", (-1,))[0],  # worlds.perceive.LENGTH_PARAM
+                o.subgoal_clearance,  # worlds.perceive.CLEARANCE_PARAM
             ],
             dtype=np.float64,
         )

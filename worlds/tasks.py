@@ -11,6 +11,8 @@ source                     tasks
 ``maze:15``                start and goal; several generated sources (``mixed:16,mixed:32``): each
 ``mixed:16``               task from one of them, uniformly; ``mixed`` is a random family among
                            :data:`MIXED_FAMILIES` per task
+``mixed:16-64``            a side per task too, square, log-uniform in 16..64 cells (about equal
+                           robot-steps per doubling of the side): :data:`TRAINING_MAPS`
 ``path/map.yaml``          a ROS map_server map (YAML + PGM/PNG image)
 ``path/x.map``             a MovingAI map: the scenarios of the ``.scen`` beside it when there is
                            one, else drawn pairs
@@ -54,8 +56,12 @@ TRAIN_SEEDS = 2**31
 MIXED_FAMILIES = ("rects", "discs", "rooms")
 """families of ``mixed:N``; mazes are left out because a memoryless policy cannot solve them"""
 DEFAULT_MAPS = "mixed:16"
+TRAINING_MAPS = "mixed:16-64"
+"""the maps learned policies train on by default (``navlearn train --local``, the actors of ``navlearn
+up``): the three families of ``mixed`` at every side from 16 to 64 cells, so one policy holds at every
+map size (issue 39, docs/navigation-by-size.md)"""
 
-_GENERATED = re.compile(r"^(?P<family>[a-z]+):(?P<h>\d+)(?:x(?P<w>\d+))?$")
+_GENERATED = re.compile(r"^(?P<family>[a-z]+):(?P<h>\d+)(?:x(?P<w>\d+)|-(?P<hi>\d+))?$")
 
 
 @dataclass(frozen=True)
@@ -143,18 +149,24 @@ def _random_endpoints(grid: GridMap, min_distance: float) -> Callable[[np.random
     return draw
 
 
-def _generated_draw(family: str, height: int, width: int) -> Callable[[np.random.Generator], Task]:
+def _generated_draw(
+    family: str, height: int, width: int, high: int = 0
+) -> Callable[[np.random.Generator], Task]:
+    """Tasks of ``family`` on ``height`` x ``width`` maps, or (``high`` > 0) on square maps of a side drawn
+    per task, log-uniform in ``height``..``high``."""
     families = MIXED_FAMILIES if family == "mixed" else (family,)
+    log_low, log_high = np.log(height), np.log(high + 1)
 
     def draw(rng: np.random.Generator) -> Task:
+        h = w = min(int(np.exp(rng.uniform(log_low, log_high))), high) if high else None
         fam = families[int(rng.integers(len(families)))]
-        grid = generate(fam, height, width, int(rng.integers(TRAIN_SEEDS)))
+        grid = generate(fam, h or height, w or width, int(rng.integers(TRAIN_SEEDS)))
         return _random_endpoints(grid, min_task_distance(grid))(rng)
 
     return draw
 
 
-def _parse_generated(spec: str) -> tuple[str, int, int] | None:
+def _parse_generated(spec: str) -> tuple[str, int, int, int] | None:
     match = _GENERATED.match(spec)
     if not match:
         return None
@@ -163,20 +175,24 @@ def _parse_generated(spec: str) -> tuple[str, int, int] | None:
         choices = ", ".join((*FAMILIES, "mixed"))
         raise ValueError(f"unknown map family {family!r} in {spec!r}; choose one of {choices}")
     height = int(match["h"])
-    width = int(match["w"] or height)
+    width = int(match["w"] or match["hi"] or height)
     if min(height, width) < 5 or max(height, width) > 1024:
         raise ValueError(f"map size in {spec!r} must be between 5 and 1024 cells a side")
-    return family, height, width
+    if match["hi"]:
+        if width <= height:
+            raise ValueError(f"size range in {spec!r} must go up (e.g. mixed:16-64)")
+        return family, height, height, width
+    return family, height, width, 0
 
 
-def _generated(parts: list[tuple[str, int, int]]) -> TaskSampler:
+def _generated(parts: list[tuple[str, int, int, int]]) -> TaskSampler:
     draws = [_generated_draw(*p) for p in parts]
 
     def draw(rng: np.random.Generator) -> Task:
         return draws[int(rng.integers(len(draws)))](rng) if len(draws) > 1 else draws[0](rng)
 
-    key = ",".join(f"{f}:{h}x{w}" for f, h, w in parts)
-    least = min(min_task_distance(GridMap(np.zeros((h, w), dtype=bool))) for _, h, w in parts)
+    key = ",".join(f"{f}:{h}-{hi}" if hi else f"{f}:{h}x{w}" for f, h, w, hi in parts)
+    least = min(min_task_distance(GridMap(np.zeros((h, w), dtype=bool))) for _, h, w, _ in parts)
     return TaskSampler(
         draw, key, resample=True, min_distance=least, cache_key=key,
         min_distance_of=lambda task: min_task_distance(task.grid),

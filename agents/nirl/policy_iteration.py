@@ -104,7 +104,7 @@ def policy_iteration(learner: NIRLLearner, config: NIRLConfig, run: NIRLRun, nav
     out = str(Path(run.out) / POLICY_DIR) if run.out else ""
     local = LocalTrainConfig(
         steps=config.policy_steps, envs=run.envs, maps=run.maps, seed=config.seed, out=out,
-        eval_every=run.policy_eval_every, eval_episodes=run.eval_episodes,
+        eval_every=run.policy_eval_every, eval_episodes=run.eval_episodes, eval_sizes=(16,),
         eval_dynamic_episodes=run.policy_eval_dynamic_episodes, keep_best=run.policy_eval_every > 0,
         final_eval_episodes=0, progress=run.progress, device=run.device,
     )  # fmt: skip

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from worlds.config import OBSERVATIONS, SUBGOALS, TRAINING_DISCS, NavConfig, observation_field
+from worlds.tasks import TRAINING_MAPS
 
 
 @dataclass
@@ -19,8 +20,9 @@ class LocalTrainConfig:
     """robot-steps (transitions) to collect, summed over the vector env"""
     envs: int = 16
     """robots stepped together in the vector env"""
-    maps: str = "mixed:16"
-    """training map spec (worlds.tasks.parse_map_spec): mixed:16, mixed:16,mixed:32, or map files (a
+    maps: str = TRAINING_MAPS
+    """training map spec (worlds.tasks.parse_map_spec): mixed:16-64 (the default: a side per map from 16
+    to 64 cells), mixed:16, mixed:16,mixed:32, or map files (a
     map_server .yaml, a MovingAI .map/.scen, an ASCII map, a directory) with key=value options such as
     min_distance=5,unknown=free (docs/maps.md); the cell size chosen is printed"""
     moving_discs: int = TRAINING_DISCS
@@ -32,7 +34,11 @@ class LocalTrainConfig:
     eval_every: int = 25_000
     """robot-steps between greedy evaluations on held-out maps (0: only the final one)"""
     eval_episodes: int = 100
-    """episodes of each periodic evaluation (validation set, seed 1)"""
+    """episodes of each periodic evaluation per map size (validation set, seed 1)"""
+    eval_sizes: tuple[int, ...] = (16, 32, 48, 64)
+    """map sides (cells) of the periodic and final evaluations: keep_best scores the mean success over
+    them, so the policy kept is the one that holds at every size (the first is the set named "unseen",
+    the others "unseen@N")"""
     eval_dynamic_episodes: int = 0
     """episodes with 4 moving discs added to each periodic evaluation (the validation seed's dynamic set);
     keep_best then scores the success pooled over both sets (0: unseen static maps only)"""

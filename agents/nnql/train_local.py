@@ -13,7 +13,7 @@ import json
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -71,14 +71,30 @@ TEST_SEED = 0
 
 
 def evaluate_policy(
-    policy: NNQLPolicy, episodes: int, seed: int, nav: NavConfig | None = None, dynamic: int = 0
+    policy: NNQLPolicy,
+    episodes: int,
+    seed: int,
+    nav: NavConfig | None = None,
+    dynamic: int = 0,
+    sizes: tuple[int, ...] = (16,),
 ) -> EvalResult:
-    """Greedy evaluation on the shared held-out "unseen" set (agents.evaluation), plus ``dynamic``
-    episodes of its "dynamic" set when positive -> EvalResult."""
-    sets = [make_eval_set("unseen", episodes, seed=seed)]
+    """Greedy evaluation on the shared held-out "unseen" set (agents.evaluation) at each of ``sizes``
+    (the first named "unseen", the others "unseen@N"), plus ``dynamic`` episodes of its "dynamic" set
+    (the first size) when positive -> EvalResult."""
+    sets = [_sized(make_eval_set("unseen", episodes, seed=seed, size=n), k, n) for k, n in enumerate(sizes)]
     if dynamic > 0:
-        sets.append(make_eval_set("dynamic", dynamic, seed=seed))
+        sets.append(make_eval_set("dynamic", dynamic, seed=seed, size=sizes[0]))
     return evaluate(policy.greedy(), sets, config=nav)
+
+
+def _sized(eval_set, k: int, size: int):
+    return eval_set if k == 0 else replace(eval_set, family=f"{eval_set.family}@{size}")
+
+
+def unseen_success(report: EvalResult) -> float:
+    """The mean success over the "unseen" sets of every size in ``report``."""
+    names = [name for name in report.metrics if name.split("@")[0] == "unseen"]
+    return float(np.mean([report.metrics[name].success.value for name in names]))
 
 
 def training_nav(run: LocalTrainConfig, nav: NavConfig | None = None) -> NavConfig:
@@ -195,7 +211,7 @@ def train_local(
         tested = evaluate_env(policy.greedy(), gym_env, run.final_eval_episodes, seed=TEST_SEED)
         result.final_eval, result.final_table = tested[gym_env.env], env_table(tested)
     elif run.final_eval_episodes > 0:
-        report = evaluate_policy(policy, run.final_eval_episodes, TEST_SEED, nav)
+        report = evaluate_policy(policy, run.final_eval_episodes, TEST_SEED, nav, sizes=run.eval_sizes)
         result.final_eval = report.to_dict(with_episodes=False)["metrics"]["unseen"]
         result.final_table = report.table()
     if run.out:
@@ -237,10 +253,15 @@ def _validate(
             point["eval_success"] = m["success"]["value"]
         score = (m["success"]["value"] if "success" in m else m["return"]["mean"], m["return"]["mean"])
         return Candidate.better(best, score, policy.version, policy.get_weights) if run.keep_best else None
-    report = evaluate_policy(policy, run.eval_episodes, VALIDATION_SEED, nav, run.eval_dynamic_episodes)
+    report = evaluate_policy(
+        policy, run.eval_episodes, VALIDATION_SEED, nav, run.eval_dynamic_episodes, run.eval_sizes
+    )
     metrics = report.metrics["unseen"]
-    point["eval_success"] = metrics.success.value
-    solved, episodes = metrics.success.value * run.eval_episodes, run.eval_episodes
+    point["eval_success"] = unseen_success(report)
+    for name, sized in report.metrics.items():
+        if name.startswith("unseen@"):
+            point[f"eval_success@{name.split('@')[1]}"] = sized.success.value
+    solved, episodes = point["eval_success"] * run.eval_episodes, run.eval_episodes
     if run.eval_dynamic_episodes > 0:
         point["eval_dynamic_success"] = report.metrics["dynamic"].success.value
         solved += point["eval_dynamic_success"] * run.eval_dynamic_episodes

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from worlds.config import TRAINING_DISCS, observation_field
+from worlds.tasks import TRAINING_MAPS
 
 
 @dataclass
@@ -15,9 +16,10 @@ class ActorConfig:
     """actor id (key transitions/<id>, token alive/actor/<id>); empty: <hostname>-<pid>"""
     envs: int = 8
     """robots stepped together in the vector env"""
-    maps: str = "mixed:16"
-    """training map spec (worlds.tasks): rooms:16, mixed:16,mixed:32, or map files (a map_server .yaml,
-    a MovingAI .map/.scen, an ASCII map, a directory) with key=value options; docs/maps.md"""
+    maps: str = TRAINING_MAPS
+    """training map spec (worlds.tasks): mixed:16-64 (default: a side per map, 16 to 64 cells), rooms:16,
+    mixed:16,mixed:32, or map files (a map_server .yaml, a MovingAI .map/.scen, an ASCII map, a
+    directory) with key=value options; docs/maps.md"""
     moving_discs: int = TRAINING_DISCS
     """each episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
     observation: str = observation_field()

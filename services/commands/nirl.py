@@ -18,8 +18,12 @@ own experience in every batch). The environment's reward is never used. Writes t
 policy (model.safetensors + config.json, loadable by `navlearn evaluate --policy DIR`),
 reward.safetensors and potential.safetensors, the weights of both networks at every iteration
 (weights_history.safetensors, plotted in weights.png), curve.jsonl and summary.json; prints the
-greedy evaluation on 100 held-out generated maps. 100 rounds (204,800 robot-steps) reach about 93%
-from 20 expert demonstrations on unseen maps (README, "NIRL and the demonstrator"). The policy is
+greedy evaluation on 100 held-out generated maps. The defaults are NIRL's best setting (docs/notebook.md,
+issue 15 part 15): 100 rounds of 2,048 robot-steps (204,800) with 0..6 moving discs, 512 Q updates per
+round, the reward fixed after round 1, temperature 0.05 to 0.01, NNQL's action-local branch (3) and
+discount (0.98). Its best observation is --observation learning_plan (demonstrations recorded with
+`navlearn demos generate --observation learning_plan`): 97.8% unseen static / 89.2% with 4 moving
+discs from 20 clean demonstrations on the test seed (part 15). The policy is
 the Q-network's weights averaged over the last quarter of the rounds (--average-last 0.25; 0: the
 last round's); --keep-best keeps the round that scored best on the --eval-every validations instead
 (off by default: with 100 static episodes it chose worse rounds than the last).
@@ -31,10 +35,8 @@ The progress potential is fitted on the goal and subgoal features only (--potent
 the default: it generalises better from 20 paths; observation: every feature); --moving-discs N
 adds 0..N moving discs to the rounds' episodes. --observation learning_plan (demonstrations
 generated with the same flag) adds the length of the own map's plan to the goal, which the
-potential then reads: NIRL's best observation (with --iterations 400 --q-updates 512
---moving-discs 6). Adding --fix-reward-after 1 --temperature-start 0.05 --temperature-end 0.01
---action-local 3 --gamma 0.98 (NNQL's action-local branch and discount) reaches the same success
-in about a quarter of the robot-steps (--iterations 100).
+potential then reads: NIRL's best observation (the defaults reach 90% validation in a median 81,920
+robot-steps there; docs/notebook.md part 15).
 MAP refinement's prior is the policy's own softmax by default; --refine-prior hindsight judges each
 demonstrated action instead by the lattice A* on the map the demonstration's own range readings
 drew (its recorded poses and readings, never the true map; agents/nirl/hindsight.py): on 20

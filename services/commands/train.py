@@ -41,6 +41,12 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
+RECIPE_ACTION_LOCAL = 3
+"""`train --local`'s action-local branch when --action-local is not given (the flat Q-network of navlearn's
+world): with maps of every size and the own-map subgoal's clearance, the shipped policy's recipe
+(docs/navigation-by-size.md)"""
+
+
 def configs(args: argparse.Namespace):
     """(LocalTrainConfig, NNQLConfig, NavConfig, EnvConfig) from the parsed flags; OptionError or
     ValueError naming the flag for anything wrong."""
@@ -48,7 +54,13 @@ def configs(args: argparse.Namespace):
     nav = options_from_args(TrainObservation, args, "NAVLEARN_TRAIN").nav()
     # SARSA bootstraps on the action taken: double Q-learning does not apply unless asked for
     sarsa = {"double_q": False} if args.opt_sarsa and args.opt_double_q is None else {}
-    nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=run.seed, **sarsa)
+    # the shipped policy's recipe: the action-local branch on the flat Q-network of navlearn's world
+    flat = not (args.opt_recurrent or nav.observation.patch_size)
+    own_world = options_from_args(EnvConfig, args, "NAVLEARN_ENV").own_world
+    recipe = (
+        {"action_local": RECIPE_ACTION_LOCAL} if args.opt_action_local is None and flat and own_world else {}
+    )
+    nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=run.seed, **sarsa, **recipe)
     if not nav.observation.patch_size:
         defaults = NNQLConfig()
         shaped = [

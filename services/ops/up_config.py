@@ -10,6 +10,7 @@ from pathlib import Path
 from protocols import keys
 from worlds.config import OBSERVATIONS, TRAINING_DISCS, observation_field
 from worlds.own_env import EnvConfig, env_spaces
+from worlds.tasks import TRAINING_MAPS
 
 
 @dataclass
@@ -24,9 +25,10 @@ class UpConfig:
     """actor processes"""
     envs: int = 8
     """robots per actor"""
-    maps: str = "mixed:16"
-    """training map spec for the actors (worlds.tasks): generated (mixed:16) or map files (a map_server
-    .yaml, a MovingAI .map, an ASCII map, a directory; docs/maps.md), which the evaluator measures too"""
+    maps: str = TRAINING_MAPS
+    """training map spec for the actors (worlds.tasks): generated (default mixed:16-64, a side per map from
+    16 to 64 cells) or map files (a map_server .yaml, a MovingAI .map, an ASCII map, a directory;
+    docs/maps.md), which the evaluator measures too"""
     moving_discs: int = TRAINING_DISCS
     """each actor episode has 0..moving_discs moving discs, uniform (0: none; the dynamic test set has 4)"""
     observation: str = observation_field()

@@ -1,0 +1,274 @@
+"""Navigation against map size: does a policy hold on bigger maps? (issue 39)
+
+For every map side in ``--sizes`` (default 16, 32, 48, 64 cells of 1 m) two sets of the shared
+evaluation (:func:`agents.evaluation.make_eval_set`, generated maps of the ``mixed`` families, never
+trained on): ``static`` and ``dynamic`` with moving discs - 4 up to 32 cells, then scaled with the
+area (:func:`discs_for`: 9 at 48, 16 at 64). On the same episodes (same maps, starts, goals, seeds)
+it runs the policy (default the shipped ``pretrained/nnql``), the goal-seeking heuristic and the A*
+expert (lattice A* on the true map, the demonstrations' source; ``--expert-episodes`` caps its
+episodes per set, it is the slow one) and prints per set: success with its 95% Wilson interval,
+SPL, static / dynamic collisions, timeouts, and the exact McNemar p-value of the policy against
+each baseline on the episodes both ran. Episodes run in the world's default step rule (what a user
+gets), stated in the JSON.
+
+It also measures the world's throughput against map size: robot-steps per CPU-second of
+``NavigationVectorEnv`` (one thread, 16 robots, the policy's observation with its own-map subgoal,
+the heuristic driving) - the own map and its A* grow with the map.
+
+    python -m bench.map_sizes                               # test seed 0, 500 episodes per set
+    python -m bench.map_sizes --seed 1 --episodes 200       # the validation seed (for tuning)
+    python -m bench.map_sizes --out results/navigation/map_sizes   # + JSON lines and a PNG
+
+Human lines, then one JSON object on the last line. Tune on ``--seed 1`` only; seed 0 is the test
+seed the figures are reported on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation.compare import mcnemar_exact
+from agents.evaluation.metrics import summarize
+from agents.evaluation.policies import load_policy
+from agents.evaluation.runner import EvalSet, fixed_sampler
+from agents.planning.expert import Expert
+from worlds.config import NavConfig, ObstacleConfig
+from worlds.env import NavigationEnv
+from worlds.heuristics import goal_seeking_policy
+from worlds.outcomes import Outcome
+from worlds.vector_env import NavigationVectorEnv
+
+METHODS = ("policy", "previous", "heuristic", "expert")
+THROUGHPUT_ROBOTS = 16
+
+
+def discs_for(size: int) -> int:
+    """Moving discs of the dynamic set at ``size`` cells a side: 4 up to 32 cells (the dynamic set's
+    crowd, as on 16x16 maps), then 4 per 32x32 cells of area (9 at 48, 16 at 64)."""
+    return max(4, round(4 * (size / 32) ** 2))
+
+
+def eval_sets(size: int, episodes: int, seed: int) -> dict[str, EvalSet]:
+    """The static and dynamic sets of one size (same maps and episodes)."""
+    static = make_eval_set("unseen", episodes, seed=seed, size=size)
+    dynamic = make_eval_set(
+        "dynamic", episodes, seed=seed, size=size, obstacles=ObstacleConfig(count=discs_for(size))
+    )
+    return {"static": static, "dynamic": dynamic}
+
+
+def run_expert(eval_set: EvalSet, nav: NavConfig, limit: int) -> dict[str, np.ndarray]:
+    """The expert on the first ``limit`` episodes of ``eval_set``: outcome, path length, steps."""
+    config = replace(nav, obstacles=eval_set.obstacles)
+    n = min(limit, len(eval_set))
+    env = NavigationEnv(config, maps=fixed_sampler(eval_set.tasks[:n], f"bench:{eval_set.family}"))
+    expert = Expert(config)
+    outcome, length, steps = np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64)
+    for i, (task, seed) in enumerate(zip(eval_set.tasks[:n], eval_set.seeds[:n], strict=True)):
+        obs, info = env.reset(seed=seed, options={"task": task})
+        expert.reset(task, info["pose"])
+        done = False
+        while not done:
+            obs, _, terminated, truncated, info = env.step(expert.act(info["pose"], obs))
+            done = terminated or truncated
+        outcome[i], length[i], steps[i] = int(info["outcome"]), float(info["path_length"]), int(info["steps"])
+    env.close()
+    return {"outcome": outcome, "length": length, "steps": steps}
+
+
+def episode_arrays(result, name: str) -> dict[str, np.ndarray]:
+    eps = result.episodes[name]
+    return {
+        "outcome": np.array([e.outcome for e in eps]),
+        "length": np.array([e.path_length for e in eps]),
+        "steps": np.array([e.steps for e in eps]),
+    }
+
+
+def figures(arrays: dict[str, np.ndarray], shortest: np.ndarray) -> dict:
+    n = len(arrays["outcome"])
+    m = summarize(arrays["outcome"], shortest[:n], arrays["length"], arrays["steps"], np.zeros(n))
+    return {
+        "episodes": n,
+        "success": m.success.value,
+        "success_ci": [m.success.low, m.success.high],
+        "spl": m.spl,
+        "collision_static": m.collision_static.value,
+        "collision_dynamic": m.collision_dynamic.value,
+        "timeout": m.timeout.value,
+        "path_ratio": m.path_ratio,
+        "steps_to_goal": m.time_to_goal,
+    }
+
+
+def paired_p(a: np.ndarray, b: np.ndarray) -> dict:
+    """McNemar on the episodes both ran (the first ``min(len)``): only a / only b / p."""
+    n = min(len(a), len(b))
+    sa, sb = a[:n] == int(Outcome.GOAL), b[:n] == int(Outcome.GOAL)
+    a_only, b_only = int((sa & ~sb).sum()), int((~sa & sb).sum())
+    return {"episodes": n, "only_policy": a_only, "only_other": b_only, "p": mcnemar_exact(a_only, b_only)}
+
+
+def throughput(nav: NavConfig, size: int, seconds: float, seed: int) -> dict:
+    """Robot-steps per CPU-second of the world at ``size`` (one thread, the heuristic driving)."""
+    config = replace(nav, obstacles=ObstacleConfig(count=0))
+    env = NavigationVectorEnv(THROUGHPUT_ROBOTS, config, maps=f"mixed:{size}", seed=seed, threads=1)
+    heuristic, width = goal_seeking_policy(config), config.sensors.n_beams + 3
+    obs, _ = env.reset(seed=seed)
+    for _ in range(3):
+        obs, *_ = env.step(heuristic(obs[:, :width]))
+    steps, ended = 0, 0
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    while time.perf_counter() - wall0 < seconds:
+        obs, _, terminated, truncated, _ = env.step(heuristic(obs[:, :width]))
+        ended += int(np.count_nonzero(terminated | truncated))
+        steps += THROUGHPUT_ROBOTS
+    cpu = time.process_time() - cpu0
+    env.close()
+    return {"robot_steps_per_cpu_s": steps / cpu, "robot_steps": steps, "episodes_ended": ended}
+
+
+def plot(report: dict, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sizes = report["sizes"]
+    rows = report["results"]
+    fig, axes = plt.subplots(1, 4, figsize=(17, 3.8))
+    styles = {"policy": "o-", "previous": "d-.", "heuristic": "s--", "expert": "^:"}
+    for name, style in styles.items():
+        for kind, colour in (("static", "C0"), ("dynamic", "C3")):
+            ys = [
+                rows[str(s)][kind][name]["success"] if name in rows[str(s)][kind] else np.nan for s in sizes
+            ]
+            axes[0].plot(sizes, ys, style, color=colour, label=f"{name}, {kind}")
+            ys = [rows[str(s)][kind][name]["spl"] if name in rows[str(s)][kind] else np.nan for s in sizes]
+            axes[1].plot(sizes, ys, style, color=colour)
+    for kind, colour in (("static", "C0"), ("dynamic", "C3")):
+        pol = [rows[str(s)][kind]["policy"] for s in sizes]
+        axes[2].plot(sizes, [p["collision_static"] + p["collision_dynamic"] for p in pol], "o-", color=colour,
+                     label=f"collisions, {kind}")  # fmt: skip
+        axes[2].plot(sizes, [p["timeout"] for p in pol], "x--", color=colour, label=f"timeouts, {kind}")
+    axes[3].plot(
+        sizes, [report["throughput"][str(s)]["robot_steps_per_cpu_s"] for s in sizes], "o-", color="k"
+    )
+    axes[0].set(title="success", xlabel="map side (cells of 1 m)", ylim=(0, 1.02))
+    axes[1].set(title="SPL", xlabel="map side (cells of 1 m)", ylim=(0, 1.02))
+    axes[2].set(title=f"{report['policy_name']}: failures", xlabel="map side (cells of 1 m)")
+    axes[3].set(title="world: robot-steps per CPU-second", xlabel="map side (cells of 1 m)", ylim=(0, None))
+    axes[0].legend(fontsize=7, loc="lower left")
+    axes[2].legend(fontsize=7)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.set_xticks(sizes)
+    fig.suptitle(f"{report['policy_name']} against map size, seed {report['seed']}, "
+                 f"{report['episodes']} episodes per set", fontsize=10)  # fmt: skip
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--policy", default="pretrained/nnql", help="saved policy directory")
+    parser.add_argument(
+        "--previous", help="another saved policy run on the same episodes, in its own observation (paired)"
+    )
+    parser.add_argument("--sizes", type=int, nargs="+", default=[16, 32, 48, 64], help="map sides (cells)")
+    parser.add_argument("--episodes", type=int, default=500, help="episodes per set")
+    parser.add_argument(
+        "--expert-episodes", type=int, default=500, help="the expert's episodes per set (0: none)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="evaluation seed (0: test, 1: validation)")
+    parser.add_argument("--throughput-seconds", type=float, default=5.0, help="seconds per size (0: skip)")
+    parser.add_argument("--max-steps", type=int, help="step limit of every episode (default: the world's)")
+    parser.add_argument("--out", help="directory for map_sizes.json and map_sizes.png")
+    args = parser.parse_args(argv)
+
+    policy = load_policy(args.policy)
+    nav = policy.nav_config()
+    if args.max_steps:
+        nav = replace(nav, max_steps=args.max_steps)
+    previous = load_policy(args.previous) if args.previous else None
+    heuristic = goal_seeking_policy(nav)
+    width = nav.sensors.n_beams + 3
+    report: dict = {
+        "bench": "map_sizes",
+        "policy": str(Path(args.policy)),
+        "policy_name": f"{Path(args.policy).name} (v{policy.version})",
+        "previous": args.previous,
+        "seed": args.seed,
+        "episodes": args.episodes,
+        "expert_episodes": args.expert_episodes,
+        "sizes": args.sizes,
+        "discs": {str(s): discs_for(s) for s in args.sizes},
+        "max_steps": nav.max_steps,
+        "load_average_before": os.getloadavg()[0],
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "results": {},
+        "throughput": {},
+    }
+    print(f"{report['policy_name']} against map size: seed {args.seed}, {args.episodes} episodes per set "
+          f"(expert {args.expert_episodes}), step limit {nav.max_steps}, "
+          f"load {report['load_average_before']:.1f}")  # fmt: skip
+    head = f"{'size':>4} {'set':<8} {'method':<9} {'n':>4} {'success % [95% CI]':<20} {'SPL':>5} "
+    print(head + f"{'coll.st%':>8} {'coll.dyn%':>9} {'timeout%':>8} {'p vs policy':>11}")
+    for size in args.sizes:
+        started = time.perf_counter()
+        per_set: dict = {}
+        for kind, es in eval_sets(size, args.episodes, args.seed).items():
+            runs = {
+                "policy": episode_arrays(evaluate(policy, es, nav), es.family),
+                "heuristic": episode_arrays(evaluate(lambda o: heuristic(o[:, :width]), es, nav), es.family),
+            }
+            if previous is not None:  # its own observation, the same episodes and step rule
+                own = replace(previous.nav_config(), max_steps=nav.max_steps)
+                runs["previous"] = episode_arrays(evaluate(previous, es, own), es.family)
+            if args.expert_episodes > 0:
+                runs["expert"] = run_expert(es, nav, args.expert_episodes)
+            rows = {}
+            for name, arrays in runs.items():
+                rows[name] = figures(arrays, es.shortest)
+                if name != "policy":
+                    rows[name]["paired"] = paired_p(runs["policy"]["outcome"], arrays["outcome"])
+                r = rows[name]
+                p = f"{r['paired']['p']:11.2g}" if "paired" in r else f"{'':>11}"
+                print(f"{size:>4} {kind:<8} {name:<9} {r['episodes']:>4} {100 * r['success']:5.1f} "
+                      f"[{100 * r['success_ci'][0]:4.1f}, {100 * r['success_ci'][1]:5.1f}] {r['spl']:5.2f} "
+                      f"{100 * r['collision_static']:8.1f} {100 * r['collision_dynamic']:9.1f} "
+                      f"{100 * r['timeout']:8.1f} {p}")  # fmt: skip
+            per_set[kind] = rows
+        per_set["wall_s"] = time.perf_counter() - started
+        report["results"][str(size)] = per_set
+    if args.throughput_seconds > 0:
+        for size in args.sizes:
+            row = throughput(nav, size, args.throughput_seconds, args.seed)
+            report["throughput"][str(size)] = row
+            print(f"world at {size}x{size}: {row['robot_steps_per_cpu_s']:,.0f} robot-steps per CPU-second "
+                  f"(one thread, {THROUGHPUT_ROBOTS} robots, heuristic driving)")  # fmt: skip
+    report["load_average_after"] = os.getloadavg()[0]
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "map_sizes.json").write_text(json.dumps(report, indent=1) + "\n")
+        if report["throughput"]:
+            print(f"wrote {plot(report, out / 'map_sizes.png')}")
+    print(json.dumps(report))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
