@@ -82,7 +82,7 @@ def test_file_specs(tmp_path, arena_paths):
 
 
 def test_size_range_spec_draws_every_size_and_keeps_each_maps_distance():
-    from worlds.bank import pool_bank
+    from worlds.bank import E_MIN_D2, pool_bank
 
     sampler = parse_map_spec(TRAINING_MAPS)
     assert TRAINING_MAPS == "mixed:16-64"
@@ -98,8 +98,8 @@ def test_size_range_spec_draws_every_size_and_keeps_each_maps_distance():
     bank = pool_bank(sampler, 64, 0)
     for task, row in zip(bank.pool_tasks, bank.etab, strict=True):
         least = min_task_distance(task.grid)
-        assert row[-1] == int(np.ceil(least**2 - 1e-9))
-    assert len({int(r[-1]) for r in bank.etab}) > 10
+        assert row[E_MIN_D2] == int(np.ceil(least**2 - 1e-9))
+    assert len({int(r[E_MIN_D2]) for r in bank.etab}) > 10
 
 
 def test_size_range_episodes_start_far_enough_apart():
