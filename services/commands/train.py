@@ -55,7 +55,7 @@ def configs(args: argparse.Namespace):
     # SARSA bootstraps on the action taken: double Q-learning does not apply unless asked for
     sarsa = {"double_q": False} if args.opt_sarsa and args.opt_double_q is None else {}
     # the shipped policy's recipe: the action-local branch on the flat Q-network of navlearn's world
-    flat = not (args.opt_recurrent or nav.observation.patch_size)
+    flat = not nav.observation.patch_size
     own_world = options_from_args(EnvConfig, args, "NAVLEARN_ENV").own_world
     recipe = (
         {"action_local": RECIPE_ACTION_LOCAL} if args.opt_action_local is None and flat and own_world else {}
