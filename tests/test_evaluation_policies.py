@@ -173,21 +173,23 @@ def test_policy_saved_without_an_observation_record_evaluates_in_the_legacy_obse
 
 
 PRETRAINED_Q = [
-    [1.41906, 1.52512, 1.5957, 1.56455, 1.43788],
-    [0.82689, 1.2211, 1.19871, 1.17899, 1.00361],
-    [0.69341, 0.71277, 0.66629, 0.64749, 0.69857],
+    [0.963699, 1.048887, 1.090574, 0.221486, 1.056207],
+    [0.969289, 0.957709, 0.956439, 0.972552, 1.020343],
+    [-0.243149, -0.498229, -0.259321, -1.231467, 0.888505],
 ]
-"""pretrained/nnql's Q-values on three seeded observations, read on a731e15 (before issue 42's refactor)"""
+"""pretrained/nnql's Q-values on three seeded observations, read when issue 39 shipped it (the policy before
+it, read on a731e15 before issue 42's refactor, is pinned in git history)"""
 
 
 def test_the_shipped_policy_loads_and_computes_what_it_did_before_the_refactor():
     obs = np.random.default_rng(42).uniform(0, 1, (3, 30)).astype(np.float32)
-    assert load_policy(PRETRAINED)(obs).tolist() == [2, 1, 1]
+    assert load_policy(PRETRAINED)(obs).tolist() == [2, 4, 4]
     flat = [q for row in NNQLPolicy.load(PRETRAINED).q_values(obs) for q in row]
     assert flat == pytest.approx([q for row in PRETRAINED_Q for q in row], abs=2e-5)
     saved = json.loads((PRETRAINED / "config.json").read_text())["nnql_config"]
     assert saved["recurrent"] is False  # saved with the retired variant's fields, which are dropped
-    assert NNQLConfig.from_dict(saved) == NNQLConfig(seed=saved["seed"])  # its recipe: the default
+    # its recipe: the defaults of train --local (the action-local branch is its flag's default there)
+    assert NNQLConfig.from_dict(saved) == NNQLConfig(seed=saved["seed"], action_local=3)
 
 
 def test_a_policy_or_config_of_the_retired_recurrent_variant_is_refused_in_one_sentence(tmp_path):
