@@ -146,6 +146,12 @@ def test_navlearn_status_shows_the_drive_and_the_sim(stack):
         "--run",
         "e2e",
     ]
+    # the module's tests may run on different pytest-xdist workers, each with its own stack: give this
+    # stack's drive a goal of its own rather than relying on another test having run first
+    trial = stack["trial"]
+    pose = robot_status(trial.session, trial.sim_key)["pose"]
+    trial.publish_goal((13.5, 13.5) if math.dist(pose[:2], (13.5, 13.5)) > 4 else (2.5, 2.5))
+    stack["commands"].wait_moving()
     done = subprocess.run(argv, env=stack["env"], capture_output=True, text=True, timeout=20)
     assert done.returncode == 0, done.stderr  # no learner here, but the drive and the sim answer
     robots = json.loads(done.stdout)["robots"]

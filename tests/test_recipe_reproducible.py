@@ -2,10 +2,12 @@
 gives the numbers it gave before the option system, the configs and the Q-network variants were
 reorganised (issue 42).
 
-PINNED was recorded by ``python -m tests.recipe_figures`` on commit a731e15 (main before issue 42's
-refactor), CPU, torch's one intra-op thread, twice with identical output. A change that moves code
-without changing what the default recipe computes leaves every figure as it is; one that changes
-the recipe on purpose re-records them here with its commit.
+PINNED was first recorded by ``python -m tests.recipe_figures`` on commit a731e15 (main before issue
+42's refactor) and held through it; it was re-recorded on 2026-12-06 (main 8bb1a09) when the default
+recipe changed on purpose (issue 39: maps of every side 16-64, the action-local branch, the own-map
+subgoal's clearance). CPU, torch's one intra-op thread, twice with identical output. A change that
+moves code without changing what the default recipe computes leaves every figure as it is; one that
+changes the recipe on purpose re-records them here with its commit.
 """
 
 from __future__ import annotations
@@ -17,17 +19,17 @@ from tests.recipe_figures import recipe_figures
 PINNED = {
     "updates": 63,
     "selected_version": 63,
-    "train_success": [0.0, 0.005917, 0.005],
-    "episode_return": [0.0, -1.1021, -1.0882],
-    "td_loss": [0.0, 0.04099, 0.018898],
-    "eval_success": [0.0, 0.0],
-    "final_success": 0.25,
-    "final_spl": 0.168948,
+    "train_success": [0.0, 0.043478, 0.153846],
+    "episode_return": [0.0, -1.1325, -0.7941],
+    "td_loss": [0.0, 0.018575, 0.010524],
+    "eval_success": [0.3125, 0.59375],
+    "final_success": 0.75,
+    "final_spl": 0.640852,
     "q_values": [
-        [-0.10193, -0.08711, -0.09383, -0.07628, -0.02369],
-        [-0.08246, -0.1575, -0.20916, -0.05744, -0.08566],
-        [-0.01613, -0.13677, -0.17285, -0.02442, -0.10487],
-        [0.00023, 0.06396, 0.00176, -0.00028, -0.07568],
+        [0.21299, 0.22024, 0.47355, 0.43641, 0.43616],
+        [0.23308, 0.21374, 0.27311, 0.32517, 0.44937],
+        [0.2143, 0.26354, 0.35735, 0.36752, 0.56795],
+        [0.45593, 0.42991, 0.4023, 0.58041, 0.39057],
     ],
 }
 

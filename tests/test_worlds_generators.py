@@ -78,7 +78,11 @@ def test_file_specs(tmp_path, arena_paths):
     plain = tmp_path / "plain.txt"
     plain.write_text("######\n#....#\n#....#\n######\n")
     sampler = parse_map_spec(str(plain))
-    assert sampler.resample and sampler(np.random.default_rng(1)).grid.shape == (4, 6)
+    # a map file without S/G: seeded start/goal pairs from worlds.pairs (a pool), not env resampling
+    assert not sampler.resample and sampler.draw_pool is not None
+    pool = sampler.draw_pool(4, 1)
+    assert pool == sampler.draw_pool(4, 1)  # reproducible
+    assert all(t.grid.shape == (4, 6) and connected(t.grid, t.start, t.goal) for t in pool)
 
 
 def test_size_range_spec_draws_every_size_and_keeps_each_maps_distance():

@@ -420,6 +420,12 @@ def observation_field():
     return field(default="learning", metadata={"choices": tuple(OBSERVATIONS), "env": OBSERVATION_ENV})
 
 
+TRAINING_MAPS = "mixed:16-64"
+"""the maps learned policies train on by default (``navlearn train --local``, the actors of ``navlearn
+up``): the three families of ``mixed`` at every side from 16 to 64 cells, so one policy holds at every
+map size (docs/navigation-by-size.md)"""
+
+
 TRAINING_DISCS = 6
 """moving discs per training episode by default (``navlearn train --local``, the actors of ``navlearn
 up``): 0..6, uniform per episode, so training sees static maps, the dynamic test set's crowds of 4

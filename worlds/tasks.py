@@ -56,10 +56,6 @@ TRAIN_SEEDS = 2**31
 MIXED_FAMILIES = ("rects", "discs", "rooms")
 """families of ``mixed:N``; mazes are left out because a memoryless policy cannot solve them"""
 DEFAULT_MAPS = "mixed:16"
-TRAINING_MAPS = "mixed:16-64"
-"""the maps learned policies train on by default (``navlearn train --local``, the actors of ``navlearn
-up``): the three families of ``mixed`` at every side from 16 to 64 cells, so one policy holds at every
-map size (issue 39, docs/navigation-by-size.md)"""
 
 _GENERATED = re.compile(r"^(?P<family>[a-z]+):(?P<h>\d+)(?:x(?P<w>\d+)|-(?P<hi>\d+))?$")
 

@@ -8,8 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-from worlds.config import OBSERVATIONS, SUBGOALS, TRAINING_DISCS, NavConfig, observation_field
-from worlds.tasks import TRAINING_MAPS
+from worlds.config import OBSERVATIONS, SUBGOALS, TRAINING_DISCS, TRAINING_MAPS, NavConfig, observation_field
 
 
 @dataclass

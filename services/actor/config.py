@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from worlds.config import TRAINING_DISCS, observation_field
-from worlds.tasks import TRAINING_MAPS
+from worlds.config import TRAINING_DISCS, TRAINING_MAPS, observation_field
 
 
 @dataclass

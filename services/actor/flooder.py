@@ -21,6 +21,7 @@ import subprocess
 import sys
 import threading
 import time
+import zlib
 
 import numpy as np
 import zenoh
@@ -65,7 +66,9 @@ def launch(args: list[str], nice: int = 0, timeout: float = 120.0) -> subprocess
 
 
 def make_batch(actor: str, rows: int, seq: int) -> TransitionBatch:
-    rng = np.random.default_rng(seq)
+    """A batch of random rows, distinct per (actor, seq): the learner stores a batch once by its
+    content (services.learner.dedup), so two actors' batches must differ as real robots' do."""
+    rng = np.random.default_rng([zlib.crc32(actor.encode()), seq])
     return TransitionBatch(
         sender=f"{actor}#{time.time_ns()}",
         seq=seq,

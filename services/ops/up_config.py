@@ -8,9 +8,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from protocols import keys
-from worlds.config import OBSERVATIONS, TRAINING_DISCS, observation_field
+from worlds.config import OBSERVATIONS, TRAINING_DISCS, TRAINING_MAPS, observation_field
 from worlds.own_env import EnvConfig, env_spaces
-from worlds.tasks import TRAINING_MAPS
 
 
 @dataclass
