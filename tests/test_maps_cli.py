@@ -4,9 +4,13 @@ scenarios and an ASCII map; world show --map; train --local --maps; demos genera
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from services.cli import main
 from tests.test_worlds_mapfiles import write_pgm, write_yaml
@@ -108,3 +112,28 @@ def test_evaluate_flags_set_distances_and_the_step_limit(tmp_path, capsys):
     assert main([*argv, "--out", str(tmp_path / "b")]) == 0
     episodes = json.loads((tmp_path / "b" / "eval.json").read_text())["episodes"]["lab"]
     assert all(e["shortest"] >= 6.0 for e in episodes)  # 1 m cells: every free cell holds the robot
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+@pytest.mark.timeout(420)
+def test_up_trains_on_a_map_file_and_its_evaluator_measures_it(tmp_path):
+    """`navlearn up --maps office.yaml` through the real processes: up says how the file was read,
+    the actor trains on it (transitions reach the learner), the evaluator measures it as a set of
+    its own beside the generated ones, and every process stops cleanly."""
+    out, run = tmp_path / "run", f"upmap{os.getpid()}"
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NAVLEARN_")}
+    argv = [
+        sys.executable, "-m", "services.cli", "up", "--run", run, "--out", str(out),
+        "--maps", str(office(tmp_path)), "--actors", "1", "--envs", "4", "--eval-episodes", "2",
+        "--hidden-sizes", "16", "--batch-size", "16", "--learning-starts", "64", "--duration", "5",
+    ]  # fmt: skip
+    done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=400)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "office.yaml: 120x80 pixels of 0.05 m -> 60x40 cells of 0.1 m" in done.stdout, done.stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["exit_codes"] == {"actor-1": 0, "learner": 0, "evaluator": 0}
+    received = sum(a["transitions"] for a in summary["last_status"]["learner"]["actors"].values())
+    assert received > 0
+    assert "office" in summary["last_evaluation"]["metrics"]
+    assert "office.yaml" in (out / "logs" / "actor-1.log").read_text()

@@ -93,7 +93,7 @@ def main(args: argparse.Namespace) -> int:
         config = options_from_args(UpConfig, args, "NAVLEARN_UP")
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=config.seed)
         env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
-        check_config(config, env)
+        map_notes = check_config(config, env)
     except (OptionError, ValueError) as exc:
         print(f"navlearn up: {exc}", file=sys.stderr)
         return 2
@@ -122,6 +122,8 @@ def main(args: argparse.Namespace) -> int:
         f"outputs in {up.out}/",
         soft_wrap=True,
     )
+    for note in map_notes:  # each map file's cell size and why (docs/maps.md)
+        console.print(f"map {note}", soft_wrap=True, highlight=False)
     console.print(
         f"status from another terminal: [bold]{record.status_command()}[/bold] "
         f"(or, from this directory, `navlearn status{local_dir(up.out)}`)",

@@ -67,10 +67,11 @@ class UpConfig:
     with --connect tcp/<this host>:<port> (give --port); default: 127.0.0.1 only"""
 
 
-def check_config(config: UpConfig, env: EnvConfig | None = None) -> None:
+def check_config(config: UpConfig, env: EnvConfig | None = None) -> list[str]:
     """Raise ValueError, naming the value and the fix, for anything wrong that is cheap to see
     before a process starts (counts, durations, port, the map spec, the output directory, and a
-    Gymnasium ``env`` that cannot be built or has no discrete actions: one copy is built here)."""
+    Gymnasium ``env`` that cannot be built or has no discrete actions: one copy is built here).
+    Returns what each map file of ``--maps`` was read as (its cell size and why), for `up` to print."""
     from worlds.tasks import parse_map_spec
 
     positive = {"actors": config.actors, "envs": config.envs, "eval_episodes": config.eval_episodes}
@@ -95,7 +96,7 @@ def check_config(config: UpConfig, env: EnvConfig | None = None) -> None:
                 ) from None
     keys.check_name(config.run, "run")
     try:
-        parse_map_spec(config.maps)
+        notes = [mf.note for mf in parse_map_spec(config.maps).maps]
     except (ValueError, OSError) as exc:
         raise ValueError(f"--maps: {exc}") from None
     check_nirl(config)
@@ -109,6 +110,7 @@ def check_config(config: UpConfig, env: EnvConfig | None = None) -> None:
     out = Path(config.out or f"runs/{config.run}")
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out}: is a file; give a directory")
+    return notes
 
 
 def check_nirl(config: UpConfig) -> None:
