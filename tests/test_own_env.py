@@ -332,3 +332,50 @@ def test_async_copies_step_like_sync_ones(user_module: str) -> None:
         results.append(steps)
     for a, b in zip(*results, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_up_keeps_the_best_evaluated_version_as_its_policy_and_opts_out_with_no_keep_best(
+    user_module: str, tmp_path: Path
+) -> None:
+    """Keep-best through the real processes: the saved policy is the version whose validation
+    evaluation (seed 1) scored best, ties to the later, not the learner's last; its weights are the ones
+    measured (they replay the recorded figures); --no-keep-best saves the last on the test seed."""
+    from agents.evaluation.selection import VALIDATION_SEED, score
+
+    name = f"{user_module}:make_box"
+    common = ["--env", name, "--env-kwargs", '{"limit": 12}', "--actors", "1", "--envs", "4",
+              "--eval-episodes", "10", "--hidden-sizes", "16", "--learning-starts", "200",
+              "--checkpoint-every", "30"]  # fmt: skip
+    out = tmp_path / "kept"
+    done = navlearn("up", *common, "--run", "keptbest", "--out", str(out), "--duration", "10")
+    assert done.returncode == 0, (done.stdout, done.stderr)
+    points = [json.loads(x) for x in (out / "eval" / "evaluations.jsonl").read_text().splitlines()]
+    assert len(points) >= 2, points
+    best = max(points, key=lambda p: (score(p["metrics"]), p["time"]))  # ties: the later version
+    summary = json.loads((out / "summary.json").read_text())
+    saved = json.loads((out / "policy" / "config.json").read_text())
+    assert summary["eval_seed"] == VALIDATION_SEED and saved["kept"]["eval_seed"] == VALIDATION_SEED
+    assert (
+        saved["version"] == summary["policy_version"] == summary["kept"]["version"] == best["policy_version"]
+    )
+    assert saved["kept"]["score"] == list(score(best["metrics"]))
+    if score(points[-1]["metrics"]) < score(best["metrics"]):  # the learner's last lost: not what is saved
+        assert saved["version"] != points[-1]["policy_version"]
+    assert saved["nnql_config"]["hidden_sizes"] == [16] and saved["env"]["id"] == name
+    replayed = evaluate_env(
+        load_policy(out / "policy"), EnvConfig.from_record(saved["env"]), 10, VALIDATION_SEED
+    )
+    assert replayed[name]["return"]["mean"] == pytest.approx(best["metrics"][name]["return"]["mean"])
+    assert f"policy: version {best['policy_version']}, the best the evaluator measured" in done.stdout
+
+    last = tmp_path / "last"
+    done = navlearn(
+        "up", *common, "--run", "lastone", "--out", str(last), "--duration", "4", "--no-keep-best"
+    )
+    assert done.returncode == 0, (done.stdout, done.stderr)
+    summary = json.loads((last / "summary.json").read_text())
+    assert summary["kept"] is None and summary["eval_seed"] == 0
+    assert (
+        summary["policy_version"] == summary["final_version"] and not (last / "eval" / "best-policy").exists()
+    )
+    assert f"policy: the learner's last version {summary['final_version']}" in done.stdout

@@ -51,7 +51,15 @@ def test_up_on_a_cold_cache_trains_its_whole_budget_then_resumes(tmp_path):
     points = [json.loads(line) for line in (out / "eval" / "evaluations.jsonl").read_text().splitlines()]
     assert len({p["launch"] for p in points}) == 2  # the learning curve's two segments
     policy = json.loads((out / "policy" / "config.json").read_text())
-    assert policy["version"] == summary["final_version"] and (out / "policy" / "model.safetensors").exists()
+    assert (out / "policy" / "model.safetensors").exists()
+    # keep-best: the best version the evaluator measured (validation seed 1), not necessarily the last
+    assert (
+        policy["version"]
+        == summary["policy_version"]
+        == summary["kept"]["version"]
+        <= summary["final_version"]
+    )
+    assert policy["kept"]["eval_seed"] == summary["eval_seed"] == 1
     assert (out / "eval" / "learning_curve.png").stat().st_size > 10_000
     assert list((out / "tb").glob("events.out.tfevents.*"))
     assert "final policy version" in second.stdout

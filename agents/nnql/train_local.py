@@ -23,6 +23,7 @@ from threadpoolctl import threadpool_limits
 from agents.evaluation.env_returns import evaluate_env
 from agents.evaluation.env_returns import table as env_table
 from agents.evaluation.runner import EvalResult, evaluate, make_eval_set
+from agents.evaluation.selection import TEST_SEED, VALIDATION_SEED, score
 from agents.nnql.config import NNQLConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.policy import NNQLPolicy
@@ -62,12 +63,6 @@ class TrainResult:
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("learner", "policy")}
-
-
-VALIDATION_SEED = 1
-"""periodic evaluations (and keep_best's choice) use the held-out "unseen" set of this seed"""
-TEST_SEED = 0
-"""the final, reported evaluation uses the set of this seed (the one `navlearn evaluate` uses)"""
 
 
 def evaluate_policy(
@@ -251,8 +246,8 @@ def _validate(
         point["eval_return"] = m["return"]["mean"]
         if "success" in m:
             point["eval_success"] = m["success"]["value"]
-        score = (m["success"]["value"] if "success" in m else m["return"]["mean"], m["return"]["mean"])
-        return Candidate.better(best, score, policy.version, policy.get_weights) if run.keep_best else None
+        kept = score({gym_env.env: m})
+        return Candidate.better(best, kept, policy.version, policy.get_weights) if run.keep_best else None
     report = evaluate_policy(
         policy, run.eval_episodes, VALIDATION_SEED, nav, run.eval_dynamic_episodes, run.eval_sizes
     )
@@ -266,10 +261,10 @@ def _validate(
         point["eval_dynamic_success"] = report.metrics["dynamic"].success.value
         solved += point["eval_dynamic_success"] * run.eval_dynamic_episodes
         episodes += run.eval_dynamic_episodes
-    score = (solved / episodes, metrics.spl)
+    kept = (solved / episodes, metrics.spl)
     if not run.keep_best:
         return None
-    return Candidate.better(best, score, policy.version, policy.get_weights)
+    return Candidate.better(best, kept, policy.version, policy.get_weights)
 
 
 def _curve_point(steps, wall, learner, recent, policy, metrics) -> dict[str, float]:

@@ -19,10 +19,12 @@ of --envs robots each and the evaluator, show progress (one live line: what each
 doing until the first transition, then the learner's status), and after --duration seconds of
 training counted from the first transition (or --updates updates, or Ctrl-C) stop them in
 order: actors, learner (final checkpoint), then the evaluator once it has measured the final
-policy. Everything lands in --out (default runs/<run>): checkpoints/, policy/ (final weights:
-model.safetensors + config.json), eval/learning_curve.png (time axis from the first launch,
-resumes marked) and eval/evaluations.jsonl, tb/ (TensorBoard), logs/, summary.json. Running it
-again with the same --run resumes from its checkpoint ("resumed from checkpoint N"). The NNQL
+policy. Everything lands in --out (default runs/<run>): checkpoints/, policy/ (model.safetensors +
+config.json: the version that scored best in the evaluator's evaluations, which play the validation
+episodes, seed 1; --no-keep-best: the learner's last weights, the evaluator on the test episodes),
+eval/learning_curve.png (time axis from the first launch, resumes marked) and
+eval/evaluations.jsonl, tb/ (TensorBoard), logs/, summary.json. Running it again with the same --run
+resumes from its checkpoint ("resumed from checkpoint N"). The NNQL
 flags go to the learner. With --nirl the learner also trains NIRL, a demonstrator process
 publishes demonstrations (the expert's --demo-episodes, or a --demos dataset once) and the
 evaluator reports NIRL beside NNQL. Exit code 2 for a bad argument (before anything starts), 1 if
@@ -72,6 +74,24 @@ def small_evaluation(last: dict) -> str | None:
     )
 
 
+def figure_lines(metrics: dict, model: str, version: int, seed: int) -> list[str]:
+    """One line per family (or Gymnasium env) of an evaluation of ``model``'s ``version`` on the
+    episodes of ``seed``."""
+    from agents.evaluation.env_returns import table
+
+    lines = []
+    for family, m in metrics.items():
+        if "return" in m:  # a Gymnasium --env
+            lines.append(f"{model} {table({family: m})} (version {version}, seed {seed})")
+            continue
+        lines.append(
+            f"{model} {family}: success {100 * m['success']['value']:.0f}% "
+            f"[{100 * m['success']['low']:.0f}, {100 * m['success']['high']:.0f}], SPL {m['spl']:.2f} "
+            f"(version {version}, {m['episodes']} held-out episodes, seed {seed})"
+        )
+    return lines
+
+
 def main(args: argparse.Namespace) -> int:
     import logging
     import sys
@@ -82,7 +102,7 @@ def main(args: argparse.Namespace) -> int:
     from rich.live import Live
     from rich.text import Text
 
-    from agents.evaluation.env_returns import table
+    from agents.evaluation.selection import TEST_SEED
     from services.common.options import OptionError, options_from_args
     from services.common.process import stop_on_signals
     from services.ops.status import progress_line
@@ -196,18 +216,19 @@ def main(args: argparse.Namespace) -> int:
         f"final policy version {summary['final_version']} after {summary['training_s']:.0f} s of "
         f"training ({summary['wall_time_s']:.0f} s in all)"
     )
+    seed = summary["eval_seed"]
     for model, final in summary["last_evaluations"].items():
-        for family, m in final["metrics"].items():
-            if "return" in m:  # a Gymnasium --env
-                console.print(f"  {model} {table({family: m})} (version {final['policy_version']})")
-                continue
-            console.print(
-                f"  {model} {family}: success {100 * m['success']['value']:.0f}% "
-                f"[{100 * m['success']['low']:.0f}, {100 * m['success']['high']:.0f}], SPL {m['spl']:.2f} "
-                f"(version {final['policy_version']}, {m['episodes']} held-out episodes)"
-            )
+        for line in figure_lines(final["metrics"], model, final["policy_version"], seed):
+            console.print(f"  {line}", highlight=False)
     if (few := small_evaluation(summary["last_evaluations"])) is not None:
         console.print(few, highlight=False)
+    test = f"test it on the test episodes (seed {TEST_SEED}): navlearn evaluate --policy {up.out}/policy"
+    if (kept := summary["kept"]) is not None:
+        console.print(f"policy: version {kept['version']}, the best the evaluator measured; {test}")
+        for line in figure_lines(kept["metrics"], "kept", kept["version"], kept["eval_seed"]):
+            console.print(f"  {line}", highlight=False)
+    elif summary["policy_version"] is not None:
+        console.print(f"policy: the learner's last version {summary['policy_version']}; {test}")
     for name, path in summary["outputs"].items():
         console.print(f"  {name}: {path}")
     if bad:

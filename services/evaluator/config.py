@@ -25,7 +25,8 @@ class EvaluatorConfig:
     episodes: int = 50
     """episodes per family (the same fixed, seeded tasks for every version)"""
     eval_seed: int = 0
-    """seed of the evaluation sets (never overlaps training maps)"""
+    """seed of the evaluation sets (never overlaps training maps): 0 the test episodes, 1 the validation
+    ones (agents.evaluation.selection), which --best-policy should choose by"""
     observation: str = observation_field()
     """what the evaluated robots observe (worlds.config.OBSERVATIONS): the learner's and actors'"""
     every_versions: int = 0
@@ -44,3 +45,7 @@ class EvaluatorConfig:
     """more models evaluated beside --model on the same sets (e.g. nirl): each follows weights/<name>"""
     imitation: str = ""
     """a saved imitation policy directory (navlearn imitate train), evaluated once as a reference"""
+    best_policy: str = ""
+    """keep-best: a directory where the best-evaluated version of --model is saved as a policy, replaced
+    each time a version scores at least as well (success, then SPL; on a Gymnasium env success where it
+    says one, else mean return); `navlearn up` makes it the run's policy. Empty: none"""

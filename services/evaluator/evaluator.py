@@ -35,6 +35,7 @@ from services.common.waiting import WaitLog
 from services.common.warmup import COMPILE_NOTE
 from services.common.weights import WeightsReceiver
 from services.evaluator.config import EvaluatorConfig
+from services.evaluator.keep_best import KeepBest
 from worlds.config import OBSERVATIONS, NavConfig
 from worlds.own_env import EnvConfig, env_spaces
 
@@ -105,6 +106,10 @@ class Evaluator:
         self.last: tuple[str, int] | None = None  # (learner sender, version) last evaluated
         self.launch = config.launched or time.time()
         """time zero of this launch's segment of the learning curve"""
+        self.keep_best = (
+            KeepBest(config.best_policy, config.eval_seed, self.env.record()) if config.best_policy else None
+        )
+        """the best-evaluated version of --model, saved (None without --best-policy)"""
 
     def _load_points(self) -> list[dict[str, Any]]:
         path = self.out / LINES_FILE
@@ -190,6 +195,8 @@ class Evaluator:
                 self.lasts[model] = (message.sender, message.version)
                 if model == self.config.model:
                     self.last = self.lasts[model]
+                if model == self.config.model and self.keep_best is not None:
+                    self.keep_best.offer(message, metrics)  # before the report `up` waits for
                 self.report(message.sender, message.version, metrics, model)
                 done += 1
             if idle:

@@ -10,7 +10,8 @@ child dies (a demonstrator that finished its episodes is not a death): actors an
 demonstrator first, then the learner (which
 broadcasts its final weights and writes its checkpoint), then the evaluator
 once it has measured the final version (bounded wait). Outputs in ``<out>``:
-``checkpoints/``, ``policy/`` (the final weights), ``eval/learning_curve.png``
+``checkpoints/``, ``policy/`` (the best-evaluated version's weights, or with ``--no-keep-best`` the
+learner's last), ``eval/learning_curve.png``
 and ``eval/evaluations.jsonl``, ``tb/`` (TensorBoard) and ``summary.json``.
 """
 
@@ -30,7 +31,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+from agents.evaluation.selection import TEST_SEED, VALIDATION_SEED
+from agents.mlp import CONFIG_FILE
+from agents.nnql.persistence import replace_dir
+from agents.nnql.policy import load_policy_dir, save_policy_dir
 from services.common.transport import TransportError, ZenohSettings, free_port, open_session
+from services.evaluator.keep_best import kept_record
 from services.learner.checkpoint import CheckpointDir
 from services.ops.run_record import RunRecord, run_lock, write_record
 from services.ops.status import query_alive, query_status, status_dict
@@ -42,9 +48,11 @@ log = logging.getLogger("navlearn.up")
 PR_SET_PDEATHSIG = 1
 MODEL = "nnql"
 DEMO_SEED = 10_000
+"""the expert demonstrator's episodes start at this seed (+ --seed), apart from the actors' seeds"""
 NNQL_CONFIG_FILE = "nnql.json"
 """the run's NNQLConfig in --out, which the learner reads (`navlearn learner --nnql-config`)"""
-"""the expert demonstrator's episodes start at this seed (+ --seed), apart from the actors' seeds"""
+BEST_POLICY = "best-policy"
+"""with keep_best: the evaluator's kept policy, in <out>/eval/ (`navlearn evaluator --best-policy`)"""
 PHASES = (
     ("building", "compiling"),
     ("waiting for a Zenoh router", "awaiting router"),
@@ -136,6 +144,10 @@ class Up:
         self._started_at = time.monotonic()
         self.lock = None
         """the OS lock on ``out`` (services.common.dirlock), held from claim() to the process's end"""
+        self.best_policy = self.out / "eval" / BEST_POLICY
+        """with keep_best: the evaluator's best-evaluated version (services.evaluator.keep_best)"""
+        self.eval_seed = VALIDATION_SEED if config.keep_best else TEST_SEED
+        """the evaluator's episodes: the validation ones when its figures choose the policy, else the test"""
 
     def claim(self) -> RunRecord:
         """Lock the run directory (DirectoryInUse, a ValueError naming the holder's pid, if another
@@ -222,6 +234,9 @@ class Up:
                 *(["--compare", "nirl"] if cfg.nirl else []),
                 *(["--imitation", cfg.imitation] if cfg.imitation else []),
                 *(["--maps", cfg.maps] if self.map_files else []),
+                "--eval-seed",
+                str(self.eval_seed),
+                *(["--best-policy", str(self.best_policy)] if cfg.keep_best else []),
                 *self.env.flags(),
             ],
             base,
@@ -331,6 +346,25 @@ class Up:
         policy = latest / "nnql" / "policy" if latest else None
         return policy if policy and (policy / "config.json").exists() else None
 
+    def write_policy(self, last: Path | None) -> dict[str, Any] | None:
+        """The run's policy in ``<out>/policy``: with keep_best the evaluator's best-evaluated version
+        (returns its ``kept`` record: version, score, seed, figures), else (or before any evaluation)
+        the learner's last, ``last`` (returns None). The learner's NNQL settings go with either."""
+        out = self.out / "policy"
+        kept = kept_record(self.best_policy) if self.config.keep_best else None
+        if kept is None:
+            if last is not None:
+                shutil.copytree(last, out, dirs_exist_ok=True)
+            return None
+        weights, config = load_policy_dir(self.best_policy)
+        metadata = {k: v for k, v in config.items() if k not in ("model", "kind", "version", "architecture")}
+        metadata["nnql_config"] = self.nnql.to_dict()
+        replace_dir(
+            out,
+            lambda tmp: save_policy_dir(tmp, weights, config["architecture"], kept["version"], **metadata),
+        )
+        return kept
+
     def evaluated_versions(self) -> set[int]:
         path = self.out / "eval" / "evaluations.jsonl"
         if not path.exists():
@@ -342,8 +376,7 @@ class Up:
         self, view: dict[str, Any] | None, codes: dict[str, int], wall: float
     ) -> dict[str, Any]:
         policy = self.latest_policy()
-        if policy is not None:
-            shutil.copytree(policy, self.out / "policy", dirs_exist_ok=True)
+        kept = self.write_policy(policy)
         lines = self.out / "eval" / "evaluations.jsonl"
         evaluations = (
             [json.loads(x) for x in lines.read_text().splitlines() if x.strip()] if lines.exists() else []
@@ -358,12 +391,17 @@ class Up:
             else round(self.first_transition_s, 1),
             "resumed_from": self.resumed_from.name if self.resumed_from else None,
             "final_version": self.final_version(),
+            "policy_version": json.loads((self.out / "policy" / CONFIG_FILE).read_text())["version"]
+            if policy or kept
+            else None,
+            "kept": kept,
+            "eval_seed": self.eval_seed,
             "exit_codes": codes,
             "last_status": view,
             "last_evaluation": last_by_model.get(MODEL),
             "last_evaluations": last_by_model,
             "outputs": {
-                "policy": str(self.out / "policy") if policy else None,
+                "policy": str(self.out / "policy") if policy or kept else None,
                 "checkpoints": str(self.out / "checkpoints"),
                 "learning_curve": str(self.out / "eval" / "learning_curve.png"),
                 "evaluations": str(lines),

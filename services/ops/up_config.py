@@ -43,6 +43,10 @@ class UpConfig:
     """evaluator episodes per family (unseen and dynamic held-out maps)"""
     eval_every: int = 0
     """updates between evaluated versions (0: every new version the evaluator can keep up with)"""
+    keep_best: bool = True
+    """save as the run's policy the version that scored best in the evaluator's evaluations (on the
+    validation episodes, seed 1) rather than the learner's last; --no-keep-best: the last, with the
+    evaluator on the test episodes (seed 0)"""
     checkpoint_every: float = 60.0
     """seconds between learner checkpoints (one is always written at the end)"""
     port: int = 0
