@@ -379,3 +379,31 @@ def test_up_keeps_the_best_evaluated_version_as_its_policy_and_opts_out_with_no_
         summary["policy_version"] == summary["final_version"] and not (last / "eval" / "best-policy").exists()
     )
     assert f"policy: the learner's last version {summary['final_version']}" in done.stdout
+
+
+def test_up_gives_its_processes_the_env_config_as_a_file_and_flags_win_over_it(tmp_path: Path) -> None:
+    """`up` hands the run's EnvConfig to the learner, the actors and the evaluator as a file (no env
+    flags rebuilt from it); each reads back the very config, kwargs with awkward JSON included."""
+    from agents.nnql.config import NNQLConfig
+    from services.cli import build_parser
+    from services.common.env_options import env_from_args
+    from services.ops.up import Up
+    from services.ops.up_config import UpConfig
+
+    env = EnvConfig(env="CartPole-v1", env_kwargs='{"max_episode_steps": 50, "note": "a b,\\"c\\""}',
+                    env_vector="async")  # fmt: skip
+    up = Up(UpConfig(out=str(tmp_path / "run"), actors=2), NNQLConfig(), env)
+    started: dict[str, list[str]] = {}
+    up._spawn = lambda name, argv, _env: started.__setitem__(name, argv)
+    up.start()
+    assert set(started) == {"learner", "actor-1", "actor-2", "evaluator"}
+    for name, argv in started.items():
+        assert "--env" not in argv and "--env-kwargs" not in argv and "--env-vector" not in argv, (name, argv)
+        assert argv[argv.index("--env-config") + 1] == str(tmp_path / "run" / "env.json"), (name, argv)
+        args = build_parser().parse_args(argv)
+        assert env_from_args(args) == env, name
+    argv = [*started["actor-1"], "--env-kwargs", '{"max_episode_steps": 9}']
+    assert env_from_args(build_parser().parse_args(argv)).kwargs == {"max_episode_steps": 9}  # the flag wins
+    (tmp_path / "bad.json").write_text('{"env": "CartPole-v1", "kwargs": {}}')
+    with pytest.raises(ValueError, match=r"bad.json: unknown EnvConfig field\(s\) \['kwargs'\]"):
+        env_from_args(build_parser().parse_args(["evaluator", "--env-config", str(tmp_path / "bad.json")]))

@@ -125,7 +125,7 @@ class EnvConfig:
         )
 
     def flags(self) -> list[str]:
-        """The command-line flags that give another process this env (``navlearn up`` passes them on)."""
+        """The command-line flags that give another process this env (bench/own_env.py gives them to `up`)."""
         out = [] if self.own_world else ["--env", self.env]
         if self.env_kwargs.strip():
             out += ["--env-kwargs", self.env_kwargs]

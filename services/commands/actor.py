@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 
 from services.actor.config import ActorConfig
+from services.common.env_options import add_env_options, env_from_args
 from services.common.options import add_options
 from services.common.transport import add_zenoh_args
-from worlds.own_env import ENV_TITLE, EnvConfig
 
 DESCRIPTION = """\
 Run an actor: it steps --envs robots (a vectorised navigation env on --maps) with the newest
@@ -37,7 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_options(parser, ActorConfig, "NAVLEARN_ACTOR", "actor")
-    add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE)
+    add_env_options(parser)
     parser.add_argument("--verbose", action="store_true", help="debug logging")
     add_zenoh_args(parser, default_mode="client")
     parser.set_defaults(func=main)
@@ -53,9 +53,9 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         config = options_from_args(ActorConfig, args, "NAVLEARN_ACTOR")
-        env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
+        env = env_from_args(args)
         settings = settings_from_args(args)
-    except (OptionError, TransportError) as exc:
+    except (OptionError, TransportError, OSError, ValueError) as exc:
         print(f"navlearn actor: {exc}", file=sys.stderr)
         return 2
     setup_logging(args.verbose)

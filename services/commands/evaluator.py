@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
+from services.common.env_options import add_env_options, env_from_args
 from services.common.options import add_options
 from services.common.transport import add_zenoh_args
 from services.evaluator.config import EvaluatorConfig
-from worlds.own_env import ENV_TITLE, EnvConfig
 
 DESCRIPTION = """\
 Run the evaluator: it follows the learner's weights (navlearn/<run>/weights/<model>, asking
@@ -33,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_options(parser, EvaluatorConfig, "NAVLEARN_EVALUATOR", "evaluator")
-    add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE)
+    add_env_options(parser)
     parser.add_argument("--verbose", action="store_true", help="debug logging")
     add_zenoh_args(parser, default_mode="client")
     parser.set_defaults(func=main)
@@ -49,9 +49,9 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         config = options_from_args(EvaluatorConfig, args, "NAVLEARN_EVALUATOR")
-        env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
+        env = env_from_args(args)
         settings = settings_from_args(args)
-    except (OptionError, TransportError) as exc:
+    except (OptionError, TransportError, OSError, ValueError) as exc:
         print(f"navlearn evaluator: {exc}", file=sys.stderr)
         return 2
     setup_logging(args.verbose)

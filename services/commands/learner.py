@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
-from pathlib import Path
 
 from agents.nnql.config import NNQLConfig
-from services.common.options import add_options
+from services.common.env_options import add_env_options, env_from_args
+from services.common.options import add_options, config_file
 from services.common.transport import add_zenoh_args
 from services.learner.config import NNQL_REFUSED, LearnerConfig
-from worlds.own_env import ENV_TITLE, EnvConfig
 
 DESCRIPTION = """\
 Run the learner: it takes transition batches from actors (navlearn/<run>/transitions/*) and
@@ -41,7 +38,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_options(parser, LearnerConfig, "NAVLEARN_LEARNER", "learner service")
-    add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE)
+    add_env_options(parser)
     add_options(parser, NNQLConfig, "NAVLEARN_NNQL", "NNQL hyper-parameters", refuse=NNQL_REFUSED)
     parser.add_argument(
         "--nnql-config",
@@ -71,7 +68,7 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         config = options_from_args(LearnerConfig, args, "NAVLEARN_LEARNER")
-        env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
+        env = env_from_args(args)
         resolve_device(config.device)  # cuda without a GPU: one sentence, before anything starts
         nnql = options_from_args(
             NNQLConfig, args, "NAVLEARN_NNQL", base=config_file(args.nnql_config, NNQLConfig)
@@ -92,19 +89,6 @@ def main(args: argparse.Namespace) -> int:
     except (TransportError, ValueError) as exc:
         print(f"navlearn learner: {exc}", file=sys.stderr)
         return 2
-
-
-def config_file(path: str | None, cls: type) -> dict:
-    """The fields of ``cls`` a JSON config file holds ({} without one); unknown fields are an error."""
-    if not path:
-        return {}
-    loaded = json.loads(Path(path).read_text())
-    if not isinstance(loaded, dict):
-        raise ValueError(f"{path}: expected a JSON object of {cls.__name__} fields")
-    unknown = sorted(set(loaded) - {f.name for f in dataclasses.fields(cls)})
-    if unknown:
-        raise ValueError(f"{path}: unknown {cls.__name__} field(s) {unknown}")
-    return loaded
 
 
 def nirl_config(args: argparse.Namespace, seed: int):

@@ -26,7 +26,9 @@ import dataclasses
 import functools
 import inspect
 import itertools
+import json
 import os
+import pathlib
 import textwrap
 import typing
 from typing import Any, TypeVar
@@ -231,3 +233,16 @@ def options_from_args(
         return cls(**values)
     except (TypeError, ValueError) as exc:
         raise OptionError(str(exc)) from None
+
+
+def config_file(path: str | None, cls: type) -> dict:
+    """The fields of ``cls`` a JSON config file holds ({} without one); unknown fields are an error."""
+    if not path:
+        return {}
+    loaded = json.loads(pathlib.Path(path).read_text())
+    if not isinstance(loaded, dict):
+        raise ValueError(f"{path}: expected a JSON object of {cls.__name__} fields")
+    unknown = sorted(set(loaded) - {f.name for f in dataclasses.fields(cls)})
+    if unknown:
+        raise ValueError(f"{path}: unknown {cls.__name__} field(s) {unknown}")
+    return loaded

@@ -35,6 +35,7 @@ from agents.evaluation.selection import TEST_SEED, VALIDATION_SEED
 from agents.mlp import CONFIG_FILE
 from agents.nnql.persistence import replace_dir
 from agents.nnql.policy import load_policy_dir, save_policy_dir
+from services.common.env_options import write_env_config
 from services.common.transport import TransportError, ZenohSettings, free_port, open_session
 from services.evaluator.keep_best import kept_record
 from services.learner.checkpoint import CheckpointDir
@@ -51,6 +52,8 @@ DEMO_SEED = 10_000
 """the expert demonstrator's episodes start at this seed (+ --seed), apart from the actors' seeds"""
 NNQL_CONFIG_FILE = "nnql.json"
 """the run's NNQLConfig in --out, which the learner reads (`navlearn learner --nnql-config`)"""
+ENV_CONFIG_FILE = "env.json"
+"""the run's EnvConfig in --out, which the learner, actors and evaluator read (`--env-config`)"""
 BEST_POLICY = "best-policy"
 """with keep_best: the evaluator's kept policy, in <out>/eval/ (`navlearn evaluator --best-policy`)"""
 PHASES = (
@@ -164,6 +167,7 @@ class Up:
         # the learner reads the run's NNQLConfig itself, not re-parsed environment variables
         nnql_file = out / NNQL_CONFIG_FILE
         nnql_file.write_text(json.dumps(self.nnql.to_dict(), indent=1) + "\n")
+        env_flags = write_env_config(self.env, out / ENV_CONFIG_FILE)  # the same for every process
         self._spawn(
             "learner",
             [
@@ -180,7 +184,7 @@ class Up:
                 cfg.observation,
                 *(["--nirl"] if cfg.nirl else []),
                 *(["--nirl-config", cfg.nirl_config] if cfg.nirl_config else []),
-                *self.env.flags(),
+                *env_flags,
                 "--nnql-config",
                 str(nnql_file),
             ],
@@ -209,7 +213,7 @@ class Up:
                     str(cfg.seed + i),
                     "--observation",
                     cfg.observation,
-                    *self.env.flags(),
+                    *env_flags,
                 ],
                 base,
             )
@@ -237,7 +241,7 @@ class Up:
                 "--eval-seed",
                 str(self.eval_seed),
                 *(["--best-policy", str(self.best_policy)] if cfg.keep_best else []),
-                *self.env.flags(),
+                *env_flags,
             ],
             base,
         )
