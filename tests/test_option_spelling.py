@@ -37,10 +37,10 @@ COMMANDS = {
 
 HAND_WRITTEN = {
     "up": set(),
-    "learner": {"--nnql-config", "--nirl-config", "--verbose"},
+    "learner": {"--nnql-config", "--nirl-config", "--env-config", "--verbose"},
     "train": {"--local"},
     "nirl train": {"--demos", "--observation"},
-    "actor": {"--verbose"},
+    "actor": {"--env-config", "--verbose"},
     "imitate train": {"--demos", "--out", "--observation"},
     "tabular": {
         "--algo",
