@@ -56,6 +56,9 @@ from worlds.maps import Cell, GridMap, Task
 from worlds.perception import observation_dim
 
 FORMAT_VERSION = 1
+ENV_KEY = "navlearn_env"
+"""the dataset metadata key of a demonstration set of a user's Gymnasium env (agents.env_demos): the
+env's record as JSON"""
 SOURCES = ("astar", "human", "file")
 _REQUIRED_OPTIONS = (
     "map_id",
@@ -340,6 +343,14 @@ def load_demos(path: str | Path) -> list[Demo]:
             dataset = minari.load_dataset(dataset_id)
         metadata = dataset.storage.metadata
         version = metadata.get("navlearn_format")
+        if version is None and ENV_KEY in metadata:
+            env = json.loads(metadata[ENV_KEY])
+            raise DemoFormatError(
+                f"{target}: demonstrations on the Gymnasium env {env['id']}, not navlearn's world: NIRL "
+                "learns its reward from the world's features (the map, the robot's poses, the plan to the "
+                "goal), which that env lacks; learn from them by behaviour cloning: navlearn imitate train "
+                f"--env {env['id']} --demos {target}"
+            )
         if version is None:
             raise DemoFormatError(f"{target}: a Minari dataset, but not a navlearn demonstration set")
         if version != FORMAT_VERSION:

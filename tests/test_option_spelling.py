@@ -30,7 +30,7 @@ COMMANDS = {
     "train": (LocalTrainConfig, TrainObservation, NNQLConfig, EnvConfig),
     "nirl train": (NIRLRun, NIRLConfig),
     "actor": (ActorConfig, EnvConfig, ZenohSettings),
-    "imitate train": (ImitationConfig,),
+    "imitate train": (ImitationConfig, EnvConfig),
     "tabular": (TabularConfig,),
 }
 """each command and the configs its flags come from"""

@@ -90,7 +90,8 @@ def train_policy(
     on_epoch: Callable[[dict], None] | None = None,
     observation: dict | None = None,
 ) -> TrainResult:
-    """Train the MLP policy on ``demos``; ``on_epoch(record)`` sees each epoch's figures.
+    """Train the MLP policy on ``demos`` (agents.demos.Demo, or agents.env_demos.EnvDemo of a user's env:
+    anything with ``observations`` and ``labels``); ``on_epoch(record)`` sees each epoch's figures.
     ``observation``: the settings the demonstrations were recorded in, kept with the policy."""
     config = config or ImitationConfig()
     train_idx, val_idx = split_episodes(len(demos), config.val_fraction, config.seed)

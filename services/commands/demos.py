@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from services.common.options import add_options
 from worlds.config import OBSERVATIONS
+from worlds.own_env import ENV_TITLE, EnvConfig
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -61,6 +63,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     gen.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
     gen.set_defaults(func=generate)
+
+    rec = sub.add_parser(
+        "record",
+        help="record demonstrations on your own Gymnasium env (--env) as a Minari dataset",
+        description="Play --episodes episodes of a Gymnasium env (--env, as `navlearn up --env` takes it: "
+        "observations flattened) with a demonstrator - a trained policy directory (--policy: "
+        "`navlearn train --local --env` or `up --env`'s policy/, or `imitate train --env`'s) or your own "
+        "callable (--expert module:fn, one flat observation -> one action) - and write them as a Minari "
+        "dataset in --out, with the env's Gymnasium spec and its id and kwargs recorded; "
+        "`navlearn imitate train --env` learns from it and checks it was recorded on that env. "
+        "Episode i resets the env with --seed + i. How-to: docs/own-env.md.",
+    )
+    who = rec.add_mutually_exclusive_group(required=True)
+    who.add_argument("--policy", metavar="DIR", help="a saved policy directory that acts greedily")
+    who.add_argument(
+        "--expert", metavar="MODULE:FN", help="your callable: one flat observation (numpy) -> one action"
+    )
+    rec.add_argument("--episodes", type=int, default=100, help="episodes to record (default %(default)s)")
+    rec.add_argument("--out", required=True, help="dataset directory named like a Minari id (demos/mine-v0)")
+    rec.add_argument("--seed", type=int, default=0, help="episode i resets the env with seed SEED + i")
+    rec.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
+    add_options(rec, EnvConfig, "NAVLEARN_ENV", ENV_TITLE + "; default: the env --policy records")
+    rec.set_defaults(func=record)
 
     info = sub.add_parser(
         "info",
@@ -141,6 +166,67 @@ def generate(args: argparse.Namespace) -> int:
         f"{stats.replans / max(stats.episodes, 1):.1f} replans per episode -> {path}"
     )
     return 0
+
+
+def record(args: argparse.Namespace) -> int:
+    """`navlearn demos record`: a demonstrator's episodes on a user's env, as a Minari dataset."""
+    import sys
+
+    try:
+        env, act, who = demonstrator(args)
+        from agents.env_demos import record_env_demos
+
+        path, stats = record_env_demos(args.out, env, act, args.episodes, args.seed, who, args.overwrite)
+    except (ValueError, OSError) as exc:  # OptionError, EnvError, DemoFormatError, PolicyFormatError
+        print(f"navlearn demos record: {exc}", file=sys.stderr)
+        return 2
+    print(
+        f"{stats.episodes} episodes of {env.signature()} by {who} ({stats.steps} steps, mean return "
+        f"{stats.mean_return:.1f}) -> {path}"
+    )
+    return 0
+
+
+def demonstrator(args: argparse.Namespace):
+    """(EnvConfig, act: flat observation -> action, who) of `demos record`'s flags: --env, else the env
+    --policy records; a --policy of another env than --env is refused naming both."""
+    import importlib
+
+    import numpy as np
+
+    from agents.env_demos import env_name
+    from services.common.options import options_from_args
+
+    given = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
+    if args.policy:
+        from agents.evaluation.policies import load_policy
+
+        policy = load_policy(args.policy)
+        recorded = getattr(policy, "env", None)
+        env = given if given.env else EnvConfig.from_record(recorded)
+        if env.own_world:
+            raise ValueError(
+                f"--policy {args.policy}: a policy of navlearn's world, whose demonstrations come from "
+                "`navlearn demos generate` (the expert); `record` is for a Gymnasium --env"
+            )
+        if recorded is not None and recorded != env.record():
+            raise ValueError(
+                f"--policy {args.policy} was trained on env {env_name(recorded)}, not on --env "
+                f"{env_name(env.record())}: record on its env (drop --env) or give a policy of this one"
+            )
+        return env, lambda obs: int(policy(np.asarray(obs, np.float32)[None])[0]), f"policy {args.policy}"
+    if given.own_world:
+        raise ValueError(
+            "--expert acts in a Gymnasium env: give --env (navlearn's world has `demos generate`)"
+        )
+    module, _, name = args.expert.partition(":")
+    try:
+        fn = getattr(importlib.import_module(module), name) if name else None
+    except ImportError as exc:
+        raise ValueError(f"--expert {args.expert}: cannot import {module!r} ({exc})") from None
+    if not callable(fn):
+        raise ValueError(f"--expert {args.expert}: not module:callable (a function of one observation)")
+    return given, fn, f"expert {args.expert}"
 
 
 def show_info(args: argparse.Namespace) -> int:

@@ -7,6 +7,7 @@ import argparse
 from agents.imitation.config import ImitationConfig
 from services.common.options import OptionError, add_options, options_from_args
 from worlds.config import OBSERVATIONS
+from worlds.own_env import ENV_TITLE, EnvConfig
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -20,7 +21,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "train",
         help="train an MLP policy on a demonstration dataset",
         description="Train an MLP from observations to the expert's actions (cross-entropy, Adam) on a "
-        "Minari demonstration dataset from `navlearn demos generate`. Episodes are split into training "
+        "Minari demonstration dataset from `navlearn demos generate` (or `navlearn demos record --env` on "
+        "your own Gymnasium env, given the same --env). Episodes are split into training "
         "and validation sets; training stops early when the validation loss stalls and keeps the best "
         "epoch. Writes model.safetensors + config.json (the shared policy format, loadable by "
         "`navlearn evaluate`) and training.jsonl (one line per epoch) into --out.",
@@ -32,13 +34,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument(
         "--observation",
         choices=list(OBSERVATIONS),
-        default="learning",
         help="what the robot observes: learning (worlds.config.LEARNING_NAV, NNQL's default), "
         "learning_plan (the same and the own map's plan length to the goal) or plain "
         "(8 beams + goal, older demonstration sets); the demonstrations must have been recorded in it, "
-        "and the saved policy records it (default %(default)s)",
+        "and the saved policy records it (default learning; not with --env)",
     )
     add_options(train, ImitationConfig, "NAVLEARN_IMITATE", "behaviour cloning")
+    add_options(
+        train, EnvConfig, "NAVLEARN_ENV", ENV_TITLE + "; the --demos of `navlearn demos record` on that env"
+    )
     train.set_defaults(func=run_train)
 
 
@@ -56,15 +60,27 @@ def run_train(args: argparse.Namespace) -> int:
 
     try:
         config = options_from_args(ImitationConfig, args, "NAVLEARN_IMITATE")
-        nav = OBSERVATIONS[args.observation]
-        demos = load_demos_for(args.demos, nav)
+        env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
+        nav = OBSERVATIONS[args.observation or "learning"]
+        if args.observation and not env.own_world:
+            raise ValueError(
+                f"--observation is navlearn's world's; with --env {env.env} the env's own is learnt"
+            )
+        if env.own_world:
+            demos, n_actions, where = load_demos_for(args.demos, nav), nav.robot.n_actions, {}
+            observation = observation_settings(nav)
+        else:  # a user's Gymnasium env: demonstrations recorded on it (agents.env_demos), its spaces
+            from agents.env_demos import load_env_demos
+            from worlds.own_env import env_spaces
+
+            demos, n_actions = load_env_demos(args.demos, env), env_spaces(env)[1]
+            where, observation = {"env": env.record()}, None  # `navlearn evaluate --policy` rebuilds it
     except (OptionError, DemoFormatError, ValueError) as exc:
         print(f"navlearn imitate train: {exc}", file=sys.stderr)
         return 2
     if len(demos) < 2:
         print("navlearn imitate train: need at least 2 demonstrations", file=sys.stderr)
         return 2
-    n_actions = nav.robot.n_actions
     with Progress() as progress:
         bar = progress.add_task("epochs", total=config.max_epochs)
 
@@ -76,10 +92,8 @@ def run_train(args: argparse.Namespace) -> int:
                 f"acc {record['val_accuracy']:.3f}",
             )
 
-        result = train_policy(
-            demos, config, n_actions=n_actions, on_epoch=on_epoch, observation=observation_settings(nav)
-        )
-    out = save_trained(args.out, result, config, demos=str(Path(args.demos).resolve()))
+        result = train_policy(demos, config, n_actions=n_actions, on_epoch=on_epoch, observation=observation)
+    out = save_trained(args.out, result, config, demos=str(Path(args.demos).resolve()), **where)
     with open(out / "training.jsonl", "w") as fh:
         for record in result.history:
             fh.write(json.dumps(record) + "\n")
