@@ -182,7 +182,7 @@ def train_dqfd(demos, seed: int, env_steps: int, nav: NavConfig, margin: float =
     given (its moving discs included); ``dueling`` False: the plain head of the rows before part 13."""
     from worlds.vector_env import NavigationVectorEnv
 
-    cfg = NNQLConfig(seed=seed, learning_starts=256, dueling=dueling)
+    cfg = NNQLConfig(seed=seed, learning_starts=256, dueling=dueling, network="mlp")  # as the recorded rows
     obs_dim, n_actions = observation_dim(nav), nav.robot.n_actions
     q = NNQLLearner(cfg, obs_dim, n_actions, observation=observation_settings(nav))
     store = demo_buffer(50_000, seed + 1)
@@ -307,7 +307,8 @@ def run_one(
                              eval_episodes=args.val_episodes, keep_best=args.keep_best,
                              final_eval_episodes=0, out="", seed=seed, progress=False,
                              moving_discs=args.nnql_discs, maps="mixed:16", eval_sizes=(16,)),
-            NNQLConfig(**{"seed": seed, "dueling": args.nnql_dueling, **args.nnql_overrides}),
+            NNQLConfig(**{"seed": seed, "dueling": args.nnql_dueling, "network": "mlp",  # as recorded
+                          **args.nnql_overrides}),
             nav=reward_nav,
         )  # fmt: skip
         kept = result.policy.greedy() if args.keep_best else result.learner.policy()  # the kept weights
@@ -395,7 +396,7 @@ def main() -> int:
     parser.add_argument(
         "--nnql", action="append", default=[], metavar="KEY=VALUE",
         help="override an NNQLConfig field of NNQL from scratch (nnql, nnql_line; repeatable), e.g. "
-        "action_local=3",
+        "network=local",
     )  # fmt: skip
     add_policy_options(parser)
     parser.add_argument(

@@ -75,7 +75,8 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
         maps="mixed:16", eval_sizes=(16,),  # 16x16 maps and validation, as the recorded runs
     )  # fmt: skip
     start = time.perf_counter()
-    trained = train_local(run, NNQLConfig(seed=seed, **{"dueling": False, **fields}))  # plain unless named
+    plain = {"dueling": False, "network": "mlp"}  # the recorded runs' MLP, plain unless named
+    trained = train_local(run, NNQLConfig(seed=seed, **{**plain, **fields}))
     wall = time.perf_counter() - start
     policy = NNQLPolicy.load(out).greedy()
     results = {name: evaluate(policy, es, config=LEARNING_NAV) for name, es in sets.items()}

@@ -13,10 +13,10 @@ robot-steps, several seeds, one observation per variant:
     F  B + a 16x16 egocentric patch of the robot's own map (occupancy, visits) read by a small CNN
        beside the MLP (agents.nnql.patch_network; no subgoal: learning alone)
     F+geo  F with the geodesic progress reward
-    Fg+geo  F+geo with the goal also drawn into the CNN's input (NNQLConfig.cnn_goal: one more image
+    Fg+geo  F+geo with the goal also drawn into the CNN's input (PatchConfig.goal: one more image
           channel, the observation's goal at its place in the patch): the same observation
-    Fge+geo  Fg+geo with the CNN's 800 features embedded in 64 before the head (NNQLConfig.cnn_embed)
-    Fgea+geo  Fge+geo with the action-local branch (NNQLConfig.action_local=3): one MLP shared by the
+    Fge+geo  Fg+geo with the CNN's 800 features embedded in 64 before the head (PatchConfig.embed)
+    Fgea+geo  Fge+geo with the action-local branch (PatchConfig.window=3): one MLP shared by the
           actions adds to each action's Q what it makes of the 7 readings around its heading and the
           goal seen from it
     G, G+geo  B and B+geo with NNQL's retired recurrent Q: measured, no longer run here (their
@@ -70,7 +70,7 @@ from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import EvalResult, EvalSet, evaluate, make_eval_set
 from agents.imitation.config import ImitationConfig
 from agents.imitation.train import train_policy
-from agents.nnql.config import NNQLConfig
+from agents.nnql.config import NNQLConfig, PatchConfig
 from agents.nnql.policy import NNQLPolicy
 from agents.nnql.train_local import LocalTrainConfig, train_local
 from agents.planning.demonstrate import generate_demos
@@ -115,10 +115,12 @@ VARIANTS["Fg+geo"] = VARIANTS["F+geo"]
 VARIANTS["Fge+geo"] = VARIANTS["F+geo"]
 VARIANTS["Fgea+geo"] = VARIANTS["F+geo"]
 NNQL_OPTIONS: dict[str, dict] = {
-    "Fg+geo": {"cnn_goal": True},
-    "Fge+geo": {"cnn_goal": True, "cnn_embed": 64},
-    "Fgea+geo": {"cnn_goal": True, "cnn_embed": 64, "action_local": 3},
+    "Fg+geo": {"patch": PatchConfig(goal=True)},
+    "Fge+geo": {"patch": PatchConfig(goal=True, embed=64)},
+    "Fgea+geo": {"patch": PatchConfig(goal=True, embed=64, window=3)},
 }
+"""each variant's NNQLConfig fields besides its Q-network (the patch CNN with a patch, else the MLP
+alone, as the recorded runs)"""
 PAIRED_WITH = ("A", "D+geo", "Fge+geo")
 """each run is compared (McNemar, same seed, same episodes) with the runs of these variants when present
 (Fge+geo: the no-planner variant each later one adds to)"""
@@ -221,7 +223,9 @@ def run_one(variant: str, seed: int, args, sets: dict) -> dict:
         moving_discs=0,  # the variant's nav as it is: static maps, as the recorded runs
         maps="mixed:16", eval_sizes=(16,),  # 16x16 maps and validation, as the recorded runs
     )  # fmt: skip
-    options = {"dueling": False, **NNQL_OPTIONS.get(variant, {}), **getattr(args, "nnql_overrides", {})}
+    network = "patch" if nav.observation.patch_size else "mlp"
+    options = {"dueling": False, "network": network, **NNQL_OPTIONS.get(variant, {}),
+               **getattr(args, "nnql_overrides", {})}  # fmt: skip
     nnql = NNQLConfig(seed=seed, **options)  # a plain head unless overridden
     trained = finished(out, run, nav)
     if trained is None:

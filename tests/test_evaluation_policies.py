@@ -188,8 +188,14 @@ def test_the_shipped_policy_loads_and_computes_what_it_did_before_the_refactor()
     assert flat == pytest.approx([q for row in PRETRAINED_Q for q in row], abs=2e-5)
     saved = json.loads((PRETRAINED / "config.json").read_text())["nnql_config"]
     assert saved["recurrent"] is False  # saved with the retired variant's fields, which are dropped
-    # its recipe: the defaults of train --local (the action-local branch is its flag's default there)
-    assert NNQLConfig.from_dict(saved) == NNQLConfig(seed=saved["seed"], action_local=3)
+    # saved with the variants' fields flat (q_network, action_local, cnn_*): read as the variant they
+    # built, the action-local branch of window 3 = today's default recipe on its observation
+    observation = json.loads((PRETRAINED / "config.json").read_text())["observation"]
+    assert saved["q_network"] == "auto" and saved["action_local"] == 3 and "network" not in saved
+    config = NNQLConfig.from_dict(saved, observation)
+    assert config == NNQLConfig(seed=saved["seed"], network="local")
+    assert config == NNQLConfig(seed=saved["seed"]).resolved(observation)
+    assert NNQLConfig.from_dict(config.to_dict()) == config  # and today's files read back as written
 
 
 def test_a_policy_or_config_of_the_retired_recurrent_variant_is_refused_in_one_sentence(tmp_path):

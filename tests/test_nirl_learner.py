@@ -199,7 +199,7 @@ def test_checkpoint_and_weight_history_round_trip(tmp_path):
     obs, expert = goal_seeking_steps(84, seed=3)
     # the reward still learning after one round (the default fixes it after round 1); the plain MLP
     config = NIRLConfig(
-        **SMALL, warmstart_updates=10, q_updates=4, reward_updates=2, fix_reward_after=5, action_local=0
+        **SMALL, warmstart_updates=10, q_updates=4, reward_updates=2, fix_reward_after=5, network="mlp"
     )
     learner = NIRLLearner(config)
     learner.add_demos([Episode(obs[:42], expert[:41]), Episode(obs[42:], expert[42:83])])

@@ -131,10 +131,10 @@ def test_warm_start_hands_nirls_q_to_nnqls_trainer_in_its_reward_units(nan_env_r
         policy_utd=0.25,
         policy_temperature=0.02,
         seed=0,
-        action_local=0,  # the warm start hands over the plain MLP's layout
+        network="mlp",  # the warm start hands over the plain MLP's layout
         gamma=GAMMA,
     )
-    with pytest.raises(ValueError, match="--action-local 0"):
+    with pytest.raises(ValueError, match="--network mlp"):
         NIRLConfig(policy_warm_start=2)
     assert config.own_rounds() == 3 and NIRLConfig(iterations=9).own_rounds() == 9
     run = NIRLRun(envs=4, maps="mixed:16", out="", eval_every=0, final_eval_episodes=0, progress=False,
@@ -158,7 +158,8 @@ def test_warm_start_hands_nirls_q_to_nnqls_trainer_in_its_reward_units(nan_env_r
 def test_train_local_starts_from_the_initial_weights_it_is_given():
     run = LocalTrainConfig(steps=32, envs=4, eval_every=0, final_eval_episodes=0, out="", progress=False,
                            moving_discs=0)  # fmt: skip
-    nnql = NNQLConfig(learning_starts=10_000, gamma=GAMMA)  # no update within 32 robot-steps
+    # no update within 32 robot-steps; the MLP alone, the layout of the initial weights
+    nnql = NNQLConfig(learning_starts=10_000, gamma=GAMMA, network="mlp")
     donor = NNQLLearner(NNQLConfig(seed=7), observation_dim(LEARNING_NAV), LEARNING_NAV.robot.n_actions)
     result = train_local(run, nnql, initial_weights=donor.get_weights())
     obs = np.random.default_rng(0).random((50, observation_dim(LEARNING_NAV)), dtype=np.float32)

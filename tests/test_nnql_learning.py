@@ -55,6 +55,7 @@ def test_nnql_learns_a_corridor(tmp_path, variant):
         temperature_start=0.2,
         temperature_end=0.01,
         temperature_decay_updates=400,
+        network="mlp",  # the update rules under test, on the MLP alone
         **variant,
     )
     run = LocalTrainConfig(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from agents.evaluation.runner import evaluate, make_eval_set
 from agents.forward import TorchForward
 from agents.nirl.config import NIRLConfig
 from agents.nnql.action_local import LocalQNetwork
-from agents.nnql.config import NNQLConfig
+from agents.nnql.config import LocalConfig, NNQLConfig, PatchConfig
 from agents.nnql.learner import NNQLLearner
 from agents.nnql.patch_network import PatchQNetwork, goal_images
 from agents.nnql.policy import NNQLPolicy
@@ -23,9 +24,14 @@ from worlds.config import NavConfig, ObservationConfig, SensorConfig, observatio
 from worlds.perception import frame_dim, frame_layout, observation_dim
 from worlds.vector_env import NavigationVectorEnv
 
-SMALL = NNQLConfig(
-    hidden_sizes=(16,), cnn_channels=(4, 4), cnn_strides=(1, 1), batch_size=8, learning_starts=8, seed=3
-)
+BASE = {"hidden_sizes": (16,), "batch_size": 8, "learning_starts": 8, "seed": 3}
+CNN = PatchConfig(channels=(4, 4), strides=(1, 1))
+SMALL = NNQLConfig(**BASE, network="patch", patch=CNN)
+
+
+def cnn(**fields) -> NNQLConfig:
+    """SMALL with these PatchConfig fields."""
+    return replace(SMALL, patch=replace(CNN, **fields))
 
 
 def patch_nav(size: int = 6, **observation) -> NavConfig:
@@ -80,16 +86,20 @@ def test_split_of_a_real_observation_separates_map_from_the_other_inputs():
     assert ((visits >= 0) & (visits < 1)).all() and (visits > 0).any(axis=(1, 2)).all()  # it has been here
 
 
-def test_without_a_patch_or_with_mlp_the_network_is_the_plain_mlp():
-    plain = patch_nav(0)
-    net = build_q_network(SMALL, observation_dim(plain), 5, observation_settings(plain))
-    assert not isinstance(net, PatchQNetwork)
-    nav = patch_nav(6)
-    mlp = NNQLConfig(**{**SMALL.to_dict(), "q_network": "mlp"})
+def test_network_picks_the_variant_and_auto_picks_by_the_observation():
+    plain, nav = patch_nav(0), patch_nav(6)
+    auto = NNQLConfig(**BASE)
+    net = build_q_network(auto, observation_dim(plain), 5, observation_settings(plain))
+    assert isinstance(net, LocalQNetwork) and net.local.spec["window"] == LocalConfig().window
+    assert "local" not in build_q_network(auto, 30, 5).architecture  # no navlearn observation: the MLP
+    mlp = replace(auto, network="mlp")
     net = build_q_network(mlp, observation_dim(nav), 5, observation_settings(nav))
-    assert not isinstance(net, PatchQNetwork) and "patch" not in net.architecture
-    auto = build_q_network(SMALL, observation_dim(nav), 5, observation_settings(nav))
-    assert isinstance(auto, PatchQNetwork)
+    assert not isinstance(net, PatchQNetwork | LocalQNetwork) and "patch" not in net.architecture
+    auto_cnn = build_q_network(
+        replace(SMALL, network="auto"), observation_dim(nav), 5, observation_settings(nav)
+    )
+    assert isinstance(auto_cnn, PatchQNetwork) and "local" not in auto_cnn.architecture
+    assert learner_for(plain, auto).config.network == "local"  # the learner records what it built
 
 
 def test_actor_forward_equals_the_learners_after_updates():
@@ -134,14 +144,16 @@ def test_saved_policy_records_the_cnn_and_evaluates_identically_after_reload(tmp
 
 
 def test_bad_values_raise_value_errors_naming_the_field():
-    with pytest.raises(ValueError, match="cnn_channels"):
-        NNQLConfig(cnn_channels=(8, 0))
-    with pytest.raises(ValueError, match="cnn_strides"):
-        NNQLConfig(cnn_strides=(1,))
-    with pytest.raises(ValueError, match="cnn_kernel_sizes"):
-        NNQLConfig(cnn_kernel_sizes=())
-    with pytest.raises(ValueError, match="q_network"):
-        NNQLConfig(q_network="cnn")
+    with pytest.raises(ValueError, match="channels"):
+        PatchConfig(channels=(8, 0))
+    with pytest.raises(ValueError, match="strides"):
+        PatchConfig(strides=(1,))
+    with pytest.raises(ValueError, match="kernel_sizes"):
+        PatchConfig(kernel_sizes=())
+    with pytest.raises(ValueError, match="network"):
+        NNQLConfig(network="cnn")
+    with pytest.raises(ValueError, match="window"):
+        LocalConfig(window=0)
     with pytest.raises(ValueError, match="patch_size"):
         ObservationConfig(patch_size=-1)
     net = PatchQNetwork({"obs_dim": 83, "n_actions": 5, "hidden_sizes": [8], "activation": "relu",
@@ -150,7 +162,7 @@ def test_bad_values_raise_value_errors_naming_the_field():
     with pytest.raises(ValueError, match="patch"):
         PatchQNetwork({**net.architecture, "obs_dim": 84})
     with pytest.raises(ValueError, match="too small"):  # default CNN: 3x3 stride 2, then 3x3
-        build_q_network(NNQLConfig(), 43, 5, observation_settings(patch_nav(4)))
+        build_q_network(NNQLConfig(network="patch"), 43, 5, observation_settings(patch_nav(4)))
     weights = {k: v.numpy() for k, v in net.state_dict().items()}
     weights["cnn.0.weight"] = weights["cnn.0.weight"][:2]
     with pytest.raises(ValueError, match="do not fit"):
@@ -160,20 +172,24 @@ def test_bad_values_raise_value_errors_naming_the_field():
 def test_train_local_cli_patch_option(tmp_path, capsys):
     assert main(["train", "--local", "--patch-size", "-2"]) == 2
     assert "patch_size" in capsys.readouterr().err
-    assert main(["train", "--local", "--cnn-goal"]) == 2
-    assert "add --patch" in capsys.readouterr().err
+    assert main(["train", "--local", "--patch-goal"]) == 2
+    assert "add --network patch and --patch-size" in capsys.readouterr().err
+    assert main(["train", "--local", "--network", "patch"]) == 2
+    assert "observation.patch_size > 0" in capsys.readouterr().err
+    assert main(["train", "--local", "--patch-size", "8", "--local-window", "2"]) == 2  # auto: the CNN
+    assert "add --network local" in capsys.readouterr().err
     out = tmp_path / "f"
     argv = ["train", "--local", "--patch-size", "8", "--subgoal", "none", "--steps", "600", "--envs", "4",
             "--out", str(out), "--eval-every", "0", "--final-eval-episodes", "0", "--hidden-sizes", "16",
-            "--no-progress", "--cnn-goal", "--cnn-embed", "8", "--action-local", "2"]  # fmt: skip
+            "--no-progress", "--patch-goal", "--patch-embed", "8", "--patch-window", "2"]  # fmt: skip
     assert main(argv) == 0
     config = json.loads((out / "config.json").read_text())
     assert config["architecture"]["patch"]["size"] == 8
     patch = config["architecture"]["patch"]
     assert patch["embed"] == 8 and patch["goal"]["at"] == 24  # the goal part follows the 24 sector readings
     assert config["observation"]["observation.subgoal"] == "none"
-    assert config["nnql_config"]["q_network"] == "auto"
-    assert config["architecture"]["local"]["window"] == 2 and config["nnql_config"]["action_local"] == 2
+    assert config["nnql_config"]["network"] == "patch"  # auto, as built on this observation
+    assert config["architecture"]["local"]["window"] == 2 and config["nnql_config"]["patch"]["window"] == 2
 
 
 def test_an_actor_process_runs_a_cnn_policy_on_one_torch_thread(tmp_path):
@@ -215,7 +231,7 @@ def assert_travels_with_the_policy(learner: NNQLLearner, obs: np.ndarray, tmp_pa
 
 
 def test_goal_images_put_the_goal_where_the_patch_samples_it():
-    """cnn_goal: a goal 3 m ahead lies between the centres of cells u = 10 and 11 (2.5 m, 3.5 m ahead)
+    """PatchConfig.goal: a goal 3 m ahead lies between the centres of cells u = 10 and 11 (2.5 m, 3.5 m ahead)
     and v = 7, 8 (0.5 m right, 0.5 m left) of a 16x16 patch of 1 m cells; 6 m left at v = 13.5; a far
     goal is moved along its bearing onto the border; each image holds the goal's unit mass."""
     max_range = 6.0
@@ -236,9 +252,9 @@ def test_goal_images_put_the_goal_where_the_patch_samples_it():
         assert got == cells
 
 
-def test_cnn_goal_adds_each_frames_goal_as_a_channel_and_travels_with_the_policy(tmp_path):
+def test_patch_goal_adds_each_frames_goal_as_a_channel_and_travels_with_the_policy(tmp_path):
     nav = patch_nav(6, frame_stack=2)
-    config = NNQLConfig(**{**SMALL.to_dict(), "cnn_goal": True})
+    config = cnn(goal=True)
     learner = learner_for(nav, config)
     net = learner.network
     assert isinstance(net, PatchQNetwork) and net.architecture["patch"]["goal"] == {"at": 8, "max_range": 6.0}
@@ -255,19 +271,18 @@ def test_cnn_goal_adds_each_frames_goal_as_a_channel_and_travels_with_the_policy
     assert_travels_with_the_policy(learner, obs, tmp_path)
 
 
-def test_cnn_goal_without_a_patch_is_a_clear_error():
+def test_the_patch_network_or_its_settings_without_a_patch_are_clear_errors():
     plain = patch_nav(0)
-    config = NNQLConfig(**{**SMALL.to_dict(), "cnn_goal": True})
-    with pytest.raises(ValueError, match=r"cnn_goal.*patch_size"):
-        build_q_network(config, observation_dim(plain), 5, observation_settings(plain))
-    embed = NNQLConfig(**{**SMALL.to_dict(), "cnn_embed": 8})
-    with pytest.raises(ValueError, match=r"cnn_embed=8.*patch_size"):
+    with pytest.raises(ValueError, match=r"network='patch'.*patch_size"):
+        build_q_network(cnn(goal=True), observation_dim(plain), 5, observation_settings(plain))
+    embed = replace(cnn(embed=8), network="auto")  # auto builds the action-local branch here
+    with pytest.raises(ValueError, match=r"embed=8.*builds 'local'.*--network patch and --patch-size"):
         build_q_network(embed, observation_dim(plain), 5, observation_settings(plain))
 
 
 def test_cnn_embed_maps_the_cnn_features_before_the_head_and_travels_with_the_policy(tmp_path):
     nav = patch_nav(6)
-    learner = learner_for(nav, NNQLConfig(**{**SMALL.to_dict(), "cnn_embed": 5}))
+    learner = learner_for(nav, cnn(embed=5))
     net = learner.network
     assert (
         net.architecture["patch"]["embed"] == 5
@@ -275,16 +290,17 @@ def test_cnn_embed_maps_the_cnn_features_before_the_head_and_travels_with_the_po
     )
     obs = env_observations(nav, n=4)
     assert_travels_with_the_policy(learner, obs, tmp_path)
-    with pytest.raises(ValueError, match="cnn_embed"):
-        NNQLConfig(cnn_embed=-1)
+    with pytest.raises(ValueError, match="embed"):
+        PatchConfig(embed=-1)
 
 
 def test_action_local_sees_each_actions_view_the_same_way_whichever_action_it_is(tmp_path):
-    """action_local: with 8 readings 45 degrees apart (the first behind the robot), the actions' turns
+    """The action-local branch beside the CNN (PatchConfig.window): with 8 readings 45 degrees apart (the
+    first behind the robot), the actions' turns
     -90..90 degrees face readings 2..6; action 4 (90 degrees left) seeing the readings and goal of an
     observation is action 2 (straight on) seeing them turned 90 degrees right: the same branch output."""
     nav = patch_nav(6)
-    learner = learner_for(nav, NNQLConfig(**{**SMALL.to_dict(), "action_local": 1}))
+    learner = learner_for(nav, cnn(window=1))
     local = learner.network.local
     assert local.spec["headings"] == [2, 3, 4, 5, 6] and local.spec["goal_at"] == 8
     assert local.index.tolist() == [[1, 2, 3], [2, 3, 4], [3, 4, 5], [4, 5, 6], [5, 6, 7]]
@@ -304,16 +320,17 @@ def test_action_local_sees_each_actions_view_the_same_way_whichever_action_it_is
 
 
 def test_action_local_bad_values_are_clear_errors():
-    with pytest.raises(ValueError, match="action_local=-1"):
-        NNQLConfig(action_local=-1)
+    with pytest.raises(ValueError, match=r"PatchConfig\.window=-1"):
+        PatchConfig(window=-1)
     nav = patch_nav(6)
-    too_wide = NNQLConfig(**{**SMALL.to_dict(), "action_local": 4})  # 9 readings of 8
-    with pytest.raises(ValueError, match=r"action_local=4.*action_local <= 3"):
-        build_q_network(too_wide, observation_dim(nav), 5, observation_settings(nav))
+    with pytest.raises(ValueError, match=r"window 4.*window <= 3"):  # 9 readings of 8
+        build_q_network(cnn(window=4), observation_dim(nav), 5, observation_settings(nav))
     plain = patch_nav(0)
-    with pytest.raises(ValueError, match=r"action_local=1.*observation"):  # no settings: no layout
-        build_q_network(NNQLConfig(**{**SMALL.to_dict(), "action_local": 1}), observation_dim(plain), 5)
-    with pytest.raises(ValueError, match=r"action_local=4.*action_local <= 3"):
+    local = NNQLConfig(**BASE, network="local", local=LocalConfig(window=1))
+    with pytest.raises(ValueError, match=r"network='local'.*observation"):  # no settings: no layout
+        build_q_network(local, observation_dim(plain), 5)
+    too_wide = replace(local, local=LocalConfig(window=4))
+    with pytest.raises(ValueError, match=r"window 4.*window <= 3"):
         build_q_network(too_wide, observation_dim(plain), 5, observation_settings(plain))
     with pytest.raises(ValueError, match="does not fit frames"):  # a frame of 12 in 13 features
         LocalQNetwork({"obs_dim": 13, "n_actions": 5, "hidden_sizes": [4], "activation": "relu",
@@ -328,7 +345,7 @@ def test_action_local_without_a_patch_adds_the_branch_to_the_flat_mlp(tmp_path, 
     branch over the newest frame's readings and goal, the same turned-view equivariance as with the
     patch; the policy runs that module in actors and files (torch forward), and NIRL builds it."""
     nav = patch_nav(0, frame_stack=2, subgoal="own_map", plan_length=True)
-    config = NNQLConfig(**{**SMALL.to_dict(), "action_local": 1, "dueling": dueling})
+    config = NNQLConfig(**BASE, network="local", local=LocalConfig(window=1), dueling=dueling)
     learner = learner_for(nav, config)
     net = learner.network
     assert isinstance(net, LocalQNetwork) and net.architecture.get("dueling", False) is dueling
@@ -344,7 +361,8 @@ def test_action_local_without_a_patch_adds_the_branch_to_the_flat_mlp(tmp_path, 
         turned[:, 9], turned[:, 10] = -obs[:, 10], obs[:, 9]
         torch.testing.assert_close(net.local(turned)[:, 2], net.local(obs[:, : frame_dim(nav)])[:, 4])
     assert_travels_with_the_policy(learner, obs.numpy(), tmp_path)
-    nirl = NIRLConfig(hidden_sizes=(16,), action_local=1, dueling=dueling).nnql_config()
-    assert isinstance(learner_for(nav, nirl).network, LocalQNetwork)
-    with pytest.raises(ValueError, match="action_local=-2"):
-        NIRLConfig(action_local=-2)
+    nirl = NIRLConfig(hidden_sizes=(16,), local=LocalConfig(window=1), dueling=dueling).nnql_config()
+    assert isinstance(learner_for(nav, nirl).network, LocalQNetwork)  # network auto, on NIRL's observation
+    assert learner_for(nav, nirl).network.local.spec["window"] == 1
+    with pytest.raises(ValueError, match="window=-2"):
+        NIRLConfig(local={"window": -2})

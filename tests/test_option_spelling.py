@@ -8,7 +8,6 @@ a hand-written flag, or one option under two names (`--hidden` beside `--hidden-
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 import pytest
 
@@ -19,6 +18,7 @@ from agents.nnql.train_config import LocalTrainConfig, TrainObservation
 from agents.tabular.config import TabularConfig
 from services.actor.config import ActorConfig
 from services.cli import build_parser
+from services.common.options import option_fields
 from services.common.transport import ZenohSettings
 from services.learner.config import NNQL_REFUSED, LearnerConfig
 from services.ops.up_config import UpConfig
@@ -71,13 +71,15 @@ def command_parser(name: str) -> argparse.ArgumentParser:
     return parser
 
 
-def flag_of(field: dataclasses.Field) -> str:
-    return field.metadata.get("flag") or "--" + field.name.replace("_", "-")
+def flag_of(option) -> str:
+    """An option's flag as written here: --<name with dashes>, unless its field renames it."""
+    return (not option.parent and option.field.metadata.get("flag")) or "--" + option.name.replace("_", "-")
 
 
 def field_flags(name: str) -> dict[str, str]:
-    """flag -> field name of every field of the command's configs."""
-    return {flag_of(f): f.name for cls in COMMANDS[name] for f in dataclasses.fields(cls)}
+    """flag -> option name of every option of the command's configs (a nested config's fields are
+    options named <field>_<subfield>: NNQLConfig.local.window is --local-window)."""
+    return {flag_of(o): o.name for cls in COMMANDS[name] for o in option_fields(cls)}
 
 
 @pytest.mark.parametrize("name", sorted(COMMANDS))
@@ -109,25 +111,36 @@ def test_a_field_of_several_configs_has_one_type():
     """hidden_sizes, gamma, lr, seed, maps, envs, ...: the same name takes the same kind of value."""
     types: dict[str, set[str]] = {}
     for cls in {c for classes in COMMANDS.values() for c in classes}:
-        for field in dataclasses.fields(cls):
-            types.setdefault(field.name, set()).add(str(field.type).removesuffix(" | None"))
+        for option in option_fields(cls):
+            types.setdefault(option.name, set()).add(str(option.field.type).removesuffix(" | None"))
     assert {name: kinds for name, kinds in types.items() if len(kinds) > 1} == {}
 
 
 def test_the_training_commands_share_the_nnql_options_and_the_old_spellings_are_gone():
     flags = {name: set(field_flags(name)) for name in COMMANDS}
-    nnql = {flag_of(f) for f in dataclasses.fields(NNQLConfig)} - {"--seed"}
-    refused = {flag_of(f) for f in dataclasses.fields(NNQLConfig) if f.name in NNQL_REFUSED}
+    nnql = {flag_of(o) for o in option_fields(NNQLConfig)} - {"--seed"}
+    refused = {flag_of(o) for o in option_fields(NNQLConfig) if (o.parent or o.name) in NNQL_REFUSED}
+    assert {"--sarsa", "--patch-channels", "--patch-goal", "--patch-window"} <= refused
     for name in ("up", "learner", "train"):
         assert nnql <= flags[name]
-    for option in ("--gamma", "--hidden-sizes", "--exploration", "--action-local", "--patch-size"):
+    for option in (
+        "--gamma",
+        "--hidden-sizes",
+        "--exploration",
+        "--network",
+        "--local-window",
+        "--patch-size",
+    ):
         assert option in flags["train"]
+    # the Q-network variant and the action-local branch are spelled the same for NIRL
+    assert {"--network", "--local-window", "--dueling", "--hidden-sizes"} <= flags["nirl train"]
     parsed = {
         option
         for name in ("up", "learner", "train", "nirl train", "imitate train")
         for action in command_parser(name)._actions
         for option in action.option_strings
     }
-    assert not {"--hidden", "--epsilon-greedy", "--patch", "--no-subgoal", "--keep-last"} & parsed
+    old = {"--hidden", "--epsilon-greedy", "--patch", "--no-subgoal", "--keep-last", "--action-local"}
+    assert not (old | {"--q-network", "--cnn-goal", "--cnn-embed", "--cnn-channels"}) & parsed
     for name in ("up", "learner"):  # refused in one sentence, not offered in --help
         assert all(flag not in command_parser(name).format_help() for flag in refused)

@@ -267,10 +267,11 @@ def test_distributed_commands_refuse_sarsa(command, monkeypatch, capsys):
     ("flags", "reason"),
     [
         (["--sarsa"], "navlearn train --local --sarsa"),
-        (["--cnn-goal"], "own-map patch"),
-        (["--cnn-embed", "64"], "own-map patch"),
-        (["--cnn-channels", "8", "16"], "own-map patch"),
-        (["--cnn-strides", "1", "1"], "own-map patch"),
+        (["--patch-goal"], "own-map patch"),
+        (["--patch-embed", "64"], "own-map patch"),
+        (["--patch-channels", "8", "16"], "own-map patch"),
+        (["--patch-strides", "1", "1"], "own-map patch"),
+        (["--patch-window", "3"], "own-map patch"),
     ],
 )
 def test_distributed_commands_refuse_what_they_cannot_honour_while_parsing(command, flags, reason, capsys):
@@ -292,7 +293,7 @@ def test_learner_reads_its_nnql_config_from_a_file_and_flags_win(tmp_path, monke
         NNQLConfig, args, "NAVLEARN_NNQL", base=config_file(args.nnql_config, NNQLConfig)
     )
     assert (nnql.gamma, nnql.hidden_sizes, nnql.seed, nnql.lr) == (0.9, (32, 16), 4, 0.01)
-    path.write_text(json.dumps({"cnn_goal": True}))
+    path.write_text(json.dumps({"patch": {"goal": True}}))
     with pytest.raises(OptionError, match="own-map patch"):
         options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", base=config_file(args.nnql_config, NNQLConfig))
     path.write_text(json.dumps({"gama": 0.9}))

@@ -4,11 +4,11 @@
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from agents.mlp import ACTIVATION_NAMES
-from agents.nnql.config import NNQLConfig
+from agents.nnql.config import NETWORKS, LocalConfig, NNQLConfig
 from worlds.config import TRAINING_DISCS
 
 CORES = ("iq", "sqil", "max_margin")
@@ -41,19 +41,20 @@ class NIRLConfig:
     100 rounds with discs, 500 + 500 episodes, one seed) 94.2% / 82.8% against the plain head's 91.8% /
     81.4%; on the test seed at 200 rounds, 3 seeds, level with the plain head (docs/notebook.md, issue 15
     part 7). Saved configs without the field had the plain head"""
-    action_local: int = 3
-    """K > 0 (default 3): the Q-network gets NNQL's action-local branch (``NNQLConfig.action_local``,
-    agents.nnql.action_local.LocalQNetwork): one small MLP, shared by the actions, over the 2K+1
-    range readings around each action's heading and the goal turned to it, added to that action's Q -
-    a wall learned ahead of one action is learned ahead of all; 0: off. With gamma 0.98 and part 14's
-    setting, 90% validation at a median 81,920 robot-steps against 143,360 (docs/notebook.md, issue 15
-    part 15); the default since issue 39 (part 15's setting is NIRL's default)"""
+    network: str = field(default="auto", metadata={"choices": NETWORKS})
+    """the Q-network variant, as NNQLConfig.network (auto: on NIRL's observations, local, the default
+    since issue 39; mlp: the MLP alone). With local, one small MLP shared by the actions over the 2K+1
+    range readings around each action's heading and the goal turned to it is added to that action's Q
+    (agents.nnql.action_local): with gamma 0.98 and part 14's setting, 90% validation at a median 81,920
+    robot-steps against the MLP's 143,360 (docs/notebook.md, issue 15 part 15)"""
+    local: LocalConfig = field(default_factory=LocalConfig)
+    """network local's own settings, as NNQLConfig.local"""
     reward_hidden_sizes: tuple[int, ...] = (64, 64)
     """widths of the reward network's hidden layers (input: state-action features)"""
     reward_scale: float = 2.0
     """max_margin: the learned reward is a cost in (-reward_scale, 0); iq/sqil: unused"""
     gamma: float = 0.98
-    """discount factor (NNQL's 0.98, a 50-step horizon: with action_local 3 it reached 90% validation
+    """discount factor (NNQL's 0.98, a 50-step horizon: with the action-local branch it reached 90% validation
     sooner than 0.99, issue 15 part 15; the default since issue 39)"""
     alpha: float = 0.01
     """iq/sqil: entropy temperature of the soft Q-function; V = alpha logsumexp(Q / alpha)"""
@@ -207,19 +208,24 @@ class NIRLConfig:
             raise ValueError("NIRLConfig: need positive batch sizes and replay_capacity >= batch_size")
         if min(self.temperature_start, self.temperature_end) <= 0:
             raise ValueError("NIRLConfig: Boltzmann temperatures must be > 0")
-        if self.action_local < 0:
-            raise ValueError(f"NIRLConfig.action_local={self.action_local}: expected >= 0 (0: off)")
+        if isinstance(self.local, dict):  # from a saved config
+            self.local = LocalConfig(**self.local)
+        if self.network not in NETWORKS or self.network == "patch":
+            raise ValueError(
+                f"NIRLConfig.network={self.network!r}: expected auto, local or mlp (NIRL's observations,"
+                " learning and learning_plan, have no own-map patch)"
+            )
         if min(self.iterations, self.steps_per_iteration, self.reward_updates, self.q_updates) < 0:
             raise ValueError("NIRLConfig: iteration counts must be >= 0")
         if self.policy_steps < 0 or self.policy_utd < 0:
             raise ValueError("NIRLConfig: need policy_steps >= 0 and policy_utd >= 0")
         if self.policy_warm_start < 0:
             raise ValueError(f"NIRLConfig.policy_warm_start={self.policy_warm_start}: expected >= 0 rounds")
-        if self.policy_warm_start and self.action_local:
+        if self.policy_warm_start and self.network != "mlp":
             raise ValueError(
                 f"NIRLConfig.policy_warm_start={self.policy_warm_start} hands NIRL's Q-network to NNQL's "
-                f"trainer in the plain MLP's layout, which action_local={self.action_local} does not "
-                "have: add --action-local 0"
+                f"trainer in the plain MLP's layout, which network={self.network!r} does not have: add "
+                "--network mlp"
             )
         if self.policy_temperature <= 0:
             raise ValueError(f"NIRLConfig.policy_temperature={self.policy_temperature}: expected > 0")
@@ -235,7 +241,8 @@ class NIRLConfig:
             hidden_sizes=self.hidden_sizes,
             activation=self.activation,
             dueling=self.dueling,
-            action_local=self.action_local,
+            network=self.network,
+            local=self.local,
             lr=self.lr,
             gamma=self.gamma,
             batch_size=self.batch_size,
@@ -275,18 +282,23 @@ class NIRLConfig:
     def from_dict(cls, data: dict[str, Any]) -> NIRLConfig:
         """Inverse of to_dict; unknown keys are an error so typos do not pass silently. A field a saved
         config lacks reads as what it meant then (:data:`SAVED_WITHOUT`), not as today's default."""
+        data = dict(data)
+        if "network" not in data:  # saved with ``action_local`` (k > 0: the branch), or before it: none
+            window = int(data.pop("action_local", 0))
+            data |= {"network": "local", "local": {"window": window}} if window else {"network": "mlp"}
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names)
         if unknown:
             raise ValueError(f"NIRLConfig: unknown field(s) {unknown}")
-        return cls(**(SAVED_WITHOUT | dict(data)))
+        return cls(**(SAVED_WITHOUT | data))
 
 
-SAVED_WITHOUT = {"core": "max_margin", "potential_inputs": "observation", "dueling": False, "action_local": 0}
+SAVED_WITHOUT = {"core": "max_margin", "potential_inputs": "observation", "dueling": False}
 """what a saved NIRL config (a checkpoint's, a policy's config.json) without the field meant: saved
 before cores existed (format 1), it was the max-margin learner's; before ``potential_inputs`` existed,
-the potential read every feature; before ``dueling`` existed, the Q-network had a plain head; before
-``action_local`` existed, it had no action-local branch"""
+the potential read every feature; before ``dueling`` existed, the Q-network had a plain head. Saved
+before ``network``, its ``action_local`` k > 0 was the action-local branch of window k, 0 (or none)
+the MLP alone"""
 
 
 @dataclass

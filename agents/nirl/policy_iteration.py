@@ -72,7 +72,8 @@ class FixedReward:
 
 
 def nnql_config(config: NIRLConfig) -> NNQLConfig:
-    """NNQL's defaults (dueling head, utd, batch, exploration) with NIRL's gamma and seed, ``policy_utd``
+    """NNQL's defaults (dueling head, utd, batch, exploration) on the MLP alone, with NIRL's gamma and
+    seed, ``policy_utd``
     when set, and with ``policy_warm_start`` NIRL's Q-network's layers and a constant
     ``policy_temperature``."""
     options: dict = {"utd_ratio": config.policy_utd} if config.policy_utd > 0 else {}
@@ -83,7 +84,8 @@ def nnql_config(config: NIRLConfig) -> NNQLConfig:
             "temperature_start": config.policy_temperature,
             "temperature_end": config.policy_temperature,
         }
-    return NNQLConfig(gamma=config.gamma, seed=config.seed, **options)
+    # the MLP alone: the warm start's layout, and the phase's recorded runs
+    return NNQLConfig(gamma=config.gamma, seed=config.seed, network="mlp", **options)
 
 
 def warm_weights(learner: NIRLLearner, config: NIRLConfig) -> dict[str, np.ndarray]:

@@ -1,12 +1,14 @@
 """The action-local branch: what one small MLP, shared by the actions, makes of each action's view.
 
-With ``NNQLConfig.action_local`` = k a branch (:class:`ActionLocal`) adds to each action's Q-value
+With ``NNQLConfig.network`` "local" (its own settings: ``agents.nnql.config.LocalConfig``, window
+k) a branch (:class:`ActionLocal`) adds to each action's Q-value
 what one small MLP, shared by the actions, makes of the newest frame seen from that action's heading:
 the 2k+1 readings centred on it and the goal's distance and bearing turned to it. A wall ahead of an
 action is then the same input whichever action it is ahead of (weight sharing over the robot's
 rotations), so a collision learned for one action is learned for all. It sits beside the flat MLP
-(:class:`LocalQNetwork`; NIRL's ``action_local`` too) or beside the patch CNN
-(:class:`agents.nnql.patch_network.PatchQNetwork`). agents.nnql.q_networks picks the variant.
+(:class:`LocalQNetwork`, built by :func:`build`; NIRL's ``local`` too) or beside the patch CNN
+(:class:`agents.nnql.patch_network.PatchQNetwork`, ``PatchConfig.window``). agents.nnql.q_networks
+picks the variant.
 """
 
 from __future__ import annotations
@@ -19,8 +21,9 @@ import torch
 from torch import nn
 from torchrl.modules import MLP
 
+from agents.nnql.config import LocalConfig
 from agents.nnql.networks import QNetwork, activation_class
-from worlds.config import NavConfig
+from worlds.config import NavConfig, with_observation
 from worlds.perception import frame_dim, frame_layout
 
 LOCAL_HIDDEN = 32
@@ -64,8 +67,8 @@ class ActionLocal(nn.Module):
         window, n = self.spec["window"], self.spec["n_readings"]
         if not 1 <= 2 * window + 1 <= n or len(self.spec["headings"]) != len(self.spec["turns"]):
             raise ValueError(
-                f"NNQLConfig.action_local={window}: an action's view of 2 * {window} + 1 readings must fit"
-                f" the {n} readings (action_local <= {(n - 1) // 2})"
+                f"action-local window {window}: an action's view of 2 * {window} + 1 readings must fit"
+                f" the {n} readings (window <= {(n - 1) // 2}; --local-window or --patch-window)"
             )
         offsets = torch.arange(-window, window + 1)
         index = (torch.tensor(self.spec["headings"])[:, None] + offsets) % n + self.spec["readings_at"]
@@ -123,3 +126,20 @@ class LocalQNetwork(nn.Module):
         flat = obs.reshape(-1, obs.shape[-1])
         q = self.head(flat) + self.local(flat[:, : self.frame_dim])
         return q.reshape(*obs.shape[:-1], q.shape[-1])
+
+
+def build(
+    config: LocalConfig, head: Mapping[str, Any], observation: Mapping[str, Any] | None
+) -> LocalQNetwork:
+    """Network "local": the MLP of architecture ``head`` (``QNetwork``'s, dueling or not) plus the branch
+    of ``config.window``, where ``observation`` (navlearn's observation settings) puts the readings."""
+    if not observation:
+        raise ValueError(
+            "NNQLConfig.network='local': the action-local branch reads the readings and the goal where the "
+            "observation's settings put them; build the learner with its observation"
+        )
+    view = view_layout(with_observation(NavConfig(), dict(observation)))
+    local = {key: view[key] for key in VIEW_KEYS}
+    return LocalQNetwork(
+        {**head, "frame_dim": view["frame_dim"], "local": {**local, "window": config.window}}
+    )

@@ -1,4 +1,11 @@
-"""NNQL hyper-parameters: one flat dataclass (thesis ch. 4, cleanrl-style)."""
+"""NNQL hyper-parameters (thesis ch. 4, cleanrl-style): NNQLConfig, and the small configs of the
+Q-network variants it selects with one field (``network``).
+
+Each variant is a module (agents.nnql.networks: the MLP; agents.nnql.action_local: the action-local
+branch; agents.nnql.patch_network: the patch CNN), built by agents.nnql.q_networks from the config
+below that is its own. The configs live here, not beside the torch modules, so every command's flags
+(services.common.options: ``--local-window``, ``--patch-channels``, ...) are built without torch.
+"""
 
 from __future__ import annotations
 
@@ -14,8 +21,9 @@ STORAGES = ("memory", "memmap")
 
 TARGET_UPDATES = ("soft", "hard")
 LOSS_FUNCTIONS = ("l2", "smooth_l1", "l1")
-Q_NETWORKS = ("auto", "mlp")
-CNN_FIELDS = ("cnn_channels", "cnn_kernel_sizes", "cnn_strides")
+NETWORKS = ("auto", "mlp", "local", "patch")
+"""the Q-network variants NNQLConfig.network chooses among (agents.nnql.q_networks)"""
+CONV_FIELDS = ("channels", "kernel_sizes", "strides")
 RETIRED_FIELDS = ("recurrent", "lstm_size", "seq_len", "burn_in", "sequences")
 """fields of the retired recurrent variant, which older configs (checkpoints, saved policies'
 nnql_config) still hold: dropped when read, unless ``recurrent`` is set"""
@@ -24,6 +32,62 @@ RECURRENT_RETIRED = (
     "every measured task (its figures: docs/notebook.md, results/perception/); commit a731e15 still "
     "trains and evaluates it"
 )
+
+
+@dataclass
+class LocalConfig:
+    """The action-local branch (agents.nnql.action_local), network "local": the flat MLP plus one small
+    MLP, shared by the actions, over each action's own view of the newest frame."""
+
+    window: int = 3
+    """k: an action's view is the 2k+1 newest readings centred on its heading and the goal's distance
+    and bearing seen from that heading (the same small MLP for each action, so what one action learns of
+    a wall ahead holds for all; no planner)"""
+
+    def __post_init__(self) -> None:
+        if isinstance(self.window, bool) or int(self.window) != self.window or self.window < 1:
+            raise ValueError(f"LocalConfig.window={self.window!r}: expected an integer >= 1 (--local-window)")
+
+
+@dataclass
+class PatchConfig:
+    """The patch CNN (agents.nnql.patch_network), network "patch": a small CNN over the own-map patch
+    (observation.patch_size > 0) beside the MLP over the other inputs."""
+
+    channels: tuple[int, ...] = (16, 32)
+    """output channels of the patch CNN's convolutions"""
+    kernel_sizes: tuple[int, ...] = (3, 3)
+    """kernel side of each convolution"""
+    strides: tuple[int, ...] = (2, 1)
+    """stride of each convolution"""
+    goal: bool = False
+    """draw the goal into the CNN's input, one more image channel per frame (bilinear at the goal's
+    egocentric position in patch cells, on the patch's border when farther), so the convolutions see
+    where the goal lies among the walls instead of only the MLP reading its distance and bearing (no
+    planner: the network learns what to make of it)"""
+    embed: int = 0
+    """0: the CNN's flattened features go to the MLP head as they are (800 beside 27 other inputs for
+    a 16x16 patch); > 0: a linear layer and the activation first map them to this many features, so
+    the readings and goal are not a few inputs among hundreds"""
+    window: int = 0
+    """0: off; k > 0: the action-local branch (LocalConfig.window's k) beside the CNN"""
+
+    def __post_init__(self) -> None:
+        for name in CONV_FIELDS:
+            values = tuple(int(v) for v in getattr(self, name))
+            setattr(self, name, values)
+            if not values or min(values) < 1 or len(values) != len(self.channels):
+                raise ValueError(
+                    f"PatchConfig.{name}={values}: need positive values, one per convolution "
+                    f"({len(self.channels)} in channels; --patch-{name.replace('_', '-')})"
+                )
+        if self.embed < 0:
+            raise ValueError(f"PatchConfig.embed={self.embed}: expected >= 0 (0: no embedding layer)")
+        if self.window < 0:
+            raise ValueError(f"PatchConfig.window={self.window}: expected >= 0 (0: no action-local branch)")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**dataclasses.asdict(self), **{name: list(getattr(self, name)) for name in CONV_FIELDS}}
 
 
 @dataclass
@@ -69,10 +133,10 @@ class NNQLConfig:
     """bootstrap after n steps: target sum_k<n gamma^k r_k + gamma^n Q(s_n) (Ape-X / Rainbow); the learner
     builds the returns per (actor, robot) stream, stopping at episode ends (agents/nnql/nstep.py)"""
     dueling: bool = True
-    """dueling head of the MLP Q-network: Q = V(s) + A(s, a) - mean_a A(s, a) over the last hidden layer
-    (Wang et al. 2016), saved folded into one linear layer, so actors run the plain MLP forward; on by
-    default (the shipped policy's recipe, chosen on validation); the LSTM and patch-CNN Q-networks keep a
-    plain head whatever this says"""
+    """dueling head of the MLP (networks mlp and local): Q = V(s) + A(s, a) - mean_a A(s, a) over the last
+    hidden layer (Wang et al. 2016), saved folded into one linear layer, so actors run the plain MLP
+    forward; on by default (the shipped policy's recipe, chosen on validation); the patch network keeps
+    a plain head whatever this says"""
     double_q: bool = True
     """double Q-learning: the online network picks the next action, the target network values it"""
     sarsa: bool = False
@@ -99,54 +163,33 @@ class NNQLConfig:
     """seeds network initialisation and replay sampling"""
     torch_threads: int = 1
     """torch intra-op threads, set process-wide by the learner (small MLPs are fastest on one)"""
-    q_network: str = field(default="auto", metadata={"choices": Q_NETWORKS})
-    """auto: a small CNN over the own-map patch beside the MLP when the observation has a patch
-    (agents.nnql.patch_network), else the MLP; mlp: the flat MLP over every input"""
-    cnn_channels: tuple[int, ...] = (16, 32)
-    """output channels of the patch CNN's convolutions"""
-    cnn_kernel_sizes: tuple[int, ...] = (3, 3)
-    """kernel side of each convolution"""
-    cnn_strides: tuple[int, ...] = (2, 1)
-    """stride of each convolution"""
-    cnn_goal: bool = False
-    """draw the goal into the patch CNN's input, one more image channel per frame (bilinear at the goal's
-    egocentric position in patch cells, on the patch's border when farther), so the convolutions see
-    where the goal lies among the walls instead of only the MLP reading its distance and bearing
-    (agents.nnql.patch_network; no planner: the network learns what to make of it)"""
-    cnn_embed: int = 0
-    """0: the CNN's flattened features go to the MLP head as they are (800 beside 27 other inputs for
-    a 16x16 patch); > 0: a linear layer and the activation first map them to this many features, so
-    the readings and goal are not a few inputs among hundreds"""
-    action_local: int = 0
-    """0: off; k > 0: a branch shared by every action adds to Q(s, a) what it makes of the 2k+1 newest
-    readings centred on a's heading and the goal's distance and bearing seen from that heading (the
-    same small MLP for each action, so what one action learns of a wall ahead holds for all; with a
-    patch, agents.nnql.patch_network; no planner)"""
+    network: str = field(default="auto", metadata={"choices": NETWORKS})
+    """the Q-network (agents.nnql.q_networks): mlp (the MLP alone), local (the MLP plus the action-local
+    branch, ``local``), patch (a CNN over the own-map patch beside the MLP, ``patch``; needs
+    observation.patch_size > 0) or auto: patch when the observation has a patch, local on navlearn's
+    world's other observations (the shipped policy's recipe), mlp where no navlearn observation says
+    where the readings are (a Gymnasium env, --env)"""
+    local: LocalConfig = field(default_factory=LocalConfig)
+    """network local's own settings (the action-local branch)"""
+    patch: PatchConfig = field(default_factory=PatchConfig)
+    """network patch's own settings (the patch CNN)"""
 
     def __post_init__(self) -> None:
         self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)
-        for name in CNN_FIELDS:
-            values = tuple(int(v) for v in getattr(self, name))
-            setattr(self, name, values)
-            if not values or min(values) < 1 or len(values) != len(self.cnn_channels):
-                raise ValueError(
-                    f"NNQLConfig.{name}={values}: need positive values, one per convolution "
-                    f"({len(self.cnn_channels)} in cnn_channels)"
-                )
+        if isinstance(self.local, dict):  # from a config file
+            self.local = LocalConfig(**self.local)
+        if isinstance(self.patch, dict):
+            self.patch = PatchConfig(**self.patch)
         checks = {
             "activation": (self.activation, ACTIVATION_NAMES),
             "target_update": (self.target_update, TARGET_UPDATES),
             "exploration": (self.exploration, EXPLORATIONS),
             "loss_function": (self.loss_function, LOSS_FUNCTIONS),
-            "q_network": (self.q_network, Q_NETWORKS),
+            "network": (self.network, NETWORKS),
         }
         for name, (value, allowed) in checks.items():
             if value not in allowed:
                 raise ValueError(f"NNQLConfig.{name}={value!r}: expected one of {allowed}")
-        if self.action_local < 0:
-            raise ValueError(f"NNQLConfig.action_local={self.action_local}: expected >= 0 (0: off)")
-        if self.cnn_embed < 0:
-            raise ValueError(f"NNQLConfig.cnn_embed={self.cnn_embed}: expected >= 0 (0: no embedding layer)")
         if not self.hidden_sizes or min(self.hidden_sizes) < 1:
             raise ValueError(f"NNQLConfig.hidden_sizes={self.hidden_sizes}: need positive widths")
         if not 0.0 < self.gamma <= 1.0:
@@ -166,22 +209,83 @@ class NNQLConfig:
         if self.sarsa and self.double_q:
             raise ValueError("NNQLConfig: sarsa bootstraps on the taken action; set double_q=False")
 
+    def resolved(self, observation: dict[str, Any] | None) -> NNQLConfig:
+        """This config with ``network`` the variant it builds on ``observation`` (navlearn's observation
+        settings, ``worlds.config.observation_settings``; None for another env): "auto" resolved as its
+        docstring says. ValueError, naming the option, for a variant the observation cannot feed or a
+        variant's settings changed while another variant is built (they would be silently ignored)."""
+        has_patch = bool((observation or {}).get("observation.patch_size"))
+        network = self.network
+        if network == "auto":
+            network = "patch" if has_patch else "local" if observation else "mlp"
+        if network == "patch" and not has_patch:
+            raise ValueError(
+                "NNQLConfig.network='patch' needs an observation with the own-map patch "
+                "(observation.patch_size > 0, e.g. `navlearn train --local --patch-size 16`)"
+            )
+        if network == "local" and not observation:
+            raise ValueError(
+                "NNQLConfig.network='local': the action-local branch reads the readings and the goal where "
+                "navlearn's observation settings put them; build the learner with its observation (another "
+                "env: --network mlp)"
+            )
+        for name, default in (("local", LocalConfig()), ("patch", PatchConfig())):
+            if network != name and getattr(self, name) != default:
+                raise ValueError(
+                    f"NNQLConfig.{name}={getattr(self, name)} shapes network {name!r}, and this config "
+                    f"builds {network!r} (network={self.network!r}): add --network {name}"
+                    + (" and --patch-size" if name == "patch" and not has_patch else "")
+                    + f" or drop the --{name}-* options"
+                )
+        return dataclasses.replace(self, network=network)
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-able copy (tuples become lists)."""
         data = dataclasses.asdict(self)
         data["hidden_sizes"] = list(self.hidden_sizes)
-        data.update({name: list(getattr(self, name)) for name in CNN_FIELDS})
+        data["patch"] = self.patch.to_dict()
         return data
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> NNQLConfig:
+    def from_dict(cls, data: dict[str, Any], observation: dict[str, Any] | None = None) -> NNQLConfig:
         """Inverse of to_dict; unknown keys are an error so typos do not pass silently. A config saved
-        before the recurrent variant was retired loads (its fields dropped) unless it is recurrent."""
+        before the recurrent variant was retired loads (its fields dropped) unless it is recurrent; one
+        saved with the variants' fields flat (before ``network``) loads as the variant it built
+        (:func:`from_flat_variant`, given the ``observation`` it was trained on)."""
         if data.get("recurrent"):
             raise ValueError(RECURRENT_RETIRED)
         data = {k: v for k, v in data.items() if k not in RETIRED_FIELDS}
+        if any(key in data for key in FLAT_VARIANT_FIELDS):
+            data = from_flat_variant(data, observation)
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names)
         if unknown:
             raise ValueError(f"NNQLConfig: unknown field(s) {unknown}")
         return cls(**data)
+
+
+FLAT_VARIANT_FIELDS = (
+    "q_network", "action_local", "cnn_channels", "cnn_kernel_sizes", "cnn_strides", "cnn_goal", "cnn_embed"
+)  # fmt: skip
+"""the Q-network variants' settings as NNQLConfig held them flat before ``network`` chose a variant with
+its own config (saved in policies' config.json ``nnql_config``, checkpoints and run summaries)"""
+
+
+def from_flat_variant(data: dict[str, Any], observation: dict[str, Any] | None) -> dict[str, Any]:
+    """``data`` with the flat variant fields (:data:`FLAT_VARIANT_FIELDS`) as ``network``, ``local`` and
+    ``patch``: what those fields built on ``observation`` (a policy's or checkpoint's ``observation``
+    settings). ``q_network`` "auto" built the patch CNN when the observation had a patch, "mlp" never
+    did; otherwise ``action_local`` k > 0 added the branch (network local), 0 left the MLP alone."""
+    data = dict(data)
+    if "network" in data:
+        raise ValueError(f"NNQLConfig: both network and the flat variant fields {FLAT_VARIANT_FIELDS} given")
+    old = {key: data.pop(key) for key in FLAT_VARIANT_FIELDS if key in data}
+    window = int(old.get("action_local", 0))
+    has_patch = bool((observation or {}).get("observation.patch_size"))
+    conv = {name: old[f"cnn_{name}"] for name in CONV_FIELDS if f"cnn_{name}" in old}
+    patch = {**conv, "goal": bool(old.get("cnn_goal", False)), "embed": int(old.get("cnn_embed", 0))}
+    if old.get("q_network", "auto") == "auto" and has_patch:
+        return {**data, "network": "patch", "patch": {**patch, "window": window}}
+    if window:
+        return {**data, "network": "local", "local": {"window": window}}
+    return {**data, "network": "mlp"}

@@ -80,9 +80,12 @@ class NNQLLearner(LearnerOutputs):
                 "a memory-mapped replay samples uniformly: prioritized replay keeps its trees in RAM and "
                 "would write them whole at every checkpoint; drop --prioritized or keep the replay in memory"
             )
-        self.config = config
         self.observation = None if observation is None else dict(observation)
         """what the network observes (``worlds.config.observation_settings``), recorded in saved policies"""
+        self.config = config.resolved(self.observation)
+        """the config with ``network`` the variant built ("auto" resolved), as checkpoints and policies
+        record it"""
+        config = self.config
         self.device = resolve_device(device)
         torch.set_num_threads(config.torch_threads)
         torch.manual_seed(config.seed)
@@ -322,7 +325,7 @@ class NNQLLearner(LearnerOutputs):
         ``replay_dir``: where its memory-mapped replay is, if it has one."""
         state = torch.load(Path(path) / CHECKPOINT_STATE, map_location="cpu", weights_only=True)
         arch = state["architecture"]
-        config = NNQLConfig.from_dict(state["config"])
+        config = NNQLConfig.from_dict(state["config"], state.get("observation"))
         learner = cls(config, arch["obs_dim"], arch["n_actions"], device=device, replay_dir=replay_dir,
                       observation=state.get("observation"))  # fmt: skip
         learner.load_checkpoint(path)

@@ -1,4 +1,5 @@
-"""The Q-network: a feature-based function approximator Q(s, .) (thesis ch. 4).
+"""The Q-network: a feature-based function approximator Q(s, .) (thesis ch. 4); network "mlp", and
+the head every other variant ends in (agents.nnql.q_networks).
 
 An MLP (TorchRL's ``MLP``) maps the observation - normalised range readings plus
 goal distance and bearing - to one Q-value per discrete action. Its architecture is

@@ -11,12 +11,14 @@ The split follows :func:`worlds.perception.frame_layout`: in one frame the patch
 ``start`` and holds ``2 * P * P`` values in the order (u, v, channel), ``u`` from back to front
 along the heading and ``v`` from right to left.
 
-With ``NNQLConfig.cnn_goal`` the CNN gets one more channel per frame: the goal drawn into the patch
-(:func:`goal_images`), from the frame's own goal distance and bearing, so the convolutions can relate
-the walls to where the goal lies (a conv net cannot read that from a vector the MLP gets after it).
-Nothing else is added: it is the observation's goal, placed where it is. With ``cnn_embed`` a
-linear layer (and the activation) maps the CNN's flattened features to that many before the head.
-With ``action_local`` the action-local branch (:mod:`agents.nnql.action_local`) adds its part.
+Its own settings are ``agents.nnql.config.PatchConfig`` (``NNQLConfig.patch``, network "patch");
+:func:`build` makes the network from them. With ``goal`` the CNN gets one more channel per frame:
+the goal drawn into the patch (:func:`goal_images`), from the frame's own goal distance and bearing,
+so the convolutions can relate the walls to where the goal lies (a conv net cannot read that from a
+vector the MLP gets after it). Nothing else is added: it is the observation's goal, placed where it
+is. With ``embed`` a linear layer (and the activation) maps the CNN's flattened features to that
+many before the head.
+With ``window`` the action-local branch (:mod:`agents.nnql.action_local`) adds its part.
 
 The architecture dict (saved in the policy's ``config.json`` and sent with the weights) records that
 layout and the CNN's shape, so actors and the evaluator rebuild the same module; they run this
@@ -32,7 +34,8 @@ import torch
 from torch import nn
 from torchrl.modules import MLP, ConvNet
 
-from agents.nnql.action_local import ActionLocal, view_layout
+from agents.nnql.action_local import VIEW_KEYS, ActionLocal, view_layout
+from agents.nnql.config import PatchConfig
 from agents.nnql.networks import activation_class
 from worlds.config import NavConfig, with_observation
 from worlds.perception import frame_layout
@@ -83,6 +86,41 @@ def patch_layout(observation: Mapping[str, Any] | None) -> dict[str, Any] | None
         "max_range": nav.sensors.max_range,
         **view_layout(nav),
     }
+
+
+def build(
+    config: PatchConfig,
+    obs_dim: int,
+    n_actions: int,
+    hidden_sizes: tuple[int, ...],
+    activation: str,
+    observation: Mapping[str, Any] | None,
+) -> PatchQNetwork:
+    """Network "patch" from its own settings, the head MLP's ``hidden_sizes`` and ``activation``, and
+    where ``observation`` (navlearn's observation settings, with a patch) puts the patch."""
+    layout = patch_layout(observation)
+    if layout is None:
+        raise ValueError(
+            "NNQLConfig.network='patch' needs an observation with the own-map patch"
+            " (observation.patch_size > 0)"
+        )
+    local = {key: layout.pop(key) for key in VIEW_KEYS}
+    goal_at, max_range = local["goal_at"], layout.pop("max_range")
+    patch = {
+        **layout,
+        "channels": config.channels,
+        "kernel_sizes": config.kernel_sizes,
+        "strides": config.strides,
+    }
+    if config.goal:
+        patch["goal"] = {"at": goal_at, "max_range": max_range}
+    if config.embed:
+        patch["embed"] = config.embed
+    architecture = {"obs_dim": obs_dim, "n_actions": n_actions, "hidden_sizes": hidden_sizes,
+                    "activation": activation, "patch": patch}  # fmt: skip
+    if config.window:
+        architecture["local"] = {**local, "window": config.window}
+    return PatchQNetwork(architecture)
 
 
 class PatchQNetwork(nn.Module):
@@ -158,7 +196,7 @@ class PatchQNetwork(nn.Module):
 
     def split(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(patch images (B, channels, P, P): occupancy and visits of each frame, then each frame's goal
-        image with ``cnn_goal``; the other inputs (B, rest)) of observations (..., obs_dim)."""
+        image with ``goal``; the other inputs (B, rest)) of observations (..., obs_dim)."""
         frames = obs.reshape(-1, self.frames, self.frame_dim)
         patch = frames[..., self.start : self.stop].reshape(-1, self.frames, self.size, self.size, 2)
         images = patch.permute(0, 1, 4, 2, 3).reshape(-1, 2 * self.frames, self.size, self.size)

@@ -61,7 +61,7 @@ class TrainObservation:
     subgoal), learning_plan (and the own map's plan length to the goal) or plain (8 beams + goal)"""
     patch_size: int = 0
     """add an egocentric PATCH x PATCH patch of the robot's own map (occupancy + visits), read by a small
-    CNN beside the MLP (NNQLConfig's cnn_* fields shape it); 0: none"""
+    CNN beside the MLP (NNQLConfig.network patch, shaped by NNQLConfig.patch); 0: none"""
     subgoal: str = field(default="", metadata={"choices": SUBGOALS, "shown": "the named observation's"})
     """the subgoal planned on the robot's own map (own_map: learning's), on the true map (known_map) or
     none (learning alone, e.g. with a patch)"""

@@ -131,6 +131,7 @@ def train_local(
     obs_dim = int(np.prod(env.single_observation_space.shape))
     n_actions = int(env.single_action_space.n)
     learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
+    nnql = learner.config  # network "auto" resolved: what the outputs record
     learner.env = None if gym_env is None else gym_env.record()
     if initial_weights is not None:
         learner.set_weights(initial_weights)

@@ -15,9 +15,9 @@ from worlds.config import RewardConfig
 def test_values_are_parsed_as_json_else_kept_as_strings():
     parser = argparse.ArgumentParser()
     got = parse_overrides(
-        parser, ["n_step=3", "cnn_goal=true", "lr=5e-4", "activation=tanh"], NNQLConfig, "--nnql"
+        parser, ["n_step=3", "network=patch", "lr=5e-4", "activation=tanh"], NNQLConfig, "--nnql"
     )
-    assert got == {"n_step": 3, "cnn_goal": True, "lr": 5e-4, "activation": "tanh"}
+    assert got == {"n_step": 3, "network": "patch", "lr": 5e-4, "activation": "tanh"}
     assert NNQLConfig(**got).n_step == 3
     assert parse_overrides(parser, ["collision=-3"], RewardConfig, "--rewards") == {"collision": -3}
     assert parse_overrides(parser, ["fix_reward_after=1"], NIRLConfig, "--nirl") == {"fix_reward_after": 1}

@@ -8,7 +8,7 @@ from agents.nnql.config import NNQLConfig
 from services.common.env_options import add_env_options, env_from_args
 from services.common.options import add_options, config_file
 from services.common.transport import add_zenoh_args
-from services.learner.config import NNQL_REFUSED, LearnerConfig
+from services.learner.config import NNQL_REFUSED, LearnerConfig, learner_network
 
 DESCRIPTION = """\
 Run the learner: it takes transition batches from actors (navlearn/<run>/transitions/*) and
@@ -73,6 +73,7 @@ def main(args: argparse.Namespace) -> int:
         nnql = options_from_args(
             NNQLConfig, args, "NAVLEARN_NNQL", base=config_file(args.nnql_config, NNQLConfig)
         )
+        learner_network(nnql, config.observation, env.own_world)  # its Q-network variant, before it starts
         nirl = nirl_config(args, nnql.seed) if config.nirl else None
         settings = settings_from_args(args)
         if args.zenoh_mode is None and settings.connect:

@@ -10,9 +10,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from agents.nnql.config import CNN_FIELDS, NNQLConfig
+from agents.nnql.config import NNQLConfig
 from agents.nnql.train_config import LocalTrainConfig, TrainObservation
 from services.common.options import OptionError, add_options, options_from_args
+from worlds.config import observation_settings
 from worlds.own_env import ENV_TITLE, EnvConfig, env_spaces
 
 DESCRIPTION = """\
@@ -21,8 +22,10 @@ robots, a TorchRL replay buffer and the learner, with the Boltzmann exploration 
 the policy (model.safetensors + config.json, loadable by `navlearn evaluate --policy DIR`),
 curve.png, curve.jsonl and summary.json to --out, then prints the greedy evaluation on 100
 held-out generated maps. Distributed training (actors + learner over Zenoh) is `navlearn up`,
-which takes the same NNQL flags. --patch-size 16 --subgoal none --cnn-goal --cnn-embed 64
---action-local 3 is the best no-planner variant of bench/perception.py.
+which takes the same NNQL flags. The Q-network is --network's (auto: the action-local branch on
+navlearn's world, the patch CNN with --patch-size, the MLP with --env). --patch-size 16 --subgoal none
+--network patch --patch-goal --patch-embed 64 --patch-window 3 is the best no-planner variant of
+bench/perception.py.
 """
 
 
@@ -41,12 +44,6 @@ def register(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-RECIPE_ACTION_LOCAL = 3
-"""`train --local`'s action-local branch when --action-local is not given (the flat Q-network of navlearn's
-world): with maps of every size and the own-map subgoal's clearance, the shipped policy's recipe
-(docs/navigation-by-size.md)"""
-
-
 def configs(args: argparse.Namespace):
     """(LocalTrainConfig, NNQLConfig, NavConfig, EnvConfig) from the parsed flags; OptionError or
     ValueError naming the flag for anything wrong."""
@@ -54,32 +51,18 @@ def configs(args: argparse.Namespace):
     nav = options_from_args(TrainObservation, args, "NAVLEARN_TRAIN").nav()
     # SARSA bootstraps on the action taken: double Q-learning does not apply unless asked for
     sarsa = {"double_q": False} if args.opt_sarsa and args.opt_double_q is None else {}
-    # the shipped policy's recipe: the action-local branch on the flat Q-network of navlearn's world
-    flat = not nav.observation.patch_size
-    own_world = options_from_args(EnvConfig, args, "NAVLEARN_ENV").own_world
-    recipe = (
-        {"action_local": RECIPE_ACTION_LOCAL} if args.opt_action_local is None and flat and own_world else {}
-    )
-    nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=run.seed, **sarsa, **recipe)
-    if not nav.observation.patch_size:
-        defaults = NNQLConfig()
-        shaped = [
-            n for n in ("cnn_goal", "cnn_embed", *CNN_FIELDS) if getattr(nnql, n) != getattr(defaults, n)
-        ]
-        if shaped:
-            flags = " and ".join("--" + n.replace("_", "-") for n in shaped)
-            raise OptionError(f"{flags} shape the patch network: add --patch-size (e.g. 16)")
+    nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=run.seed, **sarsa)
     if run.steps < 1 or run.envs < 1:
         raise OptionError("--steps and --envs must be positive")
     if run.moving_discs < 0 or run.eval_dynamic_episodes < 0:
         raise OptionError("--moving-discs and --eval-dynamic-episodes must be >= 0")
     env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
     if not env.own_world:
-        if nav.observation.patch_size or nnql.action_local:
-            raise OptionError(
-                "--patch-size and --action-local are for navlearn's world; drop them with --env"
-            )
+        if nav.observation.patch_size:
+            raise OptionError("--patch-size is for navlearn's world; drop it with --env")
         env_spaces(env)  # a bad id or a continuous action space: refused now, with its sentence
+    # the Q-network variant this observation can feed, its settings used: refused now, not in training
+    nnql.resolved(observation_settings(nav) if env.own_world else None)
     return run, nnql, nav, env
 
 

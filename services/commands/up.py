@@ -6,7 +6,7 @@ import argparse
 
 from agents.nnql.config import NNQLConfig
 from services.common.options import add_options
-from services.learner.config import NNQL_REFUSED
+from services.learner.config import NNQL_REFUSED, learner_network
 from services.ops.up_config import UpConfig
 from worlds.own_env import ENV_TITLE, EnvConfig
 
@@ -114,6 +114,7 @@ def main(args: argparse.Namespace) -> int:
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=config.seed)
         env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
         map_notes = check_config(config, env)
+        learner_network(nnql, config.observation, env.own_world)  # the learner's Q-network variant, now
     except (OptionError, ValueError) as exc:
         print(f"navlearn up: {exc}", file=sys.stderr)
         return 2

@@ -8,7 +8,10 @@ variables; :func:`options_from_args` resolves flag > environment > default.
 A field's ``metadata`` may rename its flag (``flag``), its environment variable
 (``env``) or its metavar (``metavar``) and restrict its values (``choices``); a
 ``list[str]`` field is a repeatable flag whose environment variable is
-comma-separated. This is the one option system: every command's config flags
+comma-separated. A field whose type is itself a dataclass (a Q-network variant's own config,
+``NNQLConfig.local``) gives one option per field of it, named ``<field>_<subfield>``
+(``--local-window``, ``NAVLEARN_NNQL_LOCAL_WINDOW``, a JSON object in a config file); see
+:func:`option_fields`. This is the one option system: every command's config flags
 (``up``, ``learner``, ``actor``, ``train``, ``nirl train``, ...) and the Zenoh flags
 (services.common.transport.ZenohSettings) are built by it, so one field has one
 spelling everywhere (tests/test_option_spelling.py lists them).
@@ -71,18 +74,58 @@ def field_docs(cls: type) -> dict[str, str]:
     return docs
 
 
-def _flag(field: dataclasses.Field) -> str:
-    return field.metadata.get("flag") or "--" + field.name.replace("_", "-")
+@dataclasses.dataclass(frozen=True)
+class Option:
+    """One option of a config class: a field, or a field of a nested config field (``parent``)."""
+
+    name: str
+    """the option's name: the field's, or ``<parent>_<field>`` for a nested config's field"""
+    owner: type
+    """the dataclass declaring ``field``"""
+    field: dataclasses.Field
+    parent: str = ""
+    """the nested config field of the top-level config holding ``field`` ("" for a top-level field)"""
+
+    @property
+    def flag(self) -> str:
+        return (not self.parent and self.field.metadata.get("flag")) or "--" + self.name.replace("_", "-")
+
+    @property
+    def kind(self) -> Any:
+        return _field_type(self.owner, self.field)
+
+
+def _field_type(cls: type, field: dataclasses.Field) -> Any:
+    return typing.get_type_hints(cls)[field.name]
+
+
+def _nested(cls: type, field: dataclasses.Field) -> type | None:
+    """The dataclass a field holds (a nested config), or None."""
+    kind = _field_type(cls, field)
+    return kind if dataclasses.is_dataclass(kind) else None
+
+
+@functools.cache
+def option_fields(cls: type) -> tuple[Option, ...]:
+    """Every option of config class ``cls``: each field, and in place of a field holding a dataclass
+    each of that dataclass' fields (one level: a variant's small config inside the learner's)."""
+    options: list[Option] = []
+    for field in dataclasses.fields(cls):
+        inner = _nested(cls, field)
+        if inner is None:
+            options.append(Option(field.name, cls, field))
+        else:
+            options.extend(
+                Option(f"{field.name}_{sub.name}", inner, sub, field.name)
+                for sub in dataclasses.fields(inner)
+            )
+    return tuple(options)
 
 
 def env_name(prefix: str, name: str, field: dataclasses.Field | None = None) -> str:
     if field is not None and field.metadata.get("env"):
         return field.metadata["env"]
     return f"{prefix}_{name.upper()}"
-
-
-def _field_type(cls: type, field: dataclasses.Field) -> Any:
-    return typing.get_type_hints(cls)[field.name]
 
 
 def _is_tuple(kind: Any) -> bool:
@@ -121,50 +164,52 @@ def add_options(
 
     ``skip`` leaves fields to the command (it sets them itself); ``refuse`` maps fields the command
     cannot honour to the reason, said when their flag or environment variable is given (the flag is
-    hidden from --help). ``defaults`` overrides the dataclass defaults shown in --help and used when
-    neither flag nor environment variable is given; ``dest_prefix`` names the parsed attributes
-    (``<dest_prefix><field>``), for :func:`options_from_args` with the same prefix.
+    hidden from --help); a nested config field named there refuses each of its options. ``defaults``
+    overrides the dataclass defaults shown in --help and used when neither flag nor environment
+    variable is given; ``dest_prefix`` names the parsed attributes (``<dest_prefix><option name>``),
+    for :func:`options_from_args` with the same prefix. Each option is one of :func:`option_fields`.
     """
     group = parser.add_argument_group(title, description)
-    docs = field_docs(cls)
     defaults = defaults or {}
     refuse = refuse or {}
-    for field in dataclasses.fields(cls):
-        if field.name in skip:
+    for option in option_fields(cls):
+        field, top = option.field, option.parent or option.name
+        if top in skip:
             continue
-        if field.name in refuse:
+        reason = refuse.get(top, refuse.get(option.name))
+        if reason is not None:
             group.add_argument(
-                _flag(field),
+                option.flag,
                 action=_Refused,
-                reason=refuse[field.name],
+                reason=reason,
                 dest=argparse.SUPPRESS,
                 default=argparse.SUPPRESS,
                 help=argparse.SUPPRESS,
             )
             continue
-        kind = _field_type(cls, field)
-        default = defaults.get(field.name, _default(field))
+        kind = option.kind
+        default = defaults.get(option.name, _default(field))
         shown = " ".join(map(str, default)) if isinstance(default, tuple | list) else default
         if field.metadata.get("shown"):
             shown = field.metadata["shown"]
-        help_text = (
-            f"{docs.get(field.name, field.name)} "
-            f"[env {env_name(env_prefix, field.name, field)}; default {shown}]"
-        ).replace("%", "%%")
-        kwargs: dict[str, Any] = {"dest": f"{dest_prefix}{field.name}", "default": None, "help": help_text}
+        doc = field_docs(option.owner).get(field.name, option.name)
+        help_text = (f"{doc} [env {env_name(env_prefix, option.name, field)}; default {shown}]").replace(
+            "%", "%%"
+        )
+        kwargs: dict[str, Any] = {"dest": f"{dest_prefix}{option.name}", "default": None, "help": help_text}
         metavar = field.metadata.get("metavar")
         if kind is bool:
-            group.add_argument(_flag(field), action=argparse.BooleanOptionalAction, **kwargs)
+            group.add_argument(option.flag, action=argparse.BooleanOptionalAction, **kwargs)
         elif _is_list(kind):
-            group.add_argument(_flag(field), action="append", metavar=metavar or "VALUE", **kwargs)
+            group.add_argument(option.flag, action="append", metavar=metavar or "VALUE", **kwargs)
         elif _is_tuple(kind):
             metavar = metavar or ("N" if _scalar(kind) in (int, float) else "NAME")
-            group.add_argument(_flag(field), nargs="+", type=_scalar(kind), metavar=metavar, **kwargs)
+            group.add_argument(option.flag, nargs="+", type=_scalar(kind), metavar=metavar, **kwargs)
         elif "choices" in field.metadata:
-            group.add_argument(_flag(field), choices=field.metadata["choices"], **kwargs)
+            group.add_argument(option.flag, choices=field.metadata["choices"], **kwargs)
         else:
-            metavar = metavar or field.name.upper()
-            group.add_argument(_flag(field), type=_scalar(kind), metavar=metavar, **kwargs)
+            metavar = metavar or option.name.upper()
+            group.add_argument(option.flag, type=_scalar(kind), metavar=metavar, **kwargs)
     parser.set_defaults(**{f"optdefaults_{cls.__name__}": defaults, f"optrefused_{cls.__name__}": refuse})
 
 
@@ -202,34 +247,45 @@ def options_from_args(
     base: dict[str, Any] | None = None,
     **overrides: Any,
 ) -> T:
-    """Build ``cls`` from parsed flags, then ``base`` (a config file's fields), then environment
-    variables, then defaults; ``overrides`` win. An environment variable of a field the command
-    refuses (``add_options(refuse=...)``) is an OptionError naming the reason."""
+    """Build ``cls`` from parsed flags, then ``base`` (a config file's fields; a nested config's as an
+    object), then environment variables, then defaults; ``overrides`` win. An environment variable of
+    a field the command refuses (``add_options(refuse=...)``) is an OptionError naming the reason."""
     defaults = getattr(args, f"optdefaults_{cls.__name__}", {}) if args is not None else {}
     refused = getattr(args, f"optrefused_{cls.__name__}", {}) if args is not None else {}
     base = base or {}
     values: dict[str, Any] = {}
-    for field in dataclasses.fields(cls):
-        kind = _field_type(cls, field)
-        value = getattr(args, f"{dest_prefix}{field.name}", None) if args is not None else None
-        env = env_name(env_prefix, field.name, field)
-        if field.name in refused and os.environ.get(env, "").strip():
-            raise OptionError(f"{env}: {refused[field.name]}")
-        from_file = base.get(field.name)
+    nested: dict[str, dict[str, Any]] = {}
+    for option in option_fields(cls):
+        field, kind, top = option.field, option.kind, option.parent or option.name
+        reason = refused.get(top, refused.get(option.name))
+        value = getattr(args, f"{dest_prefix}{option.name}", None) if args is not None else None
+        env = env_name(env_prefix, option.name, field)
+        if reason is not None and os.environ.get(env, "").strip():
+            raise OptionError(f"{env}: {reason}")
+        from_file = (base.get(option.parent) or {}).get(field.name) if option.parent else base.get(field.name)
         if from_file is not None and _is_tuple(kind):
             from_file = tuple(from_file)  # JSON has lists
-        if field.name in refused and from_file is not None and from_file != _default(field):
-            raise OptionError(f"{field.name} {from_file!r} (config file): {refused[field.name]}")
+        if reason is not None and from_file is not None and from_file != _default(field):
+            raise OptionError(f"{option.name} {from_file!r} (config file): {reason}")
         if value is None:
             value = from_file
         if value is None and os.environ.get(env, "").strip():
             value = _parse_env(os.environ[env], kind, env)
-        if value is None and field.name in defaults:
-            value = defaults[field.name]
+        if value is None and option.name in defaults:
+            value = defaults[option.name]
         if value is not None:
-            values[field.name] = tuple(value) if _is_tuple(kind) else value
-    values.update(overrides)
+            value = tuple(value) if _is_tuple(kind) else value
+            if option.parent:
+                nested.setdefault(option.parent, {})[field.name] = value
+            else:
+                values[field.name] = value
     try:
+        for name, given in nested.items():
+            if name not in overrides:
+                values[name] = _nested(cls, next(f for f in dataclasses.fields(cls) if f.name == name))(
+                    **given
+                )
+        values.update(overrides)
         return cls(**values)
     except (TypeError, ValueError) as exc:
         raise OptionError(str(exc)) from None

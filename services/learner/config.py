@@ -6,8 +6,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from agents.device import DEVICES
-from agents.nnql.config import CNN_FIELDS, STORAGES
-from worlds.config import observation_field
+from agents.nnql.config import STORAGES, NNQLConfig
+from worlds.config import OBSERVATIONS, observation_field, observation_settings
 
 SARSA_LOCAL_ONLY = (
     "the SARSA variant needs the next action taken, which transition batches do not carry; "
@@ -17,11 +17,18 @@ PATCH_ONLY = (
     "it shapes the CNN over the own-map patch, and the observations of the distributed services "
     "(--observation learning or learning_plan) have none; `navlearn train --local --patch-size N` has one"
 )
-NNQL_REFUSED = {"sarsa": SARSA_LOCAL_ONLY, "cnn_goal": PATCH_ONLY, "cnn_embed": PATCH_ONLY} | dict.fromkeys(
-    CNN_FIELDS, PATCH_ONLY
-)
+NNQL_REFUSED = {"sarsa": SARSA_LOCAL_ONLY, "patch": PATCH_ONLY}
 """NNQLConfig fields the learner service (and so `navlearn up`) cannot honour, and why: refused when
-the arguments are parsed (services.common.options.add_options' ``refuse``)"""
+the arguments are parsed (services.common.options.add_options' ``refuse``; ``patch``: every --patch-*
+option of the patch network)"""
+
+
+def learner_network(nnql: NNQLConfig, observation: str, own_world: bool) -> NNQLConfig:
+    """``nnql`` with the Q-network variant the learner builds for the actors' ``observation`` (an
+    OBSERVATIONS name; none for a Gymnasium env): a variant it cannot feed (``--network patch``,
+    ``--network local`` with --env) is a ValueError while the arguments are checked, before any process
+    starts."""
+    return nnql.resolved(observation_settings(OBSERVATIONS[observation]) if own_world else None)
 
 
 @dataclass
