@@ -13,7 +13,6 @@ from agents.nnql.q_networks import build_q_network
 from agents.nnql.train_local import LocalTrainConfig
 from services.actor.config import ActorConfig
 from services.cli import build_parser, main
-
 from services.common.options import config_file, options_from_args
 from services.learner.config import LearnerConfig, learner_network
 from services.ops.up_config import UpConfig
