@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from agents.tabular.config import TabularConfig
+from agents.tabular.config import StepSizeConfig, TabularConfig
 from worlds.gridworld import GridDynamics, GridWorldEnv
 
 Progress = Callable[[int], None]
@@ -75,28 +75,30 @@ def run_in_chunks(run: Callable[[int, int], None], episodes: int, progress: Prog
             progress(last)
 
 
-def run_control(
+def run_episodes(
     episodes_kernel: Callable[..., None],
-    env: GridWorldEnv,
-    config: TabularConfig,
+    grid: tuple[GridDynamics, int, int],
+    table: np.ndarray,
+    config: StepSizeConfig,
     progress: Progress | None,
-    *extra: object,
-) -> TabularResult:
-    """Drive a compiled control episode kernel (Q-learning, SARSA, Monte Carlo) over
-    ``config.episodes`` episodes in chunks, with progress. The kernels share one signature;
-    ``extra`` arguments (Monte Carlo's first-visit flag) go after the exploration parameters."""
-    dyn, start, max_steps = grid_dynamics(env)
-    q = np.zeros((dyn.n_states, dyn.n_actions))
-    visits = np.zeros(q.shape, dtype=np.int64)
+    chunk_args: Callable[[int, int], tuple],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Drive a compiled episode kernel over ``config.episodes`` episodes in chunks, with progress, and
+    return each episode's (undiscounted return, steps). Every tabular kernel (TD(0) prediction,
+    Q-learning, SARSA, Monte Carlo) takes ``(table, visits, successor, reward, cum_prob, goal, start,
+    max_steps, gamma, alpha, by_visits, power, *chunk_args(first, last), returns, lengths, first)``:
+    ``table`` is what it learns (V or Q, updated in place), ``visits`` counts its entries' updates,
+    ``grid`` is :func:`grid_dynamics`'s, and numba's generator is seeded from ``config.seed``."""
+    dyn, start, max_steps = grid
+    visits = np.zeros(table.shape, dtype=np.int64)
     cum_prob = np.cumsum(dyn.outcome_prob, axis=1)
-    params = exploration_schedule(config)
     returns = np.zeros(config.episodes)
     lengths = np.zeros(config.episodes, dtype=np.int64)
     seed_numba(config.seed)
 
     def run(first: int, last: int) -> None:
         episodes_kernel(
-            q,
+            table,
             visits,
             dyn.successor,
             dyn.reward,
@@ -108,15 +110,38 @@ def run_control(
             config.alpha,
             config.alpha_schedule == "visits",
             config.alpha_power,
-            config.exploration == "boltzmann",
-            params[first:last],
-            *extra,
+            *chunk_args(first, last),
             returns,
             lengths,
             first,
         )
 
     run_in_chunks(run, config.episodes, progress)
+    return returns, lengths
+
+
+def run_control(
+    episodes_kernel: Callable[..., None],
+    env: GridWorldEnv,
+    config: TabularConfig,
+    progress: Progress | None,
+    *extra: object,
+) -> TabularResult:
+    """Learn Q with a compiled control episode kernel (Q-learning, SARSA, Monte Carlo) by
+    :func:`run_episodes`: its chunk arguments are the exploration (Boltzmann or not, each episode's
+    epsilon or temperature), then ``extra`` (Monte Carlo's first-visit flag, SARSA's on-policy one)."""
+    grid = grid_dynamics(env)
+    q = np.zeros((grid[0].n_states, grid[0].n_actions))
+    params = exploration_schedule(config)
+    boltzmann = config.exploration == "boltzmann"
+    returns, lengths = run_episodes(
+        episodes_kernel,
+        grid,
+        q,
+        config,
+        progress,
+        lambda first, last: (boltzmann, params[first:last], *extra),
+    )
     return TabularResult(q, returns, lengths)
 
 

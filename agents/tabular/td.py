@@ -8,15 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from agents.tabular.common import (
-    Progress,
-    grid_dynamics,
-    run_in_chunks,
-    sample_index,
-    seed_numba,
-    start_state,
-    step_size,
-)
+from agents.tabular.common import Progress, grid_dynamics, run_episodes, sample_index, start_state, step_size
 from agents.tabular.config import TDConfig
 from worlds.gridworld import GridWorldEnv
 
@@ -38,7 +30,6 @@ def _episodes(
     successor,
     reward,
     cum_prob,
-    cum_policy,
     goal,
     start,
     max_steps,
@@ -46,6 +37,7 @@ def _episodes(
     alpha,
     by_visits,
     power,
+    cum_policy,
     n_episodes,
     returns,
     lengths,
@@ -75,7 +67,8 @@ def td0_prediction(
 ) -> PredictionResult:
     """Estimate ``V_pi`` of a deterministic ``(S,)`` or stochastic ``(S, A)`` policy by TD(0)."""
     config = config or TDConfig()
-    dyn, start, max_steps = grid_dynamics(env)
+    grid = grid_dynamics(env)
+    dyn = grid[0]
     policy = np.asarray(policy)
     if policy.shape == (dyn.n_states,):
         policy = np.eye(dyn.n_actions)[policy]
@@ -83,32 +76,7 @@ def td0_prediction(
         raise ValueError(f"policy must be (S,) actions or (S, A) probabilities, got shape {policy.shape}")
     cum_policy = np.cumsum(policy, axis=1)
     values = np.zeros(dyn.n_states)
-    visits = np.zeros(dyn.n_states, dtype=np.int64)
-    cum_prob = np.cumsum(dyn.outcome_prob, axis=1)
-    returns = np.zeros(config.episodes)
-    lengths = np.zeros(config.episodes, dtype=np.int64)
-    seed_numba(config.seed)
-
-    def run(first: int, last: int) -> None:
-        _episodes(
-            values,
-            visits,
-            dyn.successor,
-            dyn.reward,
-            cum_prob,
-            cum_policy,
-            dyn.goal_state,
-            start,
-            max_steps,
-            config.gamma,
-            config.alpha,
-            config.alpha_schedule == "visits",
-            config.alpha_power,
-            last - first,
-            returns,
-            lengths,
-            first,
-        )
-
-    run_in_chunks(run, config.episodes, progress)
+    returns, lengths = run_episodes(
+        _episodes, grid, values, config, progress, lambda first, last: (cum_policy, last - first)
+    )
     return PredictionResult(values, returns, lengths)
