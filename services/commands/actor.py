@@ -5,9 +5,7 @@ from __future__ import annotations
 import argparse
 
 from services.actor.config import ActorConfig
-from services.common.env_options import add_env_options, env_from_args
-from services.common.options import add_options
-from services.common.transport import add_zenoh_args
+from services.common.env_service import register_env_service, run_env_service
 
 DESCRIPTION = """\
 Run an actor: it steps --envs robots (a vectorised navigation env on --maps) with the newest
@@ -30,38 +28,18 @@ async; discrete actions, observations flattened); give it the learner's --env an
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
+    register_env_service(
+        subparsers,
         "actor",
-        help="run an actor (robots + current policy, publishes transitions)",
-        description=DESCRIPTION,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        "run an actor (robots + current policy, publishes transitions)",
+        DESCRIPTION,
+        ActorConfig,
+        "NAVLEARN_ACTOR",
+        main,
     )
-    add_options(parser, ActorConfig, "NAVLEARN_ACTOR", "actor")
-    add_env_options(parser)
-    parser.add_argument("--verbose", action="store_true", help="debug logging")
-    add_zenoh_args(parser, default_mode="client")
-    parser.set_defaults(func=main)
 
 
 def main(args: argparse.Namespace) -> int:
-    import sys
-
     from services.actor.actor import run_actor
-    from services.common.options import OptionError, options_from_args
-    from services.common.process import setup_logging, stop_on_signals
-    from services.common.transport import TransportError, settings_from_args
 
-    try:
-        config = options_from_args(ActorConfig, args, "NAVLEARN_ACTOR")
-        env = env_from_args(args)
-        settings = settings_from_args(args)
-    except (OptionError, TransportError, OSError, ValueError) as exc:
-        print(f"navlearn actor: {exc}", file=sys.stderr)
-        return 2
-    setup_logging(args.verbose)
-    stop = stop_on_signals()
-    try:
-        return run_actor(config, settings, stop, env)
-    except (TransportError, ValueError) as exc:
-        print(f"navlearn actor: {exc}", file=sys.stderr)
-        return 2
+    return run_env_service(args, "actor", ActorConfig, "NAVLEARN_ACTOR", run_actor)

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from services.common.env_options import add_env_options, env_from_args
-from services.common.options import add_options
-from services.common.transport import add_zenoh_args
+from services.common.env_service import register_env_service, run_env_service
 from services.evaluator.config import EvaluatorConfig
 
 DESCRIPTION = """\
@@ -26,38 +24,18 @@ info["is_success"] (docs/own-env.md).
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
+    register_env_service(
+        subparsers,
         "evaluator",
-        help="run the evaluator service (new policy versions on held-out maps)",
-        description=DESCRIPTION,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        "run the evaluator service (new policy versions on held-out maps)",
+        DESCRIPTION,
+        EvaluatorConfig,
+        "NAVLEARN_EVALUATOR",
+        main,
     )
-    add_options(parser, EvaluatorConfig, "NAVLEARN_EVALUATOR", "evaluator")
-    add_env_options(parser)
-    parser.add_argument("--verbose", action="store_true", help="debug logging")
-    add_zenoh_args(parser, default_mode="client")
-    parser.set_defaults(func=main)
 
 
 def main(args: argparse.Namespace) -> int:
-    import sys
-
-    from services.common.options import OptionError, options_from_args
-    from services.common.process import setup_logging, stop_on_signals
-    from services.common.transport import TransportError, settings_from_args
     from services.evaluator.evaluator import run_evaluator
 
-    try:
-        config = options_from_args(EvaluatorConfig, args, "NAVLEARN_EVALUATOR")
-        env = env_from_args(args)
-        settings = settings_from_args(args)
-    except (OptionError, TransportError, OSError, ValueError) as exc:
-        print(f"navlearn evaluator: {exc}", file=sys.stderr)
-        return 2
-    setup_logging(args.verbose)
-    stop = stop_on_signals()
-    try:
-        return run_evaluator(config, settings, stop, env)
-    except (TransportError, ValueError) as exc:
-        print(f"navlearn evaluator: {exc}", file=sys.stderr)
-        return 2
+    return run_env_service(args, "evaluator", EvaluatorConfig, "NAVLEARN_EVALUATOR", run_evaluator)
