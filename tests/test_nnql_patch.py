@@ -366,3 +366,30 @@ def test_action_local_without_a_patch_adds_the_branch_to_the_flat_mlp(tmp_path, 
     assert learner_for(nav, nirl).network.local.spec["window"] == 1
     with pytest.raises(ValueError, match="window=-2"):
         NIRLConfig(local={"window": -2})
+
+
+def test_a_config_saved_with_the_variant_fields_flat_rebuilds_the_network_it_trained(tmp_path):
+    """Saved configs before ``network`` held q_network, action_local and cnn_*: each reads as the variant
+    it built on its observation (pretrained/nnql's, and older ones whose shape git history keeps)."""
+    from pathlib import Path
+
+    saved = json.loads((Path(__file__).parents[1] / "pretrained" / "nnql" / "config.json").read_text())
+    config = NNQLConfig.from_dict(saved["nnql_config"], saved["observation"])
+    arch = saved["architecture"]
+    rebuilt = build_q_network(config, arch["obs_dim"], arch["n_actions"], saved["observation"])
+    assert config.network == "local" and rebuilt.architecture == arch
+    flat = {k: v for k, v in SMALL.to_dict().items() if k not in ("network", "local", "patch")}
+    cnn_fields = {"cnn_channels": [4, 4], "cnn_kernel_sizes": [3, 3], "cnn_strides": [1, 1], "cnn_goal": True}
+    plain, nav = observation_settings(patch_nav(0)), observation_settings(patch_nav(6))
+    old = {  # (flat fields, observation) -> the variant read
+        "auto, no branch, no patch: the MLP": ({"q_network": "auto"}, plain, "mlp"),
+        "auto with a patch: the CNN": ({"q_network": "auto", "action_local": 2, **cnn_fields}, nav, "patch"),
+        "mlp with a patch: the MLP plus the branch": ({"q_network": "mlp", "action_local": 2}, nav, "local"),
+    }
+    for fields, observation, network in old.values():
+        read = NNQLConfig.from_dict({**flat, **fields}, observation)
+        assert read.network == network and build_q_network(read, 83, 5, observation) is not None
+    read = NNQLConfig.from_dict({**flat, "q_network": "auto", "action_local": 2, **cnn_fields}, nav)
+    assert read.patch == PatchConfig(channels=(4, 4), strides=(1, 1), goal=True, window=2)
+    with pytest.raises(ValueError, match="both network and the flat variant fields"):
+        NNQLConfig.from_dict({**SMALL.to_dict(), "action_local": 1})
