@@ -7,7 +7,8 @@ import pytest
 
 from worlds.generators import FAMILIES, generate, generate_task, min_task_distance
 from worlds.maps import GridMap, MapFormatError, components, connected
-from worlds.tasks import DEFAULT_MAPS, MIXED_FAMILIES, TRAINING_MAPS, parse_map_spec
+from worlds.config import TRAINING_MAPS
+from worlds.tasks import DEFAULT_MAPS, MIXED_FAMILIES, parse_map_spec
 
 
 @pytest.mark.parametrize("family", FAMILIES)

@@ -12,7 +12,7 @@ source                     tasks
 ``mixed:16``               task from one of them, uniformly; ``mixed`` is a random family among
                            :data:`MIXED_FAMILIES` per task
 ``mixed:16-64``            a side per task too, square, log-uniform in 16..64 cells (about equal
-                           robot-steps per doubling of the side): :data:`TRAINING_MAPS`
+                           robot-steps per doubling of the side): :data:`worlds.config.TRAINING_MAPS`
 ``path/map.yaml``          a ROS map_server map (YAML + PGM/PNG image)
 ``path/x.map``             a MovingAI map: the scenarios of the ``.scen`` beside it when there is
                            one, else drawn pairs
