@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from worlds.config import TRAINING_MAPS
 from worlds.generators import FAMILIES, generate, generate_task, min_task_distance
 from worlds.maps import GridMap, MapFormatError, components, connected
-from worlds.config import TRAINING_MAPS
 from worlds.tasks import DEFAULT_MAPS, MIXED_FAMILIES, parse_map_spec
 
 
