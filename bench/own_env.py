@@ -3,15 +3,18 @@
 For each seed, two runs on the same machine with the same robot-step budget (``--steps``):
 
     navlearn  ``navlearn up --env ENV --seed S --eval-episodes 100`` (router, learner, actors, evaluator;
-              default NNQLConfig and `up` settings: nothing is set per env). The bench reads the
-              evaluator's ``eval/evaluations.jsonl`` and stops the run (SIGINT: `up`'s own clean stop)
-              at the first version whose 100 greedy episodes reach the target, or once the actors
-              have stepped ``--steps`` robot-steps, or after ``--max-s`` seconds.
+              default NNQLConfig and `up` settings, keep-best included: nothing is set per env). The
+              bench reads the evaluator's ``eval/evaluations.jsonl`` (validation episodes, seed 1) and
+              stops the run (SIGINT: `up`'s own clean stop) at the first version whose 100 greedy
+              episodes reach the target, or once the actors have stepped ``--steps`` robot-steps, or
+              after ``--max-s`` seconds; then the run's saved policy (keep-best's choice) plays 100
+              test episodes (seed 0): ``saved_policy.held`` says whether it holds the target.
     sb3-dqn   ``stable_baselines3.DQN`` with the RL Baselines3 Zoo hyper-parameters for the env
               (``hyperparams/dqn.yml``, commit 019107eb of DLR-RM/rl-baselines3-zoo; SB3's defaults
               where the zoo has none), one env, torch on one thread; every ``--eval-every`` steps
               its greedy policy plays the same kind of 100 seeded episodes
               (``agents.evaluation.env_returns``); evaluation time is not counted in its wall time.
+              Its final model plays the same 100 test episodes (``final_model.held``).
 
 The target is the env's registered ``reward_threshold`` for the mean return of 100 greedy episodes, or
 ``--success`` (a success rate from ``info["is_success"]``) where given. Reported per run: reached or not,
@@ -44,9 +47,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.evaluation.env_returns import evaluate_env
+from agents.evaluation.policies import load_policy
+from agents.evaluation.selection import TEST_SEED
 from worlds.own_env import EnvConfig, make_env, reward_threshold
 
 REPO = Path(__file__).resolve().parents[1]
+SB3_EVAL_SEED = 10_000
+"""SB3's periodic evaluations play the episodes of this seed (+ the run's seed), apart from the test ones"""
 ZOO_DQN = {  # hyperparams/dqn.yml of DLR-RM/rl-baselines3-zoo at 019107eb (LunarLander-v2's for v3)
     "CartPole-v1": dict(
         learning_rate=2.5e-4,
@@ -135,15 +142,28 @@ def run_navlearn(env: EnvConfig, seed: int, args, out: Path, threshold, success)
             break
     proc.wait()
     log.close()
+    wall = time.time() - start
     shutil.rmtree(run_dir / "checkpoints", ignore_errors=True)  # replay and networks: tens of MB, kept out
     return {
         "reached": hit is not None,
         "to_target": hit,
         "best": best,
         "robot_steps": steps,
-        "wall_s": time.time() - start,
+        "wall_s": wall,
+        "saved_policy": saved_policy(run_dir / "policy", env, args, threshold, success),
         "command": " ".join(argv[1:]),
     }
+
+
+def saved_policy(path: Path, env: EnvConfig, args, threshold, success) -> dict | None:
+    """The run's saved policy (`up`'s keep-best choice) on --episodes fresh test episodes (seed 0): does
+    the policy a user gets hold the target, not just one evaluation during training?"""
+    if not (path / "config.json").exists():
+        return None
+    config = json.loads((path / "config.json").read_text())
+    metrics = evaluate_env(load_policy(path), env, args.episodes, seed=TEST_SEED)
+    return {"version": config["version"], "kept": config.get("kept") is not None, "test_seed": TEST_SEED,
+            "held": reached(metrics, threshold, success), "metrics": metrics}  # fmt: skip
 
 
 def actor_steps(run_dir: Path) -> int:
@@ -181,7 +201,7 @@ def run_sb3(env: EnvConfig, seed: int, args, threshold, success) -> dict:
             if self.num_timesteps % args.eval_every:
                 return True
             t0 = time.perf_counter()
-            metrics = evaluate_env(SB3Greedy(self.model), env, args.episodes, seed=10_000 + seed)
+            metrics = evaluate_env(SB3Greedy(self.model), env, args.episodes, seed=SB3_EVAL_SEED + seed)
             evaluating[0] += time.perf_counter() - t0
             value = headline(metrics)
             state["best"] = value if state["best"] is None else max(state["best"], value)
@@ -193,12 +213,19 @@ def run_sb3(env: EnvConfig, seed: int, args, threshold, success) -> dict:
 
     model = DQN("MlpPolicy", make_env(env), seed=seed, verbose=0, **params)
     model.learn(total_timesteps=args.steps, callback=Evaluate())
+    wall = time.perf_counter() - start - evaluating[0]
+    tested = evaluate_env(SB3Greedy(model), env, args.episodes, seed=TEST_SEED)  # its final model
     return {
+        "final_model": {
+            "test_seed": TEST_SEED,
+            "held": reached(tested, threshold, success),
+            "metrics": tested,
+        },
         "reached": state["hit"] is not None,
         "to_target": state["hit"],
         "best": state["best"],
         "robot_steps": int(model.num_timesteps),
-        "wall_s": time.perf_counter() - start - evaluating[0],
+        "wall_s": wall,
         "hyper_parameters": dict(params) or "SB3 defaults (no zoo entry)",
     }
 
@@ -261,6 +288,7 @@ def main() -> None:
         "runs": [
             {k: r[k] for k in ("system", "seed", "reached", "best", "robot_steps", "wall_s")}
             | {"to_target_s": r["to_target"]["wall_s"] if r["to_target"] else None}
+            | {"test_held": (r.get("saved_policy") or r.get("final_model") or {}).get("held")}
             for r in rows
         ],
     }
