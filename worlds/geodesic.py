@@ -79,7 +79,7 @@ def move_masks(field, moff, mh, mw):
     return moves
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _offer(g, mark, ring, count, gen, node, cand):
     """Reach ``node`` (not taken yet) at distance ``cand`` if that is new or shorter (pushed into its
     bucket's stack unless it stays in the same bucket)."""

@@ -56,20 +56,20 @@ def new_work(cells: int) -> tuple:
             np.zeros(2, i4))  # fmt: skip
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _before(fa, ga, fb, gb):
     """Heap order: smaller f first; on equal f the deeper node (larger g). (Bitwise, not short-circuit:
     no branch to mispredict.)"""
     return (fa < fb) | ((fa == fb) & (ga > gb))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _put(heap, key_f, key_g, pos, i, node, f, g):
     heap[i], key_f[i], key_g[i] = node, f, g
     pos[node] = i
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _sift_up(heap, key_f, key_g, pos, i):
     node, f, g = heap[i], key_f[i], key_g[i]
     while i > 0:
@@ -81,7 +81,7 @@ def _sift_up(heap, key_f, key_g, pos, i):
     _put(heap, key_f, key_g, pos, i, node, f, g)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _sift_down(heap, key_f, key_g, pos, i, size):
     node, f, g = heap[i], key_f[i], key_g[i]
     while True:
@@ -98,7 +98,7 @@ def _sift_down(heap, key_f, key_g, pos, i, size):
     _put(heap, key_f, key_g, pos, i, node, f, g)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _octile(dr, dc, diagonal):
     dr, dc = abs(dr), abs(dc)
     if not diagonal:
@@ -125,7 +125,7 @@ def search_start(start, goal, stride, diagonal, g, parent, pos, seen, heap, key_
     _put(heap, key_f, key_g, pos, 0, start, h, 0.0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _relax(ctx, step, cand, hr, hc, size):
     """Offer the neighbour ``node + step`` the cost ``cand`` (via the expanded ``node`` of ``ctx``;
     ``hr``, ``hc``: its offset from the goal); returns the heap's size."""

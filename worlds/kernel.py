@@ -21,8 +21,13 @@ First compile (bench/first_run.py, results/first-run/): every distinct argument 
 function is called with is one more compile of it, and a plain ``0``, ``-1`` or ``False`` in a
 call is typed as that literal value, so the constants handed to compiled helpers are numpy
 scalars (:data:`FIRST_ROBOT`, :data:`DRAW_ENTRY`, :data:`NEW_DISCS`: one specialisation each, the
-same as a call from Python); and :func:`_reset` (rare: once per episode) is compiled once and
-called, not inlined into both :func:`step_range` and :func:`reset_some`.
+same as a call from Python); :func:`_reset` (rare: once per episode) is compiled once and
+called, not inlined into both :func:`step_range` and :func:`reset_some`; and the world's helpers
+(here and in sensors, robot, obstacles, own_map, perceive, geodesic, gridsearch) are plain compiled
+functions that their callers call, not numba's IR-level ``inline="always"``, which types and
+lowers the helper's body again at every call site (``_relax`` 8 times in one search, ``_observe``
+in both the step and the reset): without it a cold compile takes less CPU time and the step is
+as fast (results/first-run/). Only the random draws (:mod:`worlds.rng`) stay inlined.
 
 numba caches compiled code per source file and does not notice edits to the modules a
 function calls; :func:`_drop_stale_cache` clears the cache when any of them changed.
@@ -106,7 +111,7 @@ def make_params(config: NavConfig) -> np.ndarray:
     return np.asarray(values, dtype=np.float64)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _wrap(angle: float) -> float:
     while angle >= math.pi:
         angle -= TWO_PI
@@ -115,7 +120,7 @@ def _wrap(angle: float) -> float:
     return angle
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _observe(i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy, orad, ocount, params, beams,
              obs, rays):  # fmt: skip
     """Write robot ``i``'s observation: range readings / max_range (each the minimum of its sector's
@@ -169,15 +174,15 @@ def _observe(i, field, moff, mh, mw, mcell, mp, x, y, c, s, gx, gy, rng, ox, oy,
         obs[i, n_beams + 2] = 1.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _step(
     i, action, field, moff, mh, mw, mcell, mp, x, y, th, gx, gy, rng, steps, plen, pdist, outcome, discs,
     n_discs, params, turns, limit
 ):  # fmt: skip
     """Move robot ``i`` and its ``n_discs`` discs one step; set its outcome; return its reward and
     the cosine and sine of its new heading (for :func:`_observe`).
-    (At most 30 arguments: CPython passes longer calls as ``*args``, which numba cannot inline.
-    The disc arrays stay in a tuple, opened only for robots that have discs.)"""
+    (At most 30 arguments: CPython passes longer calls as ``*args``. The disc arrays stay in a
+    tuple, opened only for robots that have discs.)"""
     m = mp[i]
     off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
     radius = params[P_RADIUS]
@@ -225,7 +230,7 @@ def _step(
     return reward, c, s
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _limit(field, off, height, width, cell, sr, sc, gr, gc, params, search) -> int:
     """The step limit of an episode from cell (sr, sc) to (gr, gc) (worlds.config.step_limit): an A*
     on the map's padded field (:mod:`worlds.gridsearch`, in the work arrays ``search``)."""
@@ -243,7 +248,7 @@ def _limit(field, off, height, width, cell, sr, sc, gr, gc, params, search) -> i
     return max(floor, steps)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _settle_limit(i, maps, entries, ent, scell, gcell, mp, outcome, steps, params, limit, search) -> None:
     """Robot ``i`` timed out at the floor ``max_steps`` before its limit was known (negative): compute
     it now (:func:`_limit`; kept in the entry's ``E_LIMIT`` when the endpoints are the entry's) and
@@ -264,7 +269,7 @@ MAX_START_DRAWS = 64
 """pool draws tried for a start with a drivable heading before the last one is kept anyway"""
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _drivable(field, off, height, width, cell, x, y, heading, params, turns) -> bool:
     """Has a robot at (x, y) facing ``heading`` an action whose noise-free motion is collision-free?"""
     step, radius = params[P_STEP], params[P_RADIUS]

@@ -69,7 +69,7 @@ def move_disc(field, off, height, width, cell, x, y, vx, vy, radius, patrol, ax,
     return nx, ny, vx, vy
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def swept_contact(rx0, ry0, rx1, ry1, ox0, oy0, ox1, oy1, reach) -> bool:
     """Do the robot (r0 -> r1) and a disc (o0 -> o1), both moving linearly over the step, come
     closer than ``reach`` (sum of radii)? Their relative position is linear in time."""

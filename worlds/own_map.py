@@ -24,7 +24,7 @@ CHANGED, ON_PLAN = 1, 2
 the last search (:func:`waypoint`) looked"""
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _set(occ, plan, exam, exam_id, stride, r, c, state):
     """Cell (r, c) of the own map becomes ``state``; the plan grid (if tracked: ``plan`` not empty)
     follows. Returns :data:`CHANGED` | :data:`ON_PLAN` flags."""
@@ -186,7 +186,7 @@ def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam,
     return (-1 if node == goal else node), True, g[goal] * cell
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def centre(node, width, cell, gx, gy):
     """The point a :func:`waypoint` cell stands for: its centre, or the goal (gx, gy) for -1."""
     if node < 0:

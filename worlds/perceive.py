@@ -123,7 +123,7 @@ def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell,
     wpt[i, 0], wpt[i, 1] = centre(node, width, cell, gx, gy)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _fill(row, value):
     for k in range(row.shape[0]):
         row[k] = value

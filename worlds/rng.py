@@ -3,6 +3,10 @@
 Each robot owns one 64-bit state, so a robot's draws never depend on how many other
 robots share the batch: robot ``i`` of a vector env seeded ``s`` sees exactly the
 stream of a single env seeded ``s + i``.
+
+The draws are inlined into their callers (``inline="always"``, unlike the world's other helpers):
+they are small, run about ten times per robot-step, and a call costs each draw measurably (see
+:func:`_gauss_tail`).
 """
 
 from __future__ import annotations

@@ -47,14 +47,14 @@ def move(
     return x + distance * np.cos(heading), y + distance * np.sin(heading), heading
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _point_box_sq(px: float, py: float, x0: float, y0: float, x1: float, y1: float) -> float:
     dx = max(x0 - px, 0.0, px - x1)
     dy = max(y0 - py, 0.0, py - y1)
     return dx * dx + dy * dy
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _point_segment_sq(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:
     vx, vy = bx - ax, by - ay
     length_sq = vx * vx + vy * vy
@@ -94,7 +94,7 @@ def segment_box_distance_sq(ax, ay, bx, by, x0, y0, x1, y1) -> float:
     return min(best, _point_segment_sq(x0, y1, ax, ay, bx, by), _point_segment_sq(x1, y1, ax, ay, bx, by))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def capsule_hits_grid(field, off, height, width, cell, x0, y0, x1, y1, radius) -> bool:
     """Does a disc of ``radius`` swept from (x0, y0) to (x1, y1) touch a blocked cell or leave
     the map? ``field``/``off`` locate the map in a bank (see :func:`worlds.fields.kernel_field`)."""

@@ -26,7 +26,7 @@ JUMP_MIN = 10
 small maps shorter jumps cost more than the exact steps they replace (measured)"""
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def ray_origin(field, off, height, width, cell, x, y):
     """Where rays from (x, y) start: (field index of the origin cell, its column and row, the origin
     in cell units), or index -1 when the origin is outside the map or blocked."""
@@ -40,7 +40,7 @@ def ray_origin(field, off, height, width, cell, x, y):
     return idx, c, r, px, py
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def reciprocal(d: float) -> float:
     """``1 / d`` of a direction component, inf for 0 (of either sign): the traversal's spacing of
     boundary crossings. (No division by zero is ever evaluated, so no branch raises.)"""
@@ -48,7 +48,7 @@ def reciprocal(d: float) -> float:
     return q if d != 0.0 else math.inf
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def cast_from(field, off, width, idx, c, r, px, py, dx, dy, limit) -> float:
     """Distance in cells along the unit vector (dx, dy) from an origin found by :func:`ray_origin`
     to the first blocked cell (the blocked ring around the map stops every ray, so the traversal
@@ -56,7 +56,7 @@ def cast_from(field, off, width, idx, c, r, px, py, dx, dy, limit) -> float:
     return cast_along(field, off, width, idx, c, r, px, py, dx, dy, reciprocal(dx), reciprocal(dy), limit)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def cast_along(field, off, width, idx, c, r, px, py, dx, dy, inv_dx, inv_dy, limit) -> float:
     """:func:`cast_from` given the direction's :func:`reciprocal` components ``inv_dx``, ``inv_dy``
     (a caller casting many rays computes them side by side)."""
@@ -98,7 +98,7 @@ def cast_along(field, off, width, idx, c, r, px, py, dx, dy, inv_dx, inv_dy, lim
             return t
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def cast_ray(field, off, height, width, cell, x, y, dx, dy, max_range) -> float:
     """Distance (m) from (x, y) along the unit vector (dx, dy) to the first blocked cell or the
     map border, at most ``max_range``; 0 when the origin is blocked or outside the map.
@@ -109,7 +109,7 @@ def cast_ray(field, off, height, width, cell, x, y, dx, dy, max_range) -> float:
     return min(cast_from(field, off, width, idx, c, r, px, py, dx, dy, max_range / cell) * cell, max_range)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def ray_disc(x, y, dx, dy, ox, oy, radius) -> float:
     """Distance along the unit ray from (x, y) to the disc's edge; inf when missed, 0 inside."""
     fx, fy = x - ox, y - oy
