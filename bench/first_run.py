@@ -4,7 +4,9 @@
 its processes; before, every process compiled it at the same time while the training clock
 ran. Each round runs compile_world in a fresh Python process with NUMBA_CACHE_DIR pointed at
 a new empty directory (cold), then again in another fresh process on that cache (warm), and
-reports the seconds compile_world took in each (imports excluded) with the load average.
+reports the seconds compile_world took in each (imports excluded) with the load average, and the
+CPU seconds of the compiling process (the compile is one thread: on a shared machine its CPU
+time compares trees better than the wall clock, which grows with the other processes' load).
 With ``--up SECONDS`` it also runs ``navlearn up --duration SECONDS`` (the README's settings
 otherwise: 2 actors x 8 robots) on another empty cache and reports the compile step, the
 seconds from the processes' start to the first transition, and the seconds trained.
@@ -28,12 +30,15 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 CHILD = (
-    "import json; from services.common.warmup import compile_world; "
-    "seconds, compiled = compile_world({maps!r}); print(json.dumps([seconds, compiled]))"
+    "import json, time; from services.common.warmup import compile_world; cpu = time.process_time(); "
+    "seconds, compiled = compile_world({maps!r}); "
+    "print(json.dumps([seconds, compiled, time.process_time() - cpu]))"
 )
 
 
-def timed(cache: str, maps: str, repo: Path = REPO) -> tuple[float, bool]:
+def timed(cache: str, maps: str, repo: Path = REPO) -> tuple[float, bool, float]:
+    """compile_world of ``repo`` in a fresh process on numba cache ``cache``: (seconds, whether it
+    compiled anything, CPU seconds of that process during compile_world)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": cache, "PYTHONPATH": str(repo)}
     done = subprocess.run(
         [sys.executable, "-c", CHILD.format(maps=maps)],
@@ -44,8 +49,8 @@ def timed(cache: str, maps: str, repo: Path = REPO) -> tuple[float, bool]:
         check=True,
         timeout=900,
     )
-    seconds, compiled = json.loads(done.stdout.strip().splitlines()[-1])
-    return float(seconds), bool(compiled)
+    seconds, compiled, cpu = json.loads(done.stdout.strip().splitlines()[-1])
+    return float(seconds), bool(compiled), float(cpu)
 
 
 def cold_up(duration: float) -> dict:
@@ -89,18 +94,22 @@ def main() -> None:
             with tempfile.TemporaryDirectory(prefix="navlearn-numba-") as cache:
                 load = os.getloadavg()[0]
                 if which == "before":
-                    seconds, compiled = timed(cache, args.maps, Path(args.before).resolve())
+                    seconds, compiled, cpu = timed(cache, args.maps, Path(args.before).resolve())
                     assert compiled, "a cold cache compiled nothing: NUMBA_CACHE_DIR was not honoured"
-                    before.append((seconds, load))
-                    print(f"round {round_ + 1}: before cold {seconds:.1f} s (load {load:.1f})", flush=True)
+                    before.append((seconds, load, cpu))
+                    line = (
+                        f"round {round_ + 1}: before cold {seconds:.1f} s, {cpu:.1f} CPU s (load {load:.1f})"
+                    )
+                    print(line, flush=True)
                     continue
-                seconds, compiled = timed(cache, args.maps)
+                seconds, compiled, cpu = timed(cache, args.maps)
                 assert compiled, "a cold cache compiled nothing: NUMBA_CACHE_DIR was not honoured"
-                cold.append((seconds, load))
-                again, compiled_again = timed(cache, args.maps)
+                cold.append((seconds, load, cpu))
+                again, compiled_again, _ = timed(cache, args.maps)
                 assert not compiled_again, "the warm run compiled again: the cache was not used"
                 warm.append(again)
-                line = f"round {round_ + 1}: cold {seconds:.1f} s, warm {again:.2f} s (load {load:.1f})"
+                line = f"round {round_ + 1}: cold {seconds:.1f} s, {cpu:.1f} CPU s, warm {again:.2f} s"
+                line += f" (load {load:.1f})"
                 print(line, flush=True)
     up = cold_up(args.up) if args.up else None
     if up:
@@ -111,11 +120,13 @@ def main() -> None:
     result = {
         "bench": "first_run",
         "maps": args.maps,
-        "cold_s": [round(x, 1) for x, _ in cold],
-        "cold_load_1min": [round(x, 2) for _, x in cold],
+        "cold_s": [round(x, 1) for x, _, _ in cold],
+        "cold_cpu_s": [round(x, 1) for _, _, x in cold],
+        "cold_load_1min": [round(x, 2) for _, x, _ in cold],
         "before": str(args.before) if args.before else None,
-        "before_cold_s": [round(x, 1) for x, _ in before],
-        "before_load_1min": [round(x, 2) for _, x in before],
+        "before_cold_s": [round(x, 1) for x, _, _ in before],
+        "before_cpu_s": [round(x, 1) for _, _, x in before],
+        "before_load_1min": [round(x, 2) for _, x, _ in before],
         "warm_s": [round(x, 2) for x in warm],
         "up": up,
         "load_average_1min": round(os.getloadavg()[0], 2),
