@@ -15,18 +15,20 @@ from collections.abc import Callable
 
 import numpy as np
 
-TYPICAL_COMPILE = "about 100 s on 2 busy cores, less when idle"
-"""a cold compile of the world measured on this project's 2-core machine at load 9 (100-118 s,
-bench/first_run.py, results/first-run/); on idle cores it took 41 s before the cut"""
+TYPICAL_COMPILE = "75-90 s on 2 busy cores, about 45 s on idle ones"
+"""a cold compile of the world measured on this project's 2-core machine (bench/first_run.py,
+results/first-run/): 75-90 s of wall clock at load 6-8, 42-51 CPU seconds (one thread: about the
+wall clock when a core is free)"""
 COMPILE_NOTE = (
     f"a cold numba cache compiles the world first ({TYPICAL_COMPILE}; `navlearn world compile` does "
     "it ahead); later starts load it"
 )
 STAGES = ("the robots' reset", "the robots' step", "the evaluation's planners")
 """what compile_world compiles, in order (each stage's kernels, then the next)"""
-KERNELS = 28
-"""the navlearn kernels a cold compile_world compiles (worlds/ and agents/ functions, each with the
-helpers it calls), counted by the numba:compile events: the "k of N" of the progress line"""
+KERNELS = 61
+"""the navlearn functions a cold compile_world compiles (worlds/ and agents/; every helper that is
+called rather than inlined is one, once per argument types), counted by the numba:compile events:
+the "k of N" of the progress line"""
 
 
 def _counter(report: Callable[[int], None]):
