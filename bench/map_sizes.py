@@ -50,6 +50,13 @@ METHODS = ("policy", "previous", "heuristic", "expert")
 THROUGHPUT_ROBOTS = 16
 
 
+def step_rule(nav: NavConfig) -> str:
+    """The episodes' step limit in words (:func:`worlds.config.step_limit`)."""
+    if nav.step_factor <= 0:
+        return f"step limit {nav.max_steps}"
+    return f"step limit max({nav.max_steps}, ceil({nav.step_factor:g} x the A* path's steps))"
+
+
 def discs_for(size: int) -> int:
     """Moving discs of the dynamic set at ``size`` cells a side: 4 up to 32 cells (the dynamic set's
     crowd, as on 16x16 maps), then 4 per 32x32 cells of area (9 at 48, 16 at 64)."""
@@ -194,7 +201,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--seed", type=int, default=0, help="evaluation seed (0: test, 1: validation)")
     parser.add_argument("--throughput-seconds", type=float, default=5.0, help="seconds per size (0: skip)")
-    parser.add_argument("--max-steps", type=int, help="step limit of every episode (default: the world's)")
+    parser.add_argument("--max-steps", type=int, help="least step limit of an episode (default: the world's)")
+    parser.add_argument(
+        "--step-factor",
+        type=float,
+        help="step limit = max(max steps, step factor x the A* path's steps); default the world's "
+        "(worlds.config.NavConfig.step_factor); 0: a fixed --max-steps",
+    )
     parser.add_argument("--out", help="directory for map_sizes.json and map_sizes.png")
     args = parser.parse_args(argv)
 
@@ -202,6 +215,8 @@ def main(argv: list[str] | None = None) -> int:
     nav = policy.nav_config()
     if args.max_steps:
         nav = replace(nav, max_steps=args.max_steps)
+    if args.step_factor is not None:
+        nav = replace(nav, step_factor=args.step_factor)
     previous = load_policy(args.previous) if args.previous else None
     heuristic = goal_seeking_policy(nav)
     width = nav.sensors.n_beams + 3
@@ -216,13 +231,14 @@ def main(argv: list[str] | None = None) -> int:
         "sizes": args.sizes,
         "discs": {str(s): discs_for(s) for s in args.sizes},
         "max_steps": nav.max_steps,
+        "step_factor": nav.step_factor,
         "load_average_before": os.getloadavg()[0],
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "results": {},
         "throughput": {},
     }
     print(f"{report['policy_name']} against map size: seed {args.seed}, {args.episodes} episodes per set "
-          f"(expert {args.expert_episodes}), step limit {nav.max_steps}, "
+          f"(expert {args.expert_episodes}), {step_rule(nav)}, "
           f"load {report['load_average_before']:.1f}")  # fmt: skip
     head = f"{'size':>4} {'set':<8} {'method':<9} {'n':>4} {'success % [95% CI]':<20} {'SPL':>5} "
     print(head + f"{'coll.st%':>8} {'coll.dyn%':>9} {'timeout%':>8} {'p vs policy':>11}")
@@ -235,7 +251,7 @@ def main(argv: list[str] | None = None) -> int:
                 "heuristic": episode_arrays(evaluate(lambda o: heuristic(o[:, :width]), es, nav), es.family),
             }
             if previous is not None:  # its own observation, the same episodes and step rule
-                own = replace(previous.nav_config(), max_steps=nav.max_steps)
+                own = replace(previous.nav_config(), max_steps=nav.max_steps, step_factor=nav.step_factor)
                 runs["previous"] = episode_arrays(evaluate(previous, es, own), es.family)
             if args.expert_episodes > 0:
                 runs["expert"] = run_expert(es, nav, args.expert_episodes)
