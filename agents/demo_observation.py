@@ -13,7 +13,10 @@ is that one's; they still load, in that observation (``--observation plain``).
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
+
+import numpy as np
 
 from agents.demos import Demo, DemoFormatError, dataset_location, datasets_root, load_demos
 from worlds.config import (
@@ -25,7 +28,7 @@ from worlds.config import (
     observation_name,
     observation_settings,
 )
-from worlds.perception import observation_dim
+from worlds.perception import frame_dim, frame_layout, observation_dim
 
 
 def recorded_observation(navlearn_metadata: str | dict | None, width: int) -> dict | None:
@@ -86,11 +89,31 @@ def check_observation(where: str | Path, recorded: dict | None, width: int, nav:
         )
 
 
+def plan_length_columns(recorded: dict | None, nav: NavConfig) -> np.ndarray | None:
+    """The columns to keep of a set ``recorded`` observing the plan length for a learner in ``nav``,
+    which observes the same without it (None when that is not the case: nothing to convert)."""
+    if recorded is None or not recorded.get("observation.plan_length") or nav.observation.plan_length:
+        return None
+    with_plan = replace(nav, observation=replace(nav.observation, plan_length=True))
+    if observation_differences(recorded, with_plan):
+        return None
+    start, stop = frame_layout(with_plan)["plan_length"]
+    width = frame_dim(with_plan)
+    keep = np.ones(observation_dim(with_plan), bool)
+    for frame in range(nav.observation.frame_stack):
+        keep[frame * width + start : frame * width + stop] = False
+    return np.flatnonzero(keep)
+
+
 def load_demos_for(path: str | Path, nav: NavConfig = LEARNING_NAV) -> list[Demo]:
     """The demonstrations at ``path``, checked to observe what a learner in ``nav`` observes
-    (default :data:`worlds.config.LEARNING_NAV`)."""
+    (default :data:`worlds.config.LEARNING_NAV`); a set recorded with the plan length, for a
+    learner without it, loads with that column dropped (exact; the module docstring says why)."""
     demos = load_demos(path)  # its own one-line errors for missing or damaged sets come first
     root, dataset_id = dataset_location(path)
     recorded, width = dataset_observation(path)
+    keep = plan_length_columns(recorded, nav)
+    if keep is not None and width == len(keep) + nav.observation.frame_stack:
+        return [replace(d, observations=np.ascontiguousarray(d.observations[:, keep])) for d in demos]
     check_observation(root / dataset_id, recorded, width, nav)
     return demos

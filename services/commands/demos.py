@@ -52,14 +52,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     gen.add_argument(
         "--observation",
         choices=list(OBSERVATIONS),
-        default="learning",
+        default="learning_plan",
         help="what the recorded robot observes (the expert acts on the true map; the robot's own "
-        "observation of each episode is recorded, and the dataset records its settings): learning "
-        "(worlds.config.LEARNING_NAV, what NNQL, `nirl train`, `imitate train` and `up --nirl` learn in "
-        "by default), "
-        "learning_plan (the same and the own map's plan length to the goal, NIRL's best: its README command; "
-        "`up --nirl --observation learning_plan`) "
-        "or plain (8 beams + goal, the older sets); default %(default)s",
+        "observation of each episode is recorded, and the dataset records its settings): learning_plan "
+        "(worlds.config.LEARNING_PLAN_NAV: sector minima, goal, own-map subgoal and that plan's length "
+        "to the goal; what `nirl train` learns in by default, and `imitate train` and `up --nirl` in "
+        "`learning` load it with the plan length dropped, exactly), learning (worlds.config.LEARNING_NAV, "
+        "without the plan length) or plain (8 beams + goal, the older sets); default %(default)s",
     )
     gen.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
     gen.set_defaults(func=generate)

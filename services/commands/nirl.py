@@ -21,9 +21,9 @@ reward.safetensors and potential.safetensors, the weights of both networks at ev
 greedy evaluation on 100 held-out generated maps. The defaults are NIRL's best setting (docs/notebook.md,
 issue 15 part 15): 100 rounds of 2,048 robot-steps (204,800) with 0..6 moving discs, 512 Q updates per
 round, the reward fixed after round 1, temperature 0.05 to 0.01, NNQL's action-local branch (3) and
-discount (0.98). Its best observation is --observation learning_plan (demonstrations recorded with
-`navlearn demos generate --observation learning_plan`): 97.8% unseen static / 89.2% with 4 moving
-discs from 20 clean demonstrations on the test seed (part 15). The policy is
+discount (0.98), in the observation learning_plan (the default of --observation here and of
+`navlearn demos generate`, whose sets record it): 97.8% unseen static / 89.2% with 4 moving discs
+from 20 clean demonstrations on the test seed (issue 15 part 15). The policy is
 the Q-network's weights averaged over the last quarter of the rounds (--average-last 0.25; 0: the
 last round's); --keep-best keeps the round that scored best on the --eval-every validations instead
 (off by default: with 100 static episodes it chose worse rounds than the last).
@@ -33,10 +33,10 @@ OUT/policy_iteration (`navlearn evaluate --policy OUT/policy_iteration`); --poli
 runs K more of NIRL's rounds on the fixed reward first and starts NNQL's network from that policy.
 The progress potential is fitted on the goal and subgoal features only (--potential-inputs goal,
 the default: it generalises better from 20 paths; observation: every feature); --moving-discs N
-adds 0..N moving discs to the rounds' episodes. --observation learning_plan (demonstrations
-generated with the same flag) adds the length of the own map's plan to the goal, which the
-potential then reads: NIRL's best observation (the defaults reach 90% validation in a median 81,920
-robot-steps there; docs/notebook.md part 15).
+adds 0..N moving discs to the rounds' episodes. The observation learning_plan (the default)
+holds the length of the own map's plan to the goal, which the potential reads: NIRL's best
+observation (90% validation in a median 81,920 robot-steps; docs/notebook.md part 15). Demonstrations
+recorded in another observation are refused with the --observation to give.
 MAP refinement's prior is the policy's own softmax by default; --refine-prior hindsight judges each
 demonstrated action instead by the lattice A* on the map the demonstration's own range readings
 drew (its recorded poses and readings, never the true map; agents/nirl/hindsight.py): on 20
@@ -67,12 +67,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument(
         "--observation",
         choices=list(OBSERVATIONS),
-        default="learning",
-        help="what the robot observes: learning (worlds.config.LEARNING_NAV, NNQL's default: sector "
-        "minima, goal, subgoal on its own map), learning_plan (the same and the length of that plan to the "
-        "goal, which NIRL's progress potential reads: its best) or plain (8 beams + goal, older "
-        "demonstration sets); the "
-        "demonstrations must have been recorded in it (default %(default)s)",
+        default="learning_plan",
+        help="what the robot observes: learning_plan (worlds.config.LEARNING_PLAN_NAV: sector minima, "
+        "goal, subgoal on its own map and the length of that plan to the goal, which NIRL's progress "
+        "potential reads: its best, and what `navlearn demos generate` records by default), learning "
+        "(NNQL's: the same without the plan length) or plain (8 beams + goal, older demonstration sets); "
+        "the demonstrations must have been recorded in it (default %(default)s)",
     )
     add_options(train, NIRLRun, "NAVLEARN_NIRL_RUN", "run: environment, evaluation, outputs")
     add_options(train, NIRLConfig, "NAVLEARN_NIRL", "NIRL hyper-parameters")
