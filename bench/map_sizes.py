@@ -18,6 +18,12 @@ the heuristic driving) - the own map and its A* grow with the map.
     python -m bench.map_sizes                               # test seed 0, 500 episodes per set
     python -m bench.map_sizes --seed 1 --episodes 200       # the validation seed (for tuning)
     python -m bench.map_sizes --out results/navigation/map_sizes   # + JSON lines and a PNG
+    python -m bench.map_sizes --map office.yaml arena.map --episodes 200   # per map file
+
+With ``--map`` it runs the same three on map files instead (static, the sets of
+:func:`agents.evaluation.make_map_eval_set`: a MovingAI map's own ``.scen`` pairs, else pairs drawn
+reachable for the robot, as ``navlearn evaluate --map``), one row per file and method; ``--episodes``
+is the most per file (a ``.scen`` with fewer pairs gives fewer, stated in the row).
 
 Human lines, then one JSON object on the last line. Tune on ``--seed 1`` only; seed 0 is the test
 seed the figures are reported on.
@@ -28,15 +34,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation import evaluate, make_eval_set, make_map_eval_set
 from agents.evaluation.compare import mcnemar_exact
-from agents.evaluation.metrics import summarize
+from agents.evaluation.metrics import rate, summarize
 from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import EvalSet, fixed_sampler
 from agents.planning.expert import Expert
@@ -44,6 +51,7 @@ from worlds.config import NavConfig, ObstacleConfig
 from worlds.env import NavigationEnv
 from worlds.heuristics import goal_seeking_policy
 from worlds.outcomes import Outcome
+from worlds.tasks import parse_map_spec
 from worlds.vector_env import NavigationVectorEnv
 
 METHODS = ("policy", "previous", "heuristic", "expert")
@@ -143,6 +151,123 @@ def throughput(nav: NavConfig, size: int, seconds: float, seed: int) -> dict:
     return {"robot_steps_per_cpu_s": steps / cpu, "robot_steps": steps, "episodes_ended": ended}
 
 
+@dataclass
+class Methods:
+    """What the bench runs on every episode: the policy (in its own observation and ``nav``, whose
+    step rule everything shares), the goal-seeking heuristic and, when given, a previous policy."""
+
+    policy: object
+    nav: NavConfig
+    previous: object | None = None
+
+    def runs(self, es: EvalSet, expert_episodes: int) -> dict[str, dict[str, np.ndarray]]:
+        """Outcome, path length and steps per episode of each method on ``es`` (the expert on the
+        first ``expert_episodes``)."""
+        heuristic, width = goal_seeking_policy(self.nav), self.nav.sensors.n_beams + 3
+        runs = {
+            "policy": episode_arrays(evaluate(self.policy, es, self.nav), es.family),
+            "heuristic": episode_arrays(evaluate(lambda o: heuristic(o[:, :width]), es, self.nav), es.family),
+        }
+        if self.previous is not None:  # its own observation, the same episodes and step rule
+            own = replace(
+                self.previous.nav_config(), max_steps=self.nav.max_steps, step_factor=self.nav.step_factor
+            )
+            runs["previous"] = episode_arrays(evaluate(self.previous, es, own), es.family)
+        if expert_episodes > 0:
+            runs["expert"] = run_expert(es, self.nav, expert_episodes)
+        return runs
+
+
+def header(first: str) -> str:
+    """The column heads of the rows :func:`compare_on` prints after ``first``."""
+    return (f"{first} {'method':<9} {'n':>4} {'success % [95% CI]':<20} {'SPL':>5} "
+            f"{'coll.st%':>8} {'coll.dyn%':>9} {'timeout%':>8} {'p vs policy':>11}")  # fmt: skip
+
+
+def compare_on(es: EvalSet, methods: Methods, expert_episodes: int, label: str) -> dict:
+    """Every method on ``es``: its figures and, for the others, McNemar against the policy on the
+    episodes both ran; one printed row per method, starting with ``label``."""
+    rows = {}
+    runs = methods.runs(es, expert_episodes)
+    for name, arrays in runs.items():
+        rows[name] = figures(arrays, es.shortest)
+        if name != "policy":
+            rows[name]["paired"] = paired_p(runs["policy"]["outcome"], arrays["outcome"])
+        r = rows[name]
+        p = f"{r['paired']['p']:11.2g}" if "paired" in r else f"{'':>11}"
+        print(f"{label} {name:<9} {r['episodes']:>4} {100 * r['success']:5.1f} "
+              f"[{100 * r['success_ci'][0]:4.1f}, {100 * r['success_ci'][1]:5.1f}] {r['spl']:5.2f} "
+              f"{100 * r['collision_static']:8.1f} {100 * r['collision_dynamic']:9.1f} "
+              f"{100 * r['timeout']:8.1f} {p}", flush=True)  # fmt: skip
+    if "expert" in runs:  # the issue's bar: the policy where the expert succeeds
+        rows["policy"]["where_expert_succeeds"] = where_solved(
+            runs["policy"]["outcome"], runs["expert"]["outcome"]
+        )
+        w = rows["policy"]["where_expert_succeeds"]
+        print(f"{label} policy on the {w['episodes']} episodes the expert solved: {100 * w['success']:.1f}% "
+              f"[{100 * w['success_ci'][0]:.1f}, {100 * w['success_ci'][1]:.1f}]")  # fmt: skip
+    return rows
+
+
+def where_solved(policy: np.ndarray, expert: np.ndarray) -> dict:
+    """The policy's success with its Wilson interval on the episodes (of those both ran) the expert
+    reached the goal in."""
+    n = min(len(policy), len(expert))
+    solved = expert[:n] == int(Outcome.GOAL)
+    solved_rate = rate(int((policy[:n][solved] == int(Outcome.GOAL)).sum()), int(solved.sum()))
+    return {
+        "episodes": int(solved.sum()),
+        "success": solved_rate.value,
+        "success_ci": [solved_rate.low, solved_rate.high],
+    }
+
+
+def run_maps(args: argparse.Namespace, methods: Methods) -> int:
+    """``--map``: the policy, the heuristic and the expert on each map file's own set (static)."""
+    report: dict = {
+        "bench": "map_sizes --map",
+        "policy": str(Path(args.policy)),
+        "policy_name": f"{Path(args.policy).name} (v{methods.policy.version})",
+        "seed": args.seed,
+        "episodes": args.episodes,
+        "expert_episodes": args.expert_episodes,
+        "step_rule": step_rule(methods.nav),
+        "load_average_before": os.getloadavg()[0],
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "maps": {},
+    }
+    print(f"{report['policy_name']} on map files: seed {args.seed}, at most {args.episodes} episodes per "
+          f"map (expert {args.expert_episodes}), {report['step_rule']}, "
+          f"load {report['load_average_before']:.1f}")  # fmt: skip
+    sets = []
+    for spec in args.map:
+        try:
+            sampler = parse_map_spec(spec)
+            es = make_map_eval_set(sampler, args.episodes, seed=args.seed)
+        except ValueError as exc:
+            print(f"bench.map_sizes: {exc}", file=sys.stderr)
+            return 2
+        note = "; ".join(mf.note for mf in sampler.maps)
+        print(note)
+        sets.append((spec, es, note))
+    label = max(len(es.family) for _, es, _ in sets)
+    print(header(f"{'map':<{label}}"))
+    for spec, es, note in sets:
+        started = time.perf_counter()
+        rows = compare_on(es, methods, args.expert_episodes, f"{es.family:<{label}}")
+        rows["note"] = note
+        rows["astar_m"] = {"mean": float(es.shortest.mean()), "max": float(es.shortest.max())}
+        rows["wall_s"] = time.perf_counter() - started
+        report["maps"][spec] = rows
+    report["load_average_after"] = os.getloadavg()[0]
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "maps.json").write_text(json.dumps(report, indent=1) + "\n")
+    print(json.dumps(report))
+    return 0
+
+
 def plot(report: dict, path: Path) -> Path:
     import matplotlib
 
@@ -208,7 +333,13 @@ def main(argv: list[str] | None = None) -> int:
         help="step limit = max(max steps, step factor x the A* path's steps); default the world's "
         "(worlds.config.NavConfig.step_factor); 0: a fixed --max-steps",
     )
-    parser.add_argument("--out", help="directory for map_sizes.json and map_sizes.png")
+    parser.add_argument(
+        "--map",
+        nargs="+",
+        help="map files (map_server .yaml, MovingAI .map, ASCII; key=value options as `evaluate --map`): "
+        "one row per file instead of the size sweep",
+    )
+    parser.add_argument("--out", help="directory for map_sizes.json and map_sizes.png (--map: maps.json)")
     args = parser.parse_args(argv)
 
     policy = load_policy(args.policy)
@@ -217,9 +348,9 @@ def main(argv: list[str] | None = None) -> int:
         nav = replace(nav, max_steps=args.max_steps)
     if args.step_factor is not None:
         nav = replace(nav, step_factor=args.step_factor)
-    previous = load_policy(args.previous) if args.previous else None
-    heuristic = goal_seeking_policy(nav)
-    width = nav.sensors.n_beams + 3
+    methods = Methods(policy, nav, load_policy(args.previous) if args.previous else None)
+    if args.map:
+        return run_maps(args, methods)
     report: dict = {
         "bench": "map_sizes",
         "policy": str(Path(args.policy)),
@@ -240,33 +371,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{report['policy_name']} against map size: seed {args.seed}, {args.episodes} episodes per set "
           f"(expert {args.expert_episodes}), {step_rule(nav)}, "
           f"load {report['load_average_before']:.1f}")  # fmt: skip
-    head = f"{'size':>4} {'set':<8} {'method':<9} {'n':>4} {'success % [95% CI]':<20} {'SPL':>5} "
-    print(head + f"{'coll.st%':>8} {'coll.dyn%':>9} {'timeout%':>8} {'p vs policy':>11}")
+    print(header(f"{'size':>4} {'set':<8}"))
     for size in args.sizes:
         started = time.perf_counter()
         per_set: dict = {}
         for kind, es in eval_sets(size, args.episodes, args.seed).items():
-            runs = {
-                "policy": episode_arrays(evaluate(policy, es, nav), es.family),
-                "heuristic": episode_arrays(evaluate(lambda o: heuristic(o[:, :width]), es, nav), es.family),
-            }
-            if previous is not None:  # its own observation, the same episodes and step rule
-                own = replace(previous.nav_config(), max_steps=nav.max_steps, step_factor=nav.step_factor)
-                runs["previous"] = episode_arrays(evaluate(previous, es, own), es.family)
-            if args.expert_episodes > 0:
-                runs["expert"] = run_expert(es, nav, args.expert_episodes)
-            rows = {}
-            for name, arrays in runs.items():
-                rows[name] = figures(arrays, es.shortest)
-                if name != "policy":
-                    rows[name]["paired"] = paired_p(runs["policy"]["outcome"], arrays["outcome"])
-                r = rows[name]
-                p = f"{r['paired']['p']:11.2g}" if "paired" in r else f"{'':>11}"
-                print(f"{size:>4} {kind:<8} {name:<9} {r['episodes']:>4} {100 * r['success']:5.1f} "
-                      f"[{100 * r['success_ci'][0]:4.1f}, {100 * r['success_ci'][1]:5.1f}] {r['spl']:5.2f} "
-                      f"{100 * r['collision_static']:8.1f} {100 * r['collision_dynamic']:9.1f} "
-                      f"{100 * r['timeout']:8.1f} {p}")  # fmt: skip
-            per_set[kind] = rows
+            per_set[kind] = compare_on(es, methods, args.expert_episodes, f"{size:>4} {kind:<8}")
         per_set["wall_s"] = time.perf_counter() - started
         report["results"][str(size)] = per_set
     if args.throughput_seconds > 0:

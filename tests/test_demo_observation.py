@@ -16,7 +16,14 @@ from agents.demos import DemoFormatError, write_demos
 from agents.nirl.buffers import load_demonstrations
 from agents.planning.demonstrate import generate_demos
 from services.cli import main
-from worlds.config import LEARNING_NAV, LEGACY_OBSERVATION, OBSERVATIONS, NavConfig, observation_settings
+from worlds.config import (
+    LEARNING_NAV,
+    LEARNING_PLAN_NAV,
+    LEGACY_OBSERVATION,
+    OBSERVATIONS,
+    NavConfig,
+    observation_settings,
+)
 from worlds.env import NavigationEnv, observation_space
 from worlds.perception import observation_dim
 
@@ -104,3 +111,23 @@ def test_learners_default_to_learning_nav_and_refuse_other_observations(datasets
         saved = json.loads((out / "config.json").read_text())
         assert saved["observation"] == observation_settings(nav)
         assert saved["architecture"]["obs_dim"] == observation_dim(nav)
+
+
+def test_a_learning_plan_set_loads_for_learning_learners_exactly_without_the_plan_length(datasets, tmp_path):
+    """What `navlearn demos generate` records by default (learning_plan, NIRL's) loads for behaviour
+    cloning's and NNQL's learning observation with the plan length dropped: step for step what a
+    learning recording of the same episodes holds; the other way round is refused."""
+    path, learning = datasets["learning"]
+    planned, _ = generate_demos("rooms:10", 3, seed=3, config=LEARNING_PLAN_NAV)
+    space, settings = observation_space(LEARNING_PLAN_NAV), observation_settings(LEARNING_PLAN_NAV)
+    planned_path = write_demos(
+        tmp_path / "planned-v0", planned, space, spaces.Discrete(5), observation=settings
+    )
+    loaded = load_demos_for(planned_path, LEARNING_NAV)
+    for back, want, full in zip(loaded, learning, planned, strict=True):
+        np.testing.assert_array_equal(back.actions, want.actions)
+        np.testing.assert_allclose(back.observations, want.observations, atol=1e-6)
+        assert full.observations.shape[1] == back.observations.shape[1] + 1
+    assert len(load_demos_for(planned_path, LEARNING_PLAN_NAV)) == len(planned)
+    with pytest.raises(DemoFormatError, match=re.escape("observation.plan_length=False")):
+        load_demos_for(path, LEARNING_PLAN_NAV)

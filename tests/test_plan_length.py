@@ -48,39 +48,36 @@ def test_train_local_plan_length_trains_saves_and_evaluates(tmp_path, capsys):
     assert main(["evaluate", "--policy", str(out), "--episodes", "2", "--maps", "unseen"]) == 0
 
 
-def test_nirl_learns_in_learning_plan_from_demos_recorded_in_it(tmp_path, capsys):
-    """README's NIRL path: `demos generate --observation learning_plan`, then `nirl train` in the same
-    observation (tiny sizes); a learner of another observation refuses the set naming the field."""
+def test_nirl_with_no_flags_learns_in_learning_plan_and_refuses_other_sets(tmp_path, capsys):
+    """NIRL's no-flag path is its best setting: `demos generate` records learning_plan by default and
+    `nirl train` learns in it (tiny sizes); a set recorded in `learning` is refused in one line naming
+    the flag either side; `up --nirl` (learning) takes the default set with the plan length dropped."""
+    from agents.demo_observation import dataset_observation
+    from services.ops.up_config import UpConfig, check_nirl
+
     demos = tmp_path / "planned-v0"
     assert main(["demos", "generate", "--maps", "mixed:16", "--episodes", "3", "--seed", "20011",
-                 "--observation", "learning_plan", "--out", str(demos)]) == 0  # fmt: skip
+                 "--out", str(demos)]) == 0  # fmt: skip
+    assert dataset_observation(demos) == (
+        observation_settings(LEARNING_PLAN_NAV),
+        observation_dim(LEARNING_PLAN_NAV),
+    )
     tiny = ["--iterations", "1", "--warmstart-updates", "4", "--q-updates", "4", "--reward-updates", "1",
             "--steps-per-iteration", "32", "--envs", "4", "--eval-every", "0", "--final-eval-episodes", "0",
             "--hidden-sizes", "16", "--no-progress"]  # fmt: skip
     out = tmp_path / "run"
-    argv = [
-        "nirl",
-        "train",
-        "--demos",
-        str(demos),
-        "--observation",
-        "learning_plan",
-        "--out",
-        str(out),
-        *tiny,
-    ]
-    assert main(argv) == 0
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["demo_steps"] > 0
+    assert main(["nirl", "train", "--demos", str(demos), "--out", str(out), *tiny]) == 0
+    assert json.loads((out / "summary.json").read_text())["demo_steps"] > 0
+    saved = json.loads((out / "config.json").read_text())["observation"]
+    assert saved == observation_settings(LEARNING_PLAN_NAV)
+    check_nirl(UpConfig(nirl=True, demos=str(demos)))  # up's learning observation: the column dropped
+    other = tmp_path / "learning-v0"
+    assert main(["demos", "generate", "--maps", "mixed:16", "--episodes", "3", "--seed", "20011",
+                 "--observation", "learning", "--out", str(other)]) == 0  # fmt: skip
     capsys.readouterr()
-    assert main(["nirl", "train", "--demos", str(demos), "--out", str(tmp_path / "other"), *tiny]) == 2
+    assert main(["nirl", "train", "--demos", str(other), "--out", str(tmp_path / "other"), *tiny]) == 2
     err = capsys.readouterr().err
-    assert str(demos) in err and "observation.plan_length=True" in err
-    # ... and which --observation to give either way
-    assert "train in their observation (--observation learning_plan)" in err, err
-    assert "record them again in the learner's (navlearn demos generate --observation learning)" in err, err
-    # up checks its --demos against its own --observation before anything starts
-    capsys.readouterr()
-    assert main(["up", "--nirl", "--demos", str(demos), "--out", str(tmp_path / "up")]) == 2
-    assert "train in their observation (--observation learning_plan)" in capsys.readouterr().err
-    assert not (tmp_path / "up").exists()
+    assert err.count("\n") == 1 and str(other) in err and "observation.plan_length=False" in err, err
+    assert "train in their observation (--observation learning)" in err, err
+    assert "record them again in the learner's (navlearn demos generate --observation learning_plan)" in err
+    assert not (tmp_path / "other").exists()

@@ -36,3 +36,46 @@ def test_a_tiny_sweep_prints_every_method_and_ends_with_its_json(tmp_path, capsy
         assert report["throughput"][size]["robot_steps_per_cpu_s"] > 0
     assert (tmp_path / "map_sizes.png").stat().st_size > 10_000
     assert json.loads((tmp_path / "map_sizes.json").read_text())["seed"] == 1
+
+
+def test_the_sweep_runs_in_the_worlds_default_step_rule(capsys):
+    from worlds.config import NavConfig
+
+    main(["--sizes", "16", "--episodes", "2", "--expert-episodes", "0", "--throughput-seconds", "0"])
+    out = capsys.readouterr().out.strip().splitlines()
+    report = json.loads(out[-1])
+    assert (
+        report["step_factor"] == NavConfig().step_factor > 0 and report["max_steps"] == NavConfig().max_steps
+    )
+    assert f"ceil({NavConfig().step_factor:g} x the A* path's steps)" in out[0]
+
+
+def test_map_mode_gives_one_row_per_file_and_method_and_ends_with_its_json(tmp_path, capsys):
+    """--map on a hand-drawn ASCII room and a map_server map: the policy, the heuristic and the expert on
+    each file's own episodes; an unreadable file is one error naming it."""
+    import numpy as np
+    from PIL import Image
+
+    room = ["#" * 14] + ["#" + "." * 12 + "#"] * 10 + ["#" * 14]
+    (tmp_path / "room.txt").write_text("\n".join(room) + "\n")
+    pixels = [[0 if c == "#" else 254 for c in row for _ in range(4)] for row in room for _ in range(4)]
+    Image.fromarray(np.array(pixels, "uint8")).save(tmp_path / "lab.pgm")
+    (tmp_path / "lab.yaml").write_text(
+        "image: lab.pgm\nresolution: 0.25\norigin: [0, 0, 0]\nnegate: 0\noccupied_thresh: 0.65\n"
+        "free_thresh: 0.196\n"
+    )
+    files = [str(tmp_path / "room.txt"), str(tmp_path / "lab.yaml")]
+    assert main(["--map", *files, "--episodes", "4", "--expert-episodes", "4", "--out", str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    report = json.loads(lines[-1])
+    assert list(report["maps"]) == files and "ceil(4 x" in report["step_rule"]
+    for rows in report["maps"].values():
+        assert {"policy", "heuristic", "expert"} <= set(rows) and rows["note"]
+        assert rows["policy"]["episodes"] == rows["expert"]["episodes"] == 4
+        assert rows["expert"]["paired"]["episodes"] == 4
+        solved = rows["policy"]["where_expert_succeeds"]
+        assert solved["episodes"] == round(4 * rows["expert"]["success"])
+    assert sum(line.startswith(("room ", "lab ")) for line in lines) >= 6
+    assert json.loads((tmp_path / "maps.json").read_text())["maps"].keys() == report["maps"].keys()
+    assert main(["--map", str(tmp_path / "missing.yaml"), "--episodes", "2"]) == 2
+    assert "missing.yaml" in capsys.readouterr().err
