@@ -25,7 +25,7 @@ from protocols.flow import Ack
 from protocols.messages import TransitionBatch
 from services.common.outbox import Outbox
 from services.ops.status import query_status
-from worlds.config import LEARNING_NAV
+from worlds.config import LEARNING_NAV, observation_settings
 from worlds.perception import observation_dim
 
 OBS_DIM, N_ACTIONS = observation_dim(LEARNING_NAV), 5  # what the learner service takes, 5 turns
@@ -162,7 +162,10 @@ def stored_ids(checkpoint: Path, replay_capacity: int | None = None) -> np.ndarr
         config = dataclasses.replace(config, replay_capacity=replay_capacity)
     memmap = checkpoint / "nnql" / "replay" / "memmap.json"  # a memory-mapped replay: its files' directory
     replay_dir = json.loads(memmap.read_text())["directory"] if memmap.exists() else None
-    learner = NNQLLearner(config, OBS_DIM, N_ACTIONS, replay_dir=replay_dir)
+    # built as the learner service builds it: on the learning observation's settings (the network
+    # variant they resolve to, services/learner/run.py)
+    observation = observation_settings(LEARNING_NAV)
+    learner = NNQLLearner(config, OBS_DIM, N_ACTIONS, replay_dir=replay_dir, observation=observation)
     learner.load_checkpoint(checkpoint / "nnql")
     n = len(learner.replay)
     if n == 0:
