@@ -12,8 +12,8 @@ from worlds.own_env import ENV_TITLE, EnvConfig
 
 DESCRIPTION = """\
 Train NNQL the distributed way on one machine: check the arguments (maps included), compile the
-robot world once (the first run on a machine: 75-90 s on 2 cores busy with other work, about
-45 s on idle ones, with a progress line; later runs load the cache),
+robot world once (the first run on a machine: 35-40 s on 2 idle cores, 75-90 s on cores busy
+with other work, with a progress line; later runs load the cache),
 start the learner (hosting the Zenoh router on a free loopback port), --actors actor processes
 of --envs robots each and the evaluator, show progress (one live line: what each process is
 doing until the first transition, then the learner's status), and after --duration seconds of

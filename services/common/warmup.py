@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-TYPICAL_COMPILE = "75-90 s on 2 busy cores, about 45 s on idle ones"
+TYPICAL_COMPILE = "35-40 s on 2 idle cores, 75-90 s on busy ones"
 """a cold compile of the world measured on this project's 2-core machine (bench/first_run.py,
 results/first-run/): 75-90 s of wall clock at load 6-8, 42-51 CPU seconds (one thread: about the
 wall clock when a core is free)"""
