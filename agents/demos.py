@@ -197,6 +197,19 @@ def dataset_location(path: str | Path) -> tuple[Path, str]:
     return path.parent, path.name
 
 
+def clear_target(path: str | Path, overwrite: bool) -> Path:
+    """The directory of a new dataset at ``path`` (its parent the datasets root, its name the dataset
+    id: :func:`dataset_location`), made room for: an existing dataset there is removed with
+    ``overwrite``, refused without (FileExistsError naming it and the way out)."""
+    root, dataset_id = dataset_location(path)
+    target = root / dataset_id
+    if target.exists():
+        if not overwrite:
+            raise FileExistsError(f"{target} exists (pass overwrite=True / --overwrite to replace it)")
+        shutil.rmtree(target)
+    return target
+
+
 def write_demos(
     path: str | Path,
     demos: list[Demo],
@@ -212,12 +225,8 @@ def write_demos(
     import minari
     from minari.data_collector import EpisodeBuffer
 
-    root, dataset_id = dataset_location(path)
-    target = root / dataset_id
-    if target.exists():
-        if not overwrite:
-            raise FileExistsError(f"{target} exists (pass overwrite=True / --overwrite to replace it)")
-        shutil.rmtree(target)
+    target = clear_target(path, overwrite)
+    root, dataset_id = target.parent, target.name
     if not demos:
         raise ValueError("no demonstrations to write")
     extra = dict(extra_metadata or {})

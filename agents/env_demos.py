@@ -16,7 +16,6 @@ than the learner's, or whose spaces are not that env's.
 from __future__ import annotations
 
 import json
-import shutil
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -25,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.demos import ENV_KEY, DemoFormatError, dataset_location, datasets_root
+from agents.demos import ENV_KEY, DemoFormatError, clear_target, dataset_location, datasets_root
 from worlds.own_env import EnvConfig, make_env
 
 
@@ -83,12 +82,8 @@ def record_env_demos(
 
     if episodes < 1:
         raise ValueError(f"episodes={episodes}: need at least 1")
-    root, dataset_id = dataset_location(path)
-    target = root / dataset_id
-    if target.exists():
-        if not overwrite:
-            raise FileExistsError(f"{target} exists (pass --overwrite to replace it)")
-        shutil.rmtree(target)
+    target = clear_target(path, overwrite)
+    root, dataset_id = target.parent, target.name
     played = make_env(env)
     buffers, returns = [], []
     try:
