@@ -222,18 +222,25 @@ def where_solved(policy: np.ndarray, expert: np.ndarray) -> dict:
     }
 
 
-def run_maps(args: argparse.Namespace, methods: Methods) -> int:
-    """``--map``: the policy, the heuristic and the expert on each map file's own set (static)."""
-    report: dict = {
-        "bench": "map_sizes --map",
+def report_head(args: argparse.Namespace, methods: Methods, bench: str) -> dict:
+    """What every report of this bench starts with: the run's command-line choices, the load and date."""
+    return {
+        "bench": bench,
         "policy": str(Path(args.policy)),
         "policy_name": f"{Path(args.policy).name} (v{methods.policy.version})",
         "seed": args.seed,
         "episodes": args.episodes,
         "expert_episodes": args.expert_episodes,
-        "step_rule": step_rule(methods.nav),
         "load_average_before": os.getloadavg()[0],
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+    }
+
+
+def run_maps(args: argparse.Namespace, methods: Methods) -> int:
+    """``--map``: the policy, the heuristic and the expert on each map file's own set (static)."""
+    report: dict = {
+        **report_head(args, methods, "map_sizes --map"),
+        "step_rule": step_rule(methods.nav),
         "maps": {},
     }
     print(f"{report['policy_name']} on map files: seed {args.seed}, at most {args.episodes} episodes per "
@@ -352,19 +359,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.map:
         return run_maps(args, methods)
     report: dict = {
-        "bench": "map_sizes",
-        "policy": str(Path(args.policy)),
-        "policy_name": f"{Path(args.policy).name} (v{policy.version})",
+        **report_head(args, methods, "map_sizes"),
         "previous": args.previous,
-        "seed": args.seed,
-        "episodes": args.episodes,
-        "expert_episodes": args.expert_episodes,
         "sizes": args.sizes,
         "discs": {str(s): discs_for(s) for s in args.sizes},
         "max_steps": nav.max_steps,
         "step_factor": nav.step_factor,
-        "load_average_before": os.getloadavg()[0],
-        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "results": {},
         "throughput": {},
     }
