@@ -15,6 +15,12 @@ For each seed, two runs on the same machine with the same robot-step budget (``-
               its greedy policy plays the same kind of 100 seeded episodes
               (``agents.evaluation.env_returns``); evaluation time is not counted in its wall time.
               Its final model plays the same 100 test episodes (``final_model.held``).
+              ``--sb3-budget navlearn``: the same robot-step budget as navlearn's run of the same seed
+              had, per seed: SB3 may step as many robot-steps as that run stepped to its target (all it
+              stepped where it missed), read from ``OUT/<env>/navlearn-s<seed>/result.json``, and
+              ``--max-s`` does not stop it (its wall time is whatever those steps take), so "SB3 had not
+              reached the target" means "in the robot-steps navlearn needed", not "in the wall cap". Its
+              process CPU seconds are recorded beside the wall seconds (``cpu_s``).
 
 The target is the env's registered ``reward_threshold`` for the mean return of 100 greedy episodes, or
 ``--success`` (a success rate from ``info["is_success"]``) where given. Reported per run: reached or not,
@@ -185,14 +191,26 @@ class SB3Greedy:
         return np.asarray(self.model.predict(obs, deterministic=True)[0], dtype=np.int64)
 
 
-def run_sb3(env: EnvConfig, seed: int, args, threshold, success) -> dict:
+def navlearn_budget(out: Path, seed: int) -> int:
+    """The robot-steps navlearn's run of ``seed`` stepped to its target (all of its steps where it missed):
+    SB3's budget under ``--sb3-budget navlearn``."""
+    path = out / f"navlearn-s{seed}" / "result.json"
+    if not path.exists():
+        raise SystemExit(
+            f"--sb3-budget navlearn: {path} is missing; run --systems navlearn for seed {seed} first"
+        )
+    row = json.loads(path.read_text())
+    return int(row["to_target"]["steps"] if row["to_target"] else row["robot_steps"])
+
+
+def run_sb3(env: EnvConfig, seed: int, args, threshold, success, budget: int, max_s: float) -> dict:
     import torch
     from stable_baselines3 import DQN
     from stable_baselines3.common.callbacks import BaseCallback
 
     torch.set_num_threads(1)
     params = ZOO_DQN.get(env.env, {})
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     evaluating = [0.0]
     state = {"hit": None, "best": None}
 
@@ -209,11 +227,12 @@ def run_sb3(env: EnvConfig, seed: int, args, threshold, success) -> dict:
                 wall = time.perf_counter() - start - evaluating[0]
                 state["hit"] = {"wall_s": wall, "steps": self.num_timesteps, "metrics": metrics}
                 return False
-            return time.perf_counter() - start - evaluating[0] < args.max_s
+            return time.perf_counter() - start - evaluating[0] < max_s
 
     model = DQN("MlpPolicy", make_env(env), seed=seed, verbose=0, **params)
-    model.learn(total_timesteps=args.steps, callback=Evaluate())
+    model.learn(total_timesteps=budget, callback=Evaluate())
     wall = time.perf_counter() - start - evaluating[0]
+    cpu = time.process_time() - cpu_start  # evaluations included: an upper bound of its training's CPU
     tested = evaluate_env(SB3Greedy(model), env, args.episodes, seed=TEST_SEED)  # its final model
     return {
         "final_model": {
@@ -225,7 +244,10 @@ def run_sb3(env: EnvConfig, seed: int, args, threshold, success) -> dict:
         "to_target": state["hit"],
         "best": state["best"],
         "robot_steps": int(model.num_timesteps),
+        "budget_steps": budget,
+        "wall_cap_s": None if max_s == float("inf") else max_s,
         "wall_s": wall,
+        "cpu_s": cpu,
         "hyper_parameters": dict(params) or "SB3 defaults (no zoo entry)",
     }
 
@@ -243,6 +265,13 @@ def main() -> None:
     parser.add_argument("--eval-every", type=int, default=10_000, help="SB3: steps between evaluations")
     parser.add_argument("--success", type=float, help="target: this success rate (is_success) instead")
     parser.add_argument("--systems", nargs="+", default=["navlearn", "sb3-dqn"])
+    parser.add_argument(
+        "--sb3-budget",
+        choices=("steps", "navlearn"),
+        default="steps",
+        help="SB3's robot-step budget: --steps and the --max-s wall cap (steps), or the robot-steps "
+        "navlearn's run of the same seed stepped to its target, with no wall cap (navlearn)",
+    )
     parser.add_argument("--out", default="results/own-env")
     args = parser.parse_args()
     env = EnvConfig(env=args.env, env_kwargs=args.env_kwargs, env_module=args.env_module)
@@ -250,7 +279,9 @@ def main() -> None:
     rows = []
     for seed in args.seeds:
         for system in args.systems:
-            out = Path(args.out) / env.env.replace(":", "_").replace("/", "_") / f"{system}-s{seed}"
+            same_steps = system != "navlearn" and args.sb3_budget == "navlearn"
+            label = f"{system}-navlearn-steps" if same_steps else system
+            out = Path(args.out) / env.env.replace(":", "_").replace("/", "_") / f"{label}-s{seed}"
             path = out / "result.json"
             if path.exists():
                 rows.append(json.loads(path.read_text()))
@@ -260,14 +291,17 @@ def main() -> None:
             if system == "navlearn":
                 result = run_navlearn(env, seed, args, out, threshold, args.success)
             else:
-                result = run_sb3(env, seed, args, threshold, args.success)
+                same = args.sb3_budget == "navlearn"
+                budget = navlearn_budget(out.parent, seed) if same else args.steps
+                max_s = float("inf") if same else args.max_s
+                result = run_sb3(env, seed, args, threshold, args.success, budget, max_s)
             row = {
+                "budget_steps": args.steps,
                 "env": env.signature(),
                 "system": system,
                 "seed": seed,
                 "threshold": threshold,
                 "success_target": args.success,
-                "budget_steps": args.steps,
                 "load_1min_at_start": load,
                 "date": datetime.now(UTC).isoformat(timespec="seconds"),
                 "commit": commit(),
