@@ -173,9 +173,8 @@ def _rays_side_by_side(field, moff, mh, mw, mcell, poses, maps, beam_c, beam_s, 
 @njit(cache=False)
 def _searches(plans, height, width, cell, xs, ys, goals, along, work, exam, out):
     for k in range(plans.shape[0]):
-        out[k] = waypoint(
-            plans[k], height, width, cell, xs[k], ys[k], goals[k, 0], goals[k, 1], along, work, exam, k + 1
-        )[0]
+        out[k] = waypoint(plans[k], plans[k, :0], height, width, cell, xs[k], ys[k], goals[k, 0], goals[k, 1],
+                          along, work, exam, k + 1)[0]  # fmt: skip
 
 
 @njit(cache=False)

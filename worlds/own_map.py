@@ -4,6 +4,18 @@ robot's own rays and poses (see :mod:`worlds.perception`), and the subgoal plann
 The plan grid a subgoal search reads is *padded* (the layout of :mod:`worlds.gridsearch`): one
 flat uint8 row per robot, :data:`~worlds.fields.BLOCKED` on seen-blocked cells (own map) or
 blocked cells (known map) and on a ring around the map.
+
+**Configuration space.** The search plans for the robot's centre, so on maps whose cells are finer
+than the robot it searches an *inflated* copy of the plan grid (``wide``): a cell is blocked there
+when its centre lies closer than the robot's radius to a blocked cell of the plan grid (the ring
+included), the inscribed inflation of ROS costmap_2d's / nav2's inflation layer
+(``nav2_costmap_2d::InflationLayer``: cells within the inscribed radius of a lethal cell are
+``INSCRIBED_INFLATED_OBSTACLE``, which nav2's grid planners refuse). Without it, at 0.1 m cells a
+path runs through gaps narrower than the robot and along walls closer than its radius; at 1 m cells
+and the default 0.25 m radius nothing is inflated (:func:`inflation_cells` is 0) and nothing of the
+inflation runs. ``near`` counts, per cell, the blocked cells within the radius; :func:`_set` adds
+or takes one over the disk around a cell whose blocked state changed, so the inflated grid follows
+the own map per changed cell, as the plan grid does.
 """
 
 from __future__ import annotations
@@ -25,9 +37,59 @@ the last search (:func:`waypoint`) looked"""
 
 
 @njit(cache=True)
-def _set(occ, plan, exam, exam_id, stride, r, c, state):
+def inflation_cells(radius, cell):
+    """How many cells the plan grid is inflated by for a robot of ``radius`` metres on cells of
+    ``cell`` metres: the largest offset k (in rows or columns) at which a cell's centre can lie
+    closer than ``radius`` to a blocked cell, k = ceil(radius / cell - 0.5) (a cell d rows away is
+    (d - 0.5) cells from the centre). 0 at 1 m cells and the default 0.25 m radius: no inflation.
+    Which cells of the (2k+1)^2 square count is :func:`_reaches`'s."""
+    return max(math.ceil(radius / cell - 0.5), 0)
+
+
+@njit(cache=True)
+def _reaches(dr, dc, reach):
+    """Does the centre of a cell ``dr`` rows and ``dc`` columns from a blocked cell lie closer than
+    ``reach`` cells (the robot's radius over the cell size) to that cell's square?"""
+    dy, dx = max(abs(dr) - 0.5, 0.0), max(abs(dc) - 0.5, 0.0)
+    return dx * dx + dy * dy < reach * reach
+
+
+@njit(cache=True, _nrt=False)
+def _spread(wide, near, stride, height, width, r, c, delta, reach, band):
+    """Add ``delta`` (+1 or -1) to the count ``near`` of every map cell within the robot's radius
+    (``reach`` cells; ``band``: :func:`inflation_cells`) of the padded cell (r, c) (-1 and height / width
+    are the ring), and block ``wide`` where the count is above 0."""
+    for rr in range(max(r - band, 0), min(r + band, height - 1) + 1):
+        for cc in range(max(c - band, 0), min(c + band, width - 1) + 1):
+            if _reaches(rr - r, cc - c, reach):
+                at = (rr + 1) * stride + cc + 1
+                near[at] += delta
+                wide[at] = BLOCKED if near[at] > 0 else 0
+
+
+@njit(cache=True, _nrt=False)
+def inflate(plan, wide, near, height, width, reach, band):
+    """The inflated grid ``wide`` (and its counts ``near``) of the padded plan grid ``plan`` from
+    scratch: the ring blocked, a map cell blocked when its centre lies closer than ``reach`` cells
+    to a blocked cell of ``plan`` (see the module docstring)."""
+    stride = width + 2
+    for at in range((height + 2) * stride):
+        near[at], wide[at] = 0, BLOCKED
+    for r in range(height):
+        for c in range(width):
+            wide[(r + 1) * stride + c + 1] = 0
+    for r in range(-1, height + 1):
+        for c in range(-1, width + 1):
+            if plan[(r + 1) * stride + c + 1] == BLOCKED:
+                _spread(wide, near, stride, height, width, r, c, 1, reach, band)
+
+
+@njit(cache=True)
+def _set(occ, plan, exam, exam_id, stride, r, c, state, wide, near, height, reach, band):
     """Cell (r, c) of the own map becomes ``state``; the plan grid (if tracked: ``plan`` not empty)
-    follows. Returns :data:`CHANGED` | :data:`ON_PLAN` flags."""
+    follows, and with ``band`` > 0 its inflated grid ``wide`` (``near``, ``reach``, ``band``: see
+    :func:`inflate`).
+    Returns :data:`CHANGED` | :data:`ON_PLAN` flags."""
     old = occ[r, c]
     occ[r, c] = state
     if (old == SEEN_BLOCKED) == (state == SEEN_BLOCKED):
@@ -35,8 +97,17 @@ def _set(occ, plan, exam, exam_id, stride, r, c, state):
     at = (r + 1) * stride + c + 1
     if plan.shape[0] > 0:
         plan[at] = BLOCKED if state == SEEN_BLOCKED else 0
+        if band > 0:
+            delta = 1 if state == SEEN_BLOCKED else -1
+            _spread(wide, near, stride, height, stride - 2, r, c, delta, reach, band)
     if exam_id < 0:
         return CHANGED | ON_PLAN
+    if band > 0:  # the inflated cells it changed lie within band: next to an expanded cell within band + 1
+        for rr in range(max(r - band - 1, -1), min(r + band + 1, height) + 1):
+            for cc in range(max(c - band - 1, -1), min(c + band + 1, stride - 2) + 1):
+                if exam[(rr + 1) * stride + cc + 1] == exam_id:
+                    return CHANGED | ON_PLAN
+        return CHANGED
     for row in (at - stride, at, at + stride):
         if exam[row - 1] == exam_id or exam[row] == exam_id or exam[row + 1] == exam_id:
             return CHANGED | ON_PLAN  # next to a cell the search expanded: it read this one
@@ -45,7 +116,7 @@ def _set(occ, plan, exam, exam_id, stride, r, c, state):
 
 @njit(cache=True, _nrt=False)
 def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta, ray_c, ray_s, ranges,
-             max_range, per):  # fmt: skip
+             max_range, per, wide, near, reach, band):  # fmt: skip
     """Write one step's rays and pose into a robot's own map ``occ`` (and its padded plan grid
     ``plan``, seen-blocked cells blocked, unknown and free ones free, when not empty): the cell
     past the end of every ray that hit something is blocked, the cells that the middle ray of each
@@ -53,7 +124,8 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
     cells; tracing one keeps the map's cost near the sensor's). Returns flags: :data:`CHANGED`
     when a cell became blocked or stopped being blocked (unknown and free plan alike), with
     :data:`ON_PLAN` when such a cell lies next to one the search ``exam_id`` expanded (``exam``
-    holds their stamps; ``exam_id < 0``: unknown, every change counts)."""
+    holds their stamps; ``exam_id < 0``: unknown, every change counts). With ``band`` > 0 the plan
+    grid's inflated copy ``wide`` follows too (:func:`_set`)."""
     flags = 0
     stride = width + 2
     px, py = x / cell, y / cell
@@ -61,7 +133,7 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
         return 0
     c0, r0 = int(px), int(py)
     visits[r0, c0] += 1
-    flags |= _set(occ, plan, exam, exam_id, stride, r0, c0, FREE)
+    flags |= _set(occ, plan, exam, exam_id, stride, r0, c0, FREE, wide, near, height, reach, band)
     cos_t, sin_t = math.cos(theta), math.sin(theta)
     for k in range(ray_c.shape[0]):
         dx = cos_t * ray_c[k] - sin_t * ray_s[k]
@@ -70,7 +142,8 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
         if ranges[k] < max_range:
             hx, hy = px + (length + 1e-6) * dx, py + (length + 1e-6) * dy
             if 0.0 <= hx < width and 0.0 <= hy < height:
-                flags |= _set(occ, plan, exam, exam_id, stride, int(hy), int(hx), SEEN_BLOCKED)
+                flags |= _set(occ, plan, exam, exam_id, stride, int(hy), int(hx), SEEN_BLOCKED, wide, near,
+                               height, reach, band)  # fmt: skip
         if k % per != per // 2:
             continue
         # exact traversal of the cells the ray crosses before its end (Amanatides & Woo)
@@ -90,7 +163,7 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
             next_r = next_r if on_c else next_r + delta_r
             if t >= length or c < 0 or r < 0 or c >= width or r >= height:
                 break
-            flags |= _set(occ, plan, exam, exam_id, stride, r, c, FREE)
+            flags |= _set(occ, plan, exam, exam_id, stride, r, c, FREE, wide, near, height, reach, band)
     return flags
 
 
@@ -138,7 +211,8 @@ def _in_clear(plan, stride, height, width, cell, x0, y0, x1, y1, clearance, exam
 
 
 @njit(cache=True, _nrt=False)
-def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam, exam_id, clearance=0.0):
+def waypoint(plan, wide, height, width, cell, x, y, goal_r, goal_c, along, work, exam, exam_id,
+             clearance=0.0):  # fmt: skip
     """A* (8-connected, no corner cutting) on the padded grid ``plan`` from the robot's cell to the
     goal cell (counted free); the centre of the cell ``along`` metres down the path, or the goal
     itself when the path ends first, the robot is off the map or on a blocked cell, or no path
@@ -150,7 +224,13 @@ def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam,
     expanded get the stamp ``exam_id`` in ``exam`` (a search reads only their 3x3 neighbourhoods,
     so changes elsewhere leave its result as it is). Returns (the waypoint's padded cell, -1 for the
     goal itself; searched; the path's length in metres from the robot's cell to the goal's, -1.0
-    when there is no path or no search)."""
+    when there is no path or no search).
+
+    With an inflated grid ``wide`` (:func:`inflate`; empty: none) the search runs on it first, the
+    robot's cell and the goal's counted free (a robot whose cell centre lies within its radius of a
+    wall still finds the way out, away from the wall); when it finds no path (the robot hemmed in by
+    the inflation, or a gap that the cell rounding closed), the search runs again on ``plan``, so the
+    subgoal is never lost to the inflation. The clearance check reads ``plan`` either way."""
     g, parent, seen, order, meta = work[0], work[1], work[3], work[7], work[8]
     stride = width + 2
     c, r = int(x / cell), int(y / cell)
@@ -159,15 +239,26 @@ def waypoint(plan, height, width, cell, x, y, goal_r, goal_c, along, work, exam,
     start, goal = (r + 1) * stride + c + 1, (goal_r + 1) * stride + goal_c + 1
     if plan[start] == BLOCKED:
         return -1, False, -1.0
-    was = plan[goal]
-    plan[goal] = 0
-    search_start(start, goal, stride, DIAGONAL, *work)
-    expanded = search_run(plan, 0, stride, goal, DIAGONAL, *work)
-    plan[goal] = was
-    for k in range(expanded):
-        exam[order[k]] = exam_id
-    if seen[goal] != meta[GEN]:
-        return -1, True, -1.0
+    found = False
+    if wide.shape[0] > 0:
+        was_start, was_goal = wide[start], wide[goal]
+        wide[start], wide[goal] = 0, 0
+        search_start(start, goal, stride, DIAGONAL, *work)
+        expanded = search_run(wide, 0, stride, goal, DIAGONAL, *work)
+        wide[goal], wide[start] = was_goal, was_start
+        for k in range(expanded):
+            exam[order[k]] = exam_id
+        found = seen[goal] == meta[GEN]
+    if not found:
+        was = plan[goal]
+        plan[goal] = 0
+        search_start(start, goal, stride, DIAGONAL, *work)
+        expanded = search_run(plan, 0, stride, goal, DIAGONAL, *work)
+        plan[goal] = was
+        for k in range(expanded):
+            exam[order[k]] = exam_id
+        if seen[goal] != meta[GEN]:
+            return -1, True, -1.0
     # parent links run goal -> start: the node at path length >= along is the last one walking back
     # from the goal whose g is still >= along (g grows along the path from the start)
     node = goal

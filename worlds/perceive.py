@@ -16,7 +16,18 @@ import numpy as np
 from numba import njit
 
 from worlds.geodesic import field_distance, start_field
-from worlds.own_map import CHANGED, ON_PLAN, UNKNOWN, centre, map_rays, plan_clear, plan_from_field, waypoint
+from worlds.own_map import (
+    CHANGED,
+    ON_PLAN,
+    UNKNOWN,
+    centre,
+    inflate,
+    inflation_cells,
+    map_rays,
+    plan_clear,
+    plan_from_field,
+    waypoint,
+)
 
 PATCH_VALUE = np.array([0.5, 0.0, 1.0], dtype=np.float32)
 """occupancy channel of the patch for UNKNOWN, FREE, SEEN_BLOCKED"""
@@ -38,6 +49,9 @@ NO_ACTION = np.int64(-1)
 """index in :attr:`worlds.perception.Perception.params` of the plan length's frame offset (-1: absent)"""
 CLEARANCE_PARAM = 13
 """index in :attr:`worlds.perception.Perception.params` of the subgoal's clearance (m; 0: off)"""
+RADIUS_PARAM = 14
+"""index in :attr:`worlds.perception.Perception.params` of the robot's radius (m), which the plan grid
+is inflated by (:func:`worlds.own_map.inflation_cells`)"""
 
 
 @njit(cache=True, _nrt=False)
@@ -82,13 +96,14 @@ def _frame(out, base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions,
 
 @njit(cache=True, _nrt=False)
 def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell, along, reuse, plans, work,
-             clearance):  # fmt: skip
+             clearance, wide):  # fmt: skip
     """Robot ``i``'s waypoint into ``wpt[i]`` (``plans``). The plan depends on the map, the goal and
     the robot's cell only: it is searched again when one of them changed (``fresh``: a new episode;
     ``dirty``: a cell became blocked or free; ``replan``: one where the last search looked), else
     kept; with ``reuse``, from the plans kept per cell of this plan map, and kept on a new plan map
-    when no change lies where the search that made it looked."""
-    plan, wpt, last, plan_node, stamp, version, exam, exam_id, searches, plan_length, path_length = plans
+    when no change lies where the search that made it looked. ``wide``: robot ``i``'s inflated plan
+    grid, empty when its map's cells need none."""
+    plan, wpt, last, plan_node, stamp, version, exam, exam_id, searches, plan_length, path_length = plans[:11]
     rc, cc = int(y / cell), int(x / cell)
     moved = rc != last[i, 0] or cc != last[i, 1]
     if not (fresh or dirty or moved):
@@ -114,7 +129,7 @@ def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell,
             searches[i] = 0
         searches[i] += 1
         node, searched, path_length[i] = waypoint(
-            plan[i], height, width, cell, x, y, gr, gc, along, work, exam[i], searches[i], clearance
+            plan[i], wide, height, width, cell, x, y, gr, gc, along, work, exam[i], searches[i], clearance
         )
         exam_id[i] = searches[i] if searched else -1
         if on_map:
@@ -139,7 +154,8 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     ``params``: max_range, subgoal kind, subgoal distance, frame offsets of subgoal / action /
     patch (-1: absent), patch size, geodesic weight, number of actions, rays per sector, reuse of
     plans (1) or a search at every replan (0: the straightforward program the reuse must equal),
-    frame offset of the range rates (-1: absent)."""
+    frame offset of the range rates (-1: absent), of the plan length, the subgoal's clearance, the
+    robot's radius (the plan grid's inflation on this map's cells: :mod:`worlds.own_map`)."""
     max_range, sub_kind, along = params[0], int(params[1]), params[2]
     sub_at, act_at, patch_at = int(params[3]), int(params[4]), int(params[5])
     patch, w_geo, n_actions, per = int(params[6]), params[7], int(params[8]), int(params[9])
@@ -150,6 +166,10 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     occ, visits, plans, moves, geo, pgeo, stack = mem
     plan, wpt, exam, exam_id, path_length = plans[0], plans[1], plans[6], plans[7], plans[10]
     height, width, cell, at = mh[m], mw[m], mcell[m], moff[m]
+    inflated = sub_kind != SUB_NONE and plans[11].shape[1] > 0  # worlds.perception allocates for fine cells
+    band = inflation_cells(params[RADIUS_PARAM], cell) if inflated else 0
+    reach = params[RADIUS_PARAM] / cell
+    wide, near = (plans[11][i], plans[12][i]) if band > 0 else (plans[11][i, :0], plans[12][i, :0])
     uses_map = occ.shape[1] > 0
     shaped, shaping = False, 0.0
     if fresh:
@@ -165,6 +185,8 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
             plan_from_field(field, at, plan[i], height, width)
         elif sub_kind == SUB_OWN:
             plan_clear(plan[i], height, width)
+        if band > 0:
+            inflate(plan[i], wide, near, height, width, reach, band)
     elif w_geo > 0.0:
         now = field_distance(moves, at, height, width, geo, i, cell, x, y)
         if math.isfinite(now) and math.isfinite(pgeo[i]):
@@ -175,7 +197,8 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
         own = sub_kind == SUB_OWN  # the plan grid follows the own map
         tracked, seen_by = (plan[i], exam_id[i]) if own else (plan[i, :0], -1)
         flags = map_rays(occ[i], visits[i], tracked, exam[i], seen_by, height, width, cell, x, y, theta,
-                         ray_c, ray_s, rays, max_range, per)  # fmt: skip
+                         ray_c, ray_s, rays, max_range, per, wide, near, reach,
+                         band if own else 0)  # fmt: skip
         dirty = dirty or (own and flags & CHANGED != 0)
         replan = replan or (own and flags & ON_PLAN != 0)
     wx, wy, length = gx, gy, 0.0
@@ -199,6 +222,7 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
             plans,
             work,
             clearance,
+            wide,
         )
         wx, wy, length = wpt[i, 0], wpt[i, 1], path_length[i]
         if length < 0.0:  # no path on the plan map: the straight line

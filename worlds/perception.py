@@ -48,7 +48,7 @@ import numpy as np
 from worlds.config import NavConfig
 from worlds.geodesic import move_masks, new_fields
 from worlds.gridsearch import new_work
-from worlds.own_map import FREE, SEEN_BLOCKED, UNKNOWN
+from worlds.own_map import FREE, SEEN_BLOCKED, UNKNOWN, inflation_cells
 from worlds.perceive import (
     PATCH_VALUE,
     REUSE_PARAM,
@@ -153,6 +153,7 @@ class Perception:
                 layout.get("range_rate", (-1,))[0],  # worlds.perceive.RATE_PARAM
                 layout.get("plan_length", (-1,))[0],  # worlds.perceive.LENGTH_PARAM
                 o.subgoal_clearance,  # worlds.perceive.CLEARANCE_PARAM
+                config.robot.radius,  # worlds.perceive.RADIUS_PARAM
             ],
             dtype=np.float64,
         )
@@ -166,14 +167,17 @@ class Perception:
         self.exam_id = np.full(n, -1, np.int32)
         self.pgeo = np.zeros(n, np.float64)
         self.shape, self._sized_for = (0, 0), None
+        self.inflates = False  # does a map of the bank have cells the plan grid is inflated on?
         self.moves, self._moves_for = np.zeros(0, np.uint8), None  # the geodesic field's move table
-        self._allocate((1, 1))
+        self._allocate((1, 1), False)
 
-    def _allocate(self, shape: tuple[int, int]) -> None:
+    def _allocate(self, shape: tuple[int, int], inflates: bool) -> None:
         """Grids of at least ``shape`` cells per robot, keeping what they hold (padded grids and search
-        rows are indexed with each map's own stride, so their first cells carry over as they are)."""
+        rows are indexed with each map's own stride, so their first cells carry over as they are), and
+        the inflated plan grids once a map needs them (``inflates``)."""
         h, w = max(shape[0], self.shape[0]), max(shape[1], self.shape[1])
-        if (h, w) == self.shape:
+        inflates = inflates or self.inflates
+        if (h, w) == self.shape and inflates == self.inflates:
             return
         cells = (h + 2) * (w + 2)
 
@@ -187,6 +191,9 @@ class Perception:
         self.occ = grow(getattr(self, "occ", None), np.int8, self.uses_map)
         self.visits = grow(getattr(self, "visits", None), np.int32, self.uses_map)
         self.plan = grow(getattr(self, "plan", None), np.uint8, self.plans, flat=True)
+        # the inflated plan grid and its counts (worlds.own_map.inflate), on maps of fine cells only
+        self.wide = grow(getattr(self, "wide", None), np.uint8, self.plans and inflates, flat=True)
+        self.near = grow(getattr(self, "near", None), np.int32, self.plans and inflates, flat=True)
         # per cell: the waypoint cell planned from it (-1: the goal), valid on plan-map version ``stamp``
         self.plan_node = grow(getattr(self, "plan_node", None), np.int32, self.plans)
         self.plan_length = grow(getattr(self, "plan_length", None), np.float64, self.plans)  # and its length
@@ -199,17 +206,20 @@ class Perception:
             for new, prev in zip(self.geo, old, strict=True):
                 new[(slice(None), *(slice(0, k) for k in prev.shape[1:]))] = prev
         self.work = new_work(cells)  # the subgoal's A*, one search at a time
-        self.shape = (h, w)
+        self.shape, self.inflates = (h, w), inflates
 
     def _memory(self, maps) -> tuple:
-        field, moff, mh, mw = maps[:4]
+        field, moff, mh, mw, mcell = maps[:5]
         if mh is not self._sized_for:  # the bank's maps changed: grids big enough for its largest
-            self._allocate((int(mh.max()), int(mw.max())))
+            radius = self.config.robot.radius
+            inflates = any(inflation_cells(radius, float(cell)) > 0 for cell in mcell)
+            self._allocate((int(mh.max()), int(mw.max())), inflates)
             self._sized_for = mh
         if self.geodesic and field is not self._moves_for:
             self.moves, self._moves_for = move_masks(field, moff, mh, mw), field
         plans = (self.plan, self.waypoint, self.last, self.plan_node, self.stamp, self.version, self.exam,
-                 self.exam_id, self.searches, self.plan_length, self.path_length)  # fmt: skip
+                 self.exam_id, self.searches, self.plan_length, self.path_length, self.wide,
+                 self.near)  # fmt: skip
         return self.occ, self.visits, plans, self.moves, self.geo, self.pgeo, self.stack
 
     def _state(self, maps) -> tuple:
