@@ -3,7 +3,9 @@
 A plain MLP architecture (``obs_dim``, ``n_actions``, ``hidden_sizes``, ``activation``) runs in
 numpy (:func:`agents.mlp.mlp_forward`), so an actor or evaluator of an MLP policy never loads
 torch. An architecture with a ``patch`` entry is the CNN-over-the-own-map Q-network of
-:mod:`agents.nnql.patch_network`; it runs that very torch module (the learner's forward, one
+:mod:`agents.nnql.patch_network`, one with ``image`` the CNN over a Gymnasium env's image
+(:mod:`agents.nnql.image_network`), one with ``local`` the action-local branch; each runs that very
+torch module (the learner's forward, one
 definition), without gradients. When that brings torch into the process (an actor, the evaluator,
 ``navlearn evaluate``), torch is held to one intra-op thread, as BLAS is there: a batch of a few
 dozen observations gains nothing from more on 2 shared cores. A process that already runs torch
@@ -19,6 +21,11 @@ from typing import Any, Protocol
 import numpy as np
 
 from agents.mlp import check_layers, mlp_forward, mlp_layers
+
+
+TORCH_ONLY = ("patch", "local", "image")
+"""architecture entries of the Q-network variants that run in torch (agents.nnql.q_networks): the patch
+CNN, the action-local branch, the image CNN"""
 
 
 class Forward(Protocol):
@@ -88,6 +95,6 @@ class TorchForward:
 
 def network_forward(weights: Mapping[str, np.ndarray], architecture: Mapping[str, Any]) -> Forward:
     """The forward pass of ``architecture`` with ``weights``; ValueError when they do not fit."""
-    if "patch" in architecture or "local" in architecture:
+    if any(key in architecture for key in TORCH_ONLY):
         return TorchForward(weights, architecture)
     return MLPForward(weights, architecture)

@@ -18,6 +18,11 @@ flattened to one float vector by gymnasium's own ``FlattenObservation`` (a ``Box
 episode's terminal observation is in ``info["final_obs"]``, its info in ``info["final_info"]``, and
 ``terminated`` and ``truncated`` come through as the env said them.
 
+An observation that is an image (:func:`image_description`: a ``Box`` of shape (H, W, C) or (C, H, W),
+uint8 0..255, C in 1, 3 or 4, Stable-Baselines3's convention) travels flat all the same; the learner
+reads its shape and layout from its own copy of the env (:func:`describe_env`) and, with ``--network
+auto``, learns it with a CNN (agents.nnql.image_network).
+
 A run names its env by :meth:`EnvConfig.signature` (announced in every transition batch, checked by the
 learner) and records it with :meth:`EnvConfig.record` (in the weights and in saved policies, so
 ``navlearn evaluate --policy`` rebuilds the same env).
@@ -31,7 +36,7 @@ import hashlib
 import importlib
 import json
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -228,13 +233,71 @@ def make_env(config: EnvConfig) -> Any:
         ) from None
 
 
-def env_spaces(config: EnvConfig) -> tuple[int, int]:
-    """(observation width, number of actions) of the env as NNQL takes it (one copy built and closed)."""
+IMAGE_CHANNELS = (1, 3, 4)
+"""an image's channel counts: grey, RGB, RGB-D or RGBA (Stable-Baselines3's ``is_image_space``)"""
+IMAGE_SCALE = 1.0 / 255.0
+"""what an image's uint8 values are multiplied by before the convolutions (0..255 to 0..1)"""
+
+
+def image_description(space: Any) -> dict[str, Any] | None:
+    """What the learner needs of an image observation space, or None when ``space`` is not one.
+
+    An image is what Stable-Baselines3 calls one (``stable_baselines3.common.preprocessing.
+    is_image_space`` with ``check_channels=True``; SB3 is not imported, only its rule followed, so every
+    tool agrees on which envs get a CNN): a ``Box`` of 3 dimensions, dtype uint8, low 0 and high 255
+    everywhere, whose channels (the smallest dimension first, as SB3's ``is_image_space_channels_first``
+    decides: first if it is the smallest, last otherwise) number 1, 3 or 4. Its description:
+    ``shape`` (the space's own shape, so the flat vector of ``FlattenObservation``, which flattens in C
+    order, reshapes to it), ``channels_last`` (H, W, C) or not (C, H, W), and ``scale`` (1/255).
+    A ``Dict`` observation with an image part is not described (it is learned by the MLP, flattened):
+    the part's place in the flat vector would be one more layout to record."""
+    from gymnasium import spaces
+
+    if not isinstance(space, spaces.Box) or len(space.shape) != 3 or space.dtype != np.uint8:
+        return None
+    if np.any(space.low != 0) or np.any(space.high != 255):
+        return None
+    channels_last = int(np.argmin(space.shape)) != 0
+    channels = space.shape[-1] if channels_last else space.shape[0]
+    if channels not in IMAGE_CHANNELS:
+        return None
+    return {"shape": [int(n) for n in space.shape], "channels_last": channels_last, "scale": IMAGE_SCALE}
+
+
+def image_hwc(image: dict[str, Any]) -> tuple[int, int, int]:
+    """(height, width, channels) of an :func:`image_description`."""
+    shape = [int(n) for n in image["shape"]]
+    height, width, channels = shape if image["channels_last"] else (shape[1], shape[2], shape[0])
+    return height, width, channels
+
+
+class EnvSpaces(NamedTuple):
+    """What NNQL's networks are sized by: the flat observation's width, the actions, and the image
+    the flat observation is (:func:`image_description`; None when it is not one)."""
+
+    obs_dim: int
+    n_actions: int
+    image: dict[str, Any] | None
+
+
+def describe_env(config: EnvConfig) -> EnvSpaces:
+    """:class:`EnvSpaces` of the env as NNQL takes it (one copy built and closed); the image is read
+    from the observation space before ``FlattenObservation``."""
+    from gymnasium.wrappers import FlattenObservation
+
     env = make_env(config)
     try:
-        return int(np.prod(env.observation_space.shape)), int(env.action_space.n)
+        raw = env.env.observation_space if isinstance(env, FlattenObservation) else env.observation_space
+        obs_dim = int(np.prod(env.observation_space.shape))
+        return EnvSpaces(obs_dim, int(env.action_space.n), image_description(raw))
     finally:
         env.close()
+
+
+def env_spaces(config: EnvConfig) -> tuple[int, int]:
+    """(observation width, number of actions) of the env as NNQL takes it (:func:`describe_env`)."""
+    spaces = describe_env(config)
+    return spaces.obs_dim, spaces.n_actions
 
 
 def make_vector_env(config: EnvConfig, num_envs: int) -> Any:

@@ -210,10 +210,10 @@ class NIRLConfig:
             raise ValueError("NIRLConfig: Boltzmann temperatures must be > 0")
         if isinstance(self.local, dict):  # from a saved config
             self.local = LocalConfig(**self.local)
-        if self.network not in NETWORKS or self.network == "patch":
+        if self.network not in NETWORKS or self.network in ("patch", "cnn"):
             raise ValueError(
                 f"NIRLConfig.network={self.network!r}: expected auto, local or mlp (NIRL's observations,"
-                " learning and learning_plan, have no own-map patch)"
+                " learning and learning_plan, have no own-map patch and are no image)"
             )
         if min(self.iterations, self.steps_per_iteration, self.reward_updates, self.q_updates) < 0:
             raise ValueError("NIRLConfig: iteration counts must be >= 0")

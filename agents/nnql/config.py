@@ -2,9 +2,10 @@
 Q-network variants it selects with one field (``network``).
 
 Each variant is a module (agents.nnql.networks: the MLP; agents.nnql.action_local: the action-local
-branch; agents.nnql.patch_network: the patch CNN), built by agents.nnql.q_networks from the config
+branch; agents.nnql.patch_network: the patch CNN; agents.nnql.image_network: the CNN over a Gymnasium
+env's image observation), built by agents.nnql.q_networks from the config
 below that is its own. The configs live here, not beside the torch modules, so every command's flags
-(services.common.options: ``--local-window``, ``--patch-channels``, ...) are built without torch.
+(services.common.options: ``--local-window``, ``--patch-channels``, ``--cnn-channels``, ...) are built without torch.
 """
 
 from __future__ import annotations
@@ -15,13 +16,14 @@ from typing import Any
 
 from agents.mlp import ACTIVATION_NAMES
 from protocols.messages import EXPLORATIONS
+from worlds.own_env import image_hwc
 
 STORAGES = ("memory", "memmap")
 """Where a replay keeps its transitions (agents.nnql.replay_storage): RAM or memory-mapped files."""
 
 TARGET_UPDATES = ("soft", "hard")
 LOSS_FUNCTIONS = ("l2", "smooth_l1", "l1")
-NETWORKS = ("auto", "mlp", "local", "patch")
+NETWORKS = ("auto", "mlp", "local", "patch", "cnn")
 """the Q-network variants NNQLConfig.network chooses among (agents.nnql.q_networks)"""
 CONV_FIELDS = ("channels", "kernel_sizes", "strides")
 RETIRED_FIELDS = ("recurrent", "lstm_size", "seq_len", "burn_in", "sequences")
@@ -90,6 +92,99 @@ class PatchConfig:
         return {**dataclasses.asdict(self), **{name: list(getattr(self, name)) for name in CONV_FIELDS}}
 
 
+NATURE_MIN_SIDE = 36
+"""the shorter side, in pixels, from which an image gets the Nature DQN convolutions (the smallest
+image they reduce to 1x1: 36 -> 8 -> 3 -> 1)"""
+NATURE = ((32, 64, 64), (8, 4, 3), (4, 2, 1))
+"""Mnih et al. 2015's convolutions (channels, kernel sizes, strides), Stable-Baselines3's NatureCNN"""
+MINIGRID = ((16, 32, 64), (2, 2, 2), (1, 1, 1))
+"""rl-starter-files' MiniGrid CNN (model.py, ACModel.image_conv): 2x2 stride-1 convolutions, a 2x2
+max-pool after the first"""
+
+
+@dataclass
+class ImageConfig:
+    """The image CNN (agents.nnql.image_network), network "cnn": convolutions with ReLU over a Gymnasium
+    env's image observation (worlds.own_env.image_description) scaled to 0..1, flattened into the MLP
+    head of ``hidden_sizes`` and ``activation`` (dueling as ``dueling`` says).
+
+    The convolutions, left empty (the default), follow the image's shorter side: from 36 px (Atari's 84,
+    a 64x64 render) the Nature DQN stack (:data:`NATURE`: 32 8x8 stride 4, 64 4x4 stride 2, 64 3x3
+    stride 1); below (MiniGrid's 7x7x3 view) rl-starter-files' MiniGrid CNN (:data:`MINIGRID`: 16, 32
+    and 64 channels of 2x2 stride 1, a 2x2 max-pool after the first), the max-pool left out where it
+    would shrink the view below 1x1 (under 7 px), and under 4 px only the convolutions that fit."""
+
+    channels: tuple[int, ...] = field(default=(), metadata={"shown": "by the image's size"})
+    """output channels of each convolution; empty: by the image's shorter side, from 36 px the Nature
+    DQN stack (32 8x8/4, 64 4x4/2, 64 3x3/1), below it 2x2 stride-1 convolutions of 16, 32, 64 channels
+    with a 2x2 max-pool after the first where the view stays >= 1x1 (rl-starter-files' MiniGrid CNN)"""
+    kernel_sizes: tuple[int, ...] = field(default=(), metadata={"shown": "by the image's size"})
+    """kernel side of each convolution (with --cnn-channels; empty: by the image's size)"""
+    strides: tuple[int, ...] = field(default=(), metadata={"shown": "by the image's size"})
+    """stride of each convolution (with --cnn-channels; empty: by the image's size)"""
+
+    def __post_init__(self) -> None:
+        for name in CONV_FIELDS:
+            setattr(self, name, tuple(int(v) for v in getattr(self, name)))
+        given = [getattr(self, name) for name in CONV_FIELDS]
+        if any(given) and (min(min(v, default=0) for v in given) < 1 or len({len(v) for v in given}) != 1):
+            raise ValueError(
+                f"ImageConfig channels={self.channels}, kernel_sizes={self.kernel_sizes}, strides="
+                f"{self.strides}: give all three with one positive value per convolution (--cnn-channels, "
+                "--cnn-kernel-sizes, --cnn-strides), or none for the stack by the image's size"
+            )
+
+    def convolutions(self, image: dict[str, Any]) -> dict[str, Any]:
+        """The convolutions over ``image`` (an image description): ``channels``, ``kernel_sizes``,
+        ``strides``, ``pool`` (the side of a max-pool after the first, 0: none) and ``out`` (the side
+        of the last feature maps, height and width). ValueError naming the options when given ones do
+        not fit the image."""
+        height, width, _ = image_hwc(image)
+        if self.channels:
+            conv = {"channels": list(self.channels), "kernel_sizes": list(self.kernel_sizes),
+                    "strides": list(self.strides), "pool": 0}  # fmt: skip
+        else:
+            conv = default_convolutions(min(height, width))
+        out = [conv_out(side, conv) for side in (height, width)]
+        if min(out) < 1 and not self.channels:
+            raise ValueError(
+                f"network cnn: a {height}x{width} image is too small for a 2x2 convolution; learn it "
+                "flattened with --network mlp"
+            )
+        if min(out) < 1:
+            raise ValueError(
+                f"--cnn-channels {self.channels} --cnn-kernel-sizes {self.kernel_sizes} --cnn-strides "
+                f"{self.strides}: convolutions that shrink a {height}x{width} image below 1x1; give smaller "
+                "kernels or strides, or none for the stack by the image's size"
+            )
+        return {**conv, "out": out}
+
+    def to_dict(self) -> dict[str, Any]:
+        return {name: list(getattr(self, name)) for name in CONV_FIELDS}
+
+
+def default_convolutions(side: int) -> dict[str, Any]:
+    """:class:`ImageConfig`'s rule: the convolutions of an image whose shorter side is ``side`` px."""
+    stack = NATURE if side >= NATURE_MIN_SIDE else MINIGRID
+    conv = {"channels": list(stack[0]), "kernel_sizes": list(stack[1]), "strides": list(stack[2]), "pool": 0}
+    if stack is NATURE:
+        return conv
+    if conv_out(side, {**conv, "pool": 2}) >= 1:
+        return {**conv, "pool": 2}
+    fit = max(1, min(3, side - 1))  # each 2x2 stride-1 convolution takes one pixel off
+    return {name: value[:fit] if isinstance(value, list) else value for name, value in conv.items()}
+
+
+def conv_out(side: int, conv: dict[str, Any]) -> int:
+    """The side of the feature maps that ``conv``'s convolutions (no padding; ``pool`` after the first)
+    leave of ``side`` pixels."""
+    for i, (kernel, stride) in enumerate(zip(conv["kernel_sizes"], conv["strides"], strict=True)):
+        side = (side - kernel) // stride + 1 if side >= kernel else 0
+        if i == 0 and conv["pool"]:
+            side //= conv["pool"]
+    return side
+
+
 @dataclass
 class NNQLConfig:
     """Neural-network Q-learning: Q-network, replay, loss, target network and exploration.
@@ -135,8 +230,8 @@ class NNQLConfig:
     dueling: bool = True
     """dueling head of the MLP (networks mlp and local): Q = V(s) + A(s, a) - mean_a A(s, a) over the last
     hidden layer (Wang et al. 2016), saved folded into one linear layer, so actors run the plain MLP
-    forward; on by default (the shipped policy's recipe, chosen on validation); the patch network keeps
-    a plain head whatever this says"""
+    forward; on by default (the shipped policy's recipe, chosen on validation); the cnn network's head
+    is dueling too (unfolded: it runs in torch); the patch network keeps a plain head whatever this says"""
     double_q: bool = True
     """double Q-learning: the online network picks the next action, the target network values it"""
     sarsa: bool = False
@@ -168,11 +263,16 @@ class NNQLConfig:
     branch, ``local``), patch (a CNN over the own-map patch beside the MLP, ``patch``; needs
     observation.patch_size > 0) or auto: patch when the observation has a patch, local on navlearn's
     world's other observations (the shipped policy's recipe), mlp where no navlearn observation says
-    where the readings are (a Gymnasium env, --env)"""
+    where the readings are (a Gymnasium env, --env); cnn (convolutions over a Gymnasium env's image
+    observation, then the MLP, ``cnn``): what auto picks for an env whose observation is an image (a Box
+    (H, W, C) or (C, H, W) of uint8 0..255 with 1, 3 or 4 channels, Stable-Baselines3's rule; --network
+    mlp learns it flattened instead)"""
     local: LocalConfig = field(default_factory=LocalConfig)
     """network local's own settings (the action-local branch)"""
     patch: PatchConfig = field(default_factory=PatchConfig)
     """network patch's own settings (the patch CNN)"""
+    cnn: ImageConfig = field(default_factory=ImageConfig)
+    """network cnn's own settings (the image CNN)"""
 
     def __post_init__(self) -> None:
         self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)
@@ -180,6 +280,8 @@ class NNQLConfig:
             self.local = LocalConfig(**self.local)
         if isinstance(self.patch, dict):
             self.patch = PatchConfig(**self.patch)
+        if isinstance(self.cnn, dict):
+            self.cnn = ImageConfig(**self.cnn)
         checks = {
             "activation": (self.activation, ACTIVATION_NAMES),
             "target_update": (self.target_update, TARGET_UPDATES),
@@ -209,15 +311,19 @@ class NNQLConfig:
         if self.sarsa and self.double_q:
             raise ValueError("NNQLConfig: sarsa bootstraps on the taken action; set double_q=False")
 
-    def resolved(self, observation: dict[str, Any] | None) -> NNQLConfig:
+    def resolved(
+        self, observation: dict[str, Any] | None, image: dict[str, Any] | None = None
+    ) -> NNQLConfig:
         """This config with ``network`` the variant it builds on ``observation`` (navlearn's observation
-        settings, ``worlds.config.observation_settings``; None for another env): "auto" resolved as its
-        docstring says. ValueError, naming the option, for a variant the observation cannot feed or a
-        variant's settings changed while another variant is built (they would be silently ignored)."""
+        settings, ``worlds.config.observation_settings``; None for another env) or ``image`` (a
+        Gymnasium env's image observation, ``worlds.own_env.image_description``; None when it is not
+        one): "auto" resolved as its docstring says. ValueError, naming the option, for a variant the
+        observation cannot feed or a variant's settings changed while another variant is built (they
+        would be silently ignored)."""
         has_patch = bool((observation or {}).get("observation.patch_size"))
         network = self.network
         if network == "auto":
-            network = "patch" if has_patch else "local" if observation else "mlp"
+            network = "patch" if has_patch else "local" if observation else "cnn" if image else "mlp"
         if network == "patch" and not has_patch:
             raise ValueError(
                 "NNQLConfig.network='patch' needs an observation with the own-map patch "
@@ -229,12 +335,25 @@ class NNQLConfig:
                 "navlearn's observation settings put them; build the learner with its observation (another "
                 "env: --network mlp)"
             )
-        for name, default in (("local", LocalConfig()), ("patch", PatchConfig())):
+        if network == "cnn" and not image:
+            what = "navlearn's world observes range readings and the goal" if observation else (
+                "this env's observation is not one")
+            raise ValueError(
+                f"NNQLConfig.network='cnn' (--network cnn) needs an image observation, and {what} (an "
+                "image: a Box (H, W, C) or (C, H, W) of uint8 0..255 with 1, 3 or 4 channels, "
+                "worlds.own_env.image_description); drop --network cnn (auto picks the variant) or give "
+                "--network mlp"
+            )
+        if network == "cnn":
+            self.cnn.convolutions(image)  # given convolutions that do not fit: refused now
+        defaults = (("local", LocalConfig()), ("patch", PatchConfig()), ("cnn", ImageConfig()))
+        for name, default in defaults:
             if network != name and getattr(self, name) != default:
                 raise ValueError(
                     f"NNQLConfig.{name}={getattr(self, name)} shapes network {name!r}, and this config "
                     f"builds {network!r} (network={self.network!r}): add --network {name}"
                     + (" and --patch-size" if name == "patch" and not has_patch else "")
+                    + (" with an --env whose observation is an image" if name == "cnn" and not image else "")
                     + f" or drop the --{name}-* options"
                 )
         return dataclasses.replace(self, network=network)
@@ -244,6 +363,7 @@ class NNQLConfig:
         data = dataclasses.asdict(self)
         data["hidden_sizes"] = list(self.hidden_sizes)
         data["patch"] = self.patch.to_dict()
+        data["cnn"] = self.cnn.to_dict()
         return data
 
     @classmethod

@@ -43,6 +43,7 @@ from agents.nnql.persistence import (
     check_checkpoint_observation,
 )
 from agents.nnql.policy import NNQLPolicy
+from agents.nnql.image_network import architecture_image
 from agents.nnql.q_networks import build_q_network
 from agents.nnql.replay_storage import (
     columns,
@@ -62,7 +63,9 @@ class NNQLLearner(LearnerOutputs):
     ``add(batch)`` inserts transitions; ``update(n)`` runs n updates (how many, the caller's
     agents.nnql.ratelimit.RateLimiter says); ``version`` counts updates. ``device``:
     cpu, cuda or auto (see ``agents.device``); ``replay_dir``: keep the replay in memory-mapped
-    files there instead of RAM (uniform sampling only).
+    files there instead of RAM (uniform sampling only). ``observation``: navlearn's observation settings
+    (None for a Gymnasium env); ``image``: a Gymnasium env's image observation
+    (``worlds.own_env.image_description``), which network "auto" learns with a CNN.
     """
 
     def __init__(
@@ -74,6 +77,7 @@ class NNQLLearner(LearnerOutputs):
         device: str = "cpu",
         replay_dir: str | Path | None = None,
         observation: Mapping[str, Any] | None = None,
+        image: Mapping[str, Any] | None = None,
     ):
         if replay_dir is not None and config.prioritized:
             raise ValueError(
@@ -82,14 +86,18 @@ class NNQLLearner(LearnerOutputs):
             )
         self.observation = None if observation is None else dict(observation)
         """what the network observes (``worlds.config.observation_settings``), recorded in saved policies"""
-        self.config = config.resolved(self.observation)
+        self.image = None if image is None else dict(image)
+        """a Gymnasium env's image observation (``worlds.own_env.image_description``), None if not one"""
+        self.config = config.resolved(self.observation, self.image)
         """the config with ``network`` the variant built ("auto" resolved), as checkpoints and policies
         record it"""
         config = self.config
         self.device = resolve_device(device)
         torch.set_num_threads(config.torch_threads)
         torch.manual_seed(config.seed)
-        self.network = build_q_network(config, obs_dim, n_actions, self.observation).to(self.device)
+        self.network = build_q_network(config, obs_dim, n_actions, self.observation, self.image).to(
+            self.device
+        )
         self.loss = make_loss(config, make_q_actor(self.network))
         if config.target_update == "soft":
             self.target_updater = SoftUpdate(self.loss, tau=config.target_tau)
@@ -327,6 +335,6 @@ class NNQLLearner(LearnerOutputs):
         arch = state["architecture"]
         config = NNQLConfig.from_dict(state["config"], state.get("observation"))
         learner = cls(config, arch["obs_dim"], arch["n_actions"], device=device, replay_dir=replay_dir,
-                      observation=state.get("observation"))  # fmt: skip
+                      observation=state.get("observation"), image=architecture_image(arch))  # fmt: skip
         learner.load_checkpoint(path)
         return learner

@@ -31,7 +31,7 @@ from agents.nnql.ratelimit import RateLimiter
 from agents.nnql.rollout import EpisodeEnd, VectorRollout
 from agents.nnql.train_config import LocalTrainConfig
 from worlds.config import LEARNING_NAV, NavConfig, observation_settings, with_moving_discs
-from worlds.own_env import EnvConfig, make_vector_env
+from worlds.own_env import EnvConfig, describe_env, make_vector_env
 from worlds.vector_env import NavigationVectorEnv
 
 CURVE_EVERY = 2_000
@@ -128,9 +128,10 @@ def train_local(
     else:
         env = make_vector_env(gym_env, run.envs)
         observation = None
+    image = None if gym_env is None else describe_env(gym_env).image  # network auto: a CNN for an image
     obs_dim = int(np.prod(env.single_observation_space.shape))
     n_actions = int(env.single_action_space.n)
-    learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation)
+    learner = NNQLLearner(nnql, obs_dim, n_actions, device=run.device, observation=observation, image=image)
     nnql = learner.config  # network "auto" resolved: what the outputs record
     learner.env = None if gym_env is None else gym_env.record()
     if initial_weights is not None:

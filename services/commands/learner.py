@@ -73,7 +73,7 @@ def main(args: argparse.Namespace) -> int:
         nnql = options_from_args(
             NNQLConfig, args, "NAVLEARN_NNQL", base=config_file(args.nnql_config, NNQLConfig)
         )
-        learner_network(nnql, config.observation, env.own_world)  # its Q-network variant, before it starts
+        learner_network(nnql, config.observation, env)  # its Q-network variant, before it starts
         nirl = nirl_config(args, nnql.seed) if config.nirl else None
         settings = settings_from_args(args)
         if args.zenoh_mode is None and settings.connect:

@@ -14,7 +14,7 @@ from agents.nnql.config import NNQLConfig
 from agents.nnql.train_config import LocalTrainConfig, TrainObservation
 from services.common.options import OptionError, add_options, options_from_args
 from worlds.config import observation_settings
-from worlds.own_env import ENV_TITLE, EnvConfig, env_spaces
+from worlds.own_env import ENV_TITLE, EnvConfig, describe_env
 
 DESCRIPTION = """\
 Train the NNQL policy (neural-network Q-learning, thesis ch. 4) in one process: a vector env of N
@@ -57,12 +57,13 @@ def configs(args: argparse.Namespace):
     if run.moving_discs < 0 or run.eval_dynamic_episodes < 0:
         raise OptionError("--moving-discs and --eval-dynamic-episodes must be >= 0")
     env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
+    image = None
     if not env.own_world:
         if nav.observation.patch_size:
             raise OptionError("--patch-size is for navlearn's world; drop it with --env")
-        env_spaces(env)  # a bad id or a continuous action space: refused now, with its sentence
+        image = describe_env(env).image  # a bad id or a continuous action space: refused now, with its sentence
     # the Q-network variant this observation can feed, its settings used: refused now, not in training
-    nnql.resolved(observation_settings(nav) if env.own_world else None)
+    nnql.resolved(observation_settings(nav) if env.own_world else None, image)
     return run, nnql, nav, env
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from agents.device import DEVICES
 from agents.nnql.config import STORAGES, NNQLConfig
 from worlds.config import OBSERVATIONS, observation_field, observation_settings
+from worlds.own_env import EnvConfig, describe_env
 
 SARSA_LOCAL_ONLY = (
     "the SARSA variant needs the next action taken, which transition batches do not carry; "
@@ -23,12 +24,14 @@ the arguments are parsed (services.common.options.add_options' ``refuse``; ``pat
 option of the patch network)"""
 
 
-def learner_network(nnql: NNQLConfig, observation: str, own_world: bool) -> NNQLConfig:
+def learner_network(nnql: NNQLConfig, observation: str, env: EnvConfig) -> NNQLConfig:
     """``nnql`` with the Q-network variant the learner builds for the actors' ``observation`` (an
-    OBSERVATIONS name; none for a Gymnasium env): a variant it cannot feed (``--network patch``,
-    ``--network local`` with --env) is a ValueError while the arguments are checked, before any process
-    starts."""
-    return nnql.resolved(observation_settings(OBSERVATIONS[observation]) if own_world else None)
+    OBSERVATIONS name) or ``env`` (a Gymnasium env: one copy built, its image read): a variant it cannot
+    feed (``--network patch``, ``--network local`` with --env, ``--network cnn`` without an image) is a
+    ValueError while the arguments are checked, before any process starts."""
+    if env.own_world:
+        return nnql.resolved(observation_settings(OBSERVATIONS[observation]))
+    return nnql.resolved(None, describe_env(env).image)
 
 
 @dataclass

@@ -24,7 +24,7 @@ from services.learner.service import LearnerService
 from services.ops.router import exposure_warning
 from worlds.config import OBSERVATIONS, observation_settings
 from worlds.env import observation_space
-from worlds.own_env import EnvConfig, env_spaces
+from worlds.own_env import EnvConfig, describe_env, image_hwc
 
 log = logging.getLogger("navlearn.learner")
 
@@ -71,6 +71,7 @@ def _run_learner(
     env: EnvConfig,
 ) -> int:
     nav = OBSERVATIONS[config.observation]  # what the actors observe
+    image = None  # navlearn's world observes no image
     if env.own_world:
         obs_dim, n_actions = int(observation_space(nav).shape[0]), nav.robot.n_actions
         observation = observation_settings(nav)
@@ -80,12 +81,22 @@ def _run_learner(
                 f"--nirl learns from navlearn's world and its expert; with --env {env.env} train NNQL only "
                 "(drop --nirl)"
             )
-        obs_dim, n_actions = env_spaces(env)  # one copy built: the env's own spaces, flattened
+        # one copy built: the env's own spaces, flattened, and the image its observation is, if one
+        obs_dim, n_actions, image = describe_env(env)
         observation = None  # no navlearn observation settings: the env record says what it is
-        log.info("learner: env %s, %d inputs, %d actions", env.signature(), obs_dim, n_actions)
     learner = NNQLLearner(
-        nnql, obs_dim, n_actions, device=config.device, replay_dir=config.replay_dir, observation=observation
-    )
+        nnql, obs_dim, n_actions, device=config.device, replay_dir=config.replay_dir, observation=observation,
+        image=image,
+    )  # fmt: skip
+    if not env.own_world:
+        log.info(
+            "learner: env %s, %d inputs%s, %d actions, network %s",
+            env.signature(),
+            obs_dim,
+            "" if image is None else " (image {}x{}x{})".format(*image_hwc(image)),
+            n_actions,
+            learner.config.network,
+        )
     learner.env = env.record()
     demos = DemoBuffer(config.demo_capacity, obs_dim, seed=nnql.seed)
     limits = Limits(n_actions=n_actions, max_obs_dim=obs_dim)
