@@ -22,7 +22,6 @@ import numpy as np
 
 from agents.mlp import check_layers, mlp_forward, mlp_layers
 
-
 TORCH_ONLY = ("patch", "local", "image")
 """architecture entries of the Q-network variants that run in torch (agents.nnql.q_networks): the patch
 CNN, the action-local branch, the image CNN"""

@@ -87,6 +87,38 @@ TINY_ENVS = textwrap.dedent(
 
     def make_box(limit=Corridor.LIMIT):
         return Corridor(limit)
+
+
+    class GridImage(gym.Env):
+        """An 8x8 grid seen as an 8x8x3 uint8 image (an image by SB3's rule): channel 0 is the agent,
+        channel 1 the goal; actions 0..3 move up, down, left, right; reaching the goal: +1, terminated,
+        is_success; 16 steps at most."""
+
+        SIZE, MOVES = 8, ((-1, 0), (1, 0), (0, -1), (0, 1))
+
+        def __init__(self, limit=16):
+            self.limit = int(limit)
+            self.action_space = spaces.Discrete(4)
+            self.observation_space = spaces.Box(0, 255, (self.SIZE, self.SIZE, 3), np.uint8)
+
+        def observe(self):
+            image = np.zeros((self.SIZE, self.SIZE, 3), np.uint8)
+            image[self.pos[0], self.pos[1], 0] = image[self.goal[0], self.goal[1], 1] = 255
+            return image
+
+        def reset(self, *, seed=None, options=None):
+            super().reset(seed=seed)
+            self.goal = np.array([self.SIZE - 1, self.SIZE - 1])
+            self.pos, self.t = self.np_random.integers(0, self.SIZE - 1, 2), 0
+            return self.observe(), {}
+
+        def step(self, action):
+            self.pos = np.clip(self.pos + self.MOVES[int(action)], 0, self.SIZE - 1)
+            self.t += 1
+            goal = bool((self.pos == self.goal).all())
+            truncated = not goal and self.t >= self.limit
+            info = {"is_success": goal} if goal or truncated else {}
+            return self.observe(), 1.0 if goal else -0.01, goal, truncated, info
     '''
 )
 
@@ -208,6 +240,34 @@ def test_up_trains_and_evaluates_a_users_env_through_the_real_processes(
     shown = navlearn("evaluate", "--policy", str(out / "policy"), "--episodes", "4")
     assert shown.returncode == 0, shown.stderr
     assert f"{user_module}:{factory}: return" in shown.stdout and "over 4 episodes" in shown.stdout
+
+
+def test_up_learns_an_image_env_with_the_cnn_through_the_real_processes(
+    user_module: str, tmp_path: Path
+) -> None:
+    """An env observing an 8x8x3 uint8 image: the learner builds the CNN (network auto), the actors and
+    the evaluator run it from the weights' architecture, and the saved policy evaluates alone."""
+    out, name = tmp_path / "run", f"{user_module}:GridImage"
+    done = navlearn(
+        "up", "--env", name, "--run", "tinyimage", "--out", str(out), "--actors", "1", "--envs", "4",
+        "--duration", "8", "--eval-episodes", "10", "--hidden-sizes", "16", "--learning-starts", "200",
+        "--checkpoint-every", "30",
+    )  # fmt: skip
+    assert done.returncode == 0, (done.stdout, done.stderr)
+    learner_log = (out / "logs" / "learner.log").read_text()
+    assert "192 inputs (image 8x8x3), 4 actions, network cnn" in learner_log, learner_log
+    last = json.loads((out / "summary.json").read_text())["last_evaluation"]["metrics"][name]
+    assert last["episodes"] == 10 and "success" in last
+    saved = json.loads((out / "policy" / "config.json").read_text())
+    image = saved["architecture"]["image"]
+    assert image["shape"] == [8, 8, 3] and image["channels_last"] and image["pool"] == 2
+    assert load_policy(out / "policy").obs_dim == 192
+    shown = navlearn("evaluate", "--policy", str(out / "policy"), "--episodes", "4")
+    assert shown.returncode == 0, shown.stderr
+    assert f"{name}: return" in shown.stdout and "over 4 episodes" in shown.stdout
+    box = f"{user_module}:make_box"
+    refused = navlearn("up", "--env", box, "--network", "cnn", "--out", str(tmp_path / "no"))
+    assert refused.returncode == 2 and "--network cnn) needs an image observation" in refused.stderr
 
 
 def test_an_actor_of_another_env_is_refused_by_the_learner_naming_both(

@@ -5,7 +5,8 @@ Each variant is a module (agents.nnql.networks: the MLP; agents.nnql.action_loca
 branch; agents.nnql.patch_network: the patch CNN; agents.nnql.image_network: the CNN over a Gymnasium
 env's image observation), built by agents.nnql.q_networks from the config
 below that is its own. The configs live here, not beside the torch modules, so every command's flags
-(services.common.options: ``--local-window``, ``--patch-channels``, ``--cnn-channels``, ...) are built without torch.
+(services.common.options: ``--local-window``, ``--patch-channels``, ``--cnn-channels``, ...) are built
+without torch.
 """
 
 from __future__ import annotations
@@ -311,9 +312,7 @@ class NNQLConfig:
         if self.sarsa and self.double_q:
             raise ValueError("NNQLConfig: sarsa bootstraps on the taken action; set double_q=False")
 
-    def resolved(
-        self, observation: dict[str, Any] | None, image: dict[str, Any] | None = None
-    ) -> NNQLConfig:
+    def resolved(self, observation: dict[str, Any] | None, image: dict[str, Any] | None = None) -> NNQLConfig:
         """This config with ``network`` the variant it builds on ``observation`` (navlearn's observation
         settings, ``worlds.config.observation_settings``; None for another env) or ``image`` (a
         Gymnasium env's image observation, ``worlds.own_env.image_description``; None when it is not
@@ -336,8 +335,8 @@ class NNQLConfig:
                 "env: --network mlp)"
             )
         if network == "cnn" and not image:
-            what = "navlearn's world observes range readings and the goal" if observation else (
-                "this env's observation is not one")
+            world = "navlearn's world observes range readings and the goal"
+            what = world if observation else "this env's observation is not one"
             raise ValueError(
                 f"NNQLConfig.network='cnn' (--network cnn) needs an image observation, and {what} (an "
                 "image: a Box (H, W, C) or (C, H, W) of uint8 0..255 with 1, 3 or 4 channels, "

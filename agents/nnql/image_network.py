@@ -112,9 +112,16 @@ class ImageQNetwork(nn.Module):
             "n_actions": int(arch["n_actions"]),
             "hidden_sizes": [int(h) for h in arch["hidden_sizes"]],
             "activation": arch["activation"],
-            "image": {"shape": list(self.shape), "channels_last": self.channels_last, "scale": self.scale,
-                      "channels": sizes, "kernel_sizes": kernels, "strides": strides, "pool": pool,
-                      "cnn_features": int(features)},  # fmt: skip
+            "image": {
+                "shape": list(self.shape),
+                "channels_last": self.channels_last,
+                "scale": self.scale,
+                "channels": sizes,
+                "kernel_sizes": kernels,
+                "strides": strides,
+                "pool": pool,
+                "cnn_features": int(features),
+            },
         }
         if arch.get("dueling"):
             self.architecture["dueling"] = True

@@ -32,6 +32,7 @@ from torchrl.objectives import HardUpdate, SoftUpdate
 
 from agents.device import resolve_device
 from agents.nnql.config import NNQLConfig
+from agents.nnql.image_network import architecture_image
 from agents.nnql.lean import Batch, LeanUpdate, Step
 from agents.nnql.losses import PRIORITY_KEY, make_loss
 from agents.nnql.networks import export_weights, import_weights, make_q_actor
@@ -43,7 +44,6 @@ from agents.nnql.persistence import (
     check_checkpoint_observation,
 )
 from agents.nnql.policy import NNQLPolicy
-from agents.nnql.image_network import architecture_image
 from agents.nnql.q_networks import build_q_network
 from agents.nnql.replay_storage import (
     columns,

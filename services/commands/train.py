@@ -61,7 +61,8 @@ def configs(args: argparse.Namespace):
     if not env.own_world:
         if nav.observation.patch_size:
             raise OptionError("--patch-size is for navlearn's world; drop it with --env")
-        image = describe_env(env).image  # a bad id or a continuous action space: refused now, with its sentence
+        # a bad id or a continuous action space: refused now, with its sentence
+        image = describe_env(env).image
     # the Q-network variant this observation can feed, its settings used: refused now, not in training
     nnql.resolved(observation_settings(nav) if env.own_world else None, image)
     return run, nnql, nav, env
