@@ -151,7 +151,7 @@ def test_bad_values_raise_value_errors_naming_the_field():
     with pytest.raises(ValueError, match="kernel_sizes"):
         PatchConfig(kernel_sizes=())
     with pytest.raises(ValueError, match="network"):
-        NNQLConfig(network="cnn")
+        NNQLConfig(network="conv")
     with pytest.raises(ValueError, match="window"):
         LocalConfig(window=0)
     with pytest.raises(ValueError, match="patch_size"):

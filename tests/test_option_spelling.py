@@ -141,6 +141,9 @@ def test_the_training_commands_share_the_nnql_options_and_the_old_spellings_are_
         for option in action.option_strings
     }
     old = {"--hidden", "--epsilon-greedy", "--patch", "--no-subgoal", "--keep-last", "--action-local"}
-    assert not (old | {"--q-network", "--cnn-goal", "--cnn-embed", "--cnn-channels"}) & parsed
+    # the patch CNN's flat --cnn-* flags are gone (--cnn-channels, -kernel-sizes, -strides now shape network
+    # cnn, the image CNN: an old patch command is refused naming --network cnn, never silently re-read)
+    assert not (old | {"--q-network", "--cnn-goal", "--cnn-embed"}) & parsed
+    assert {"--cnn-channels", "--cnn-kernel-sizes", "--cnn-strides"} <= flags["up"] & flags["train"]
     for name in ("up", "learner"):  # refused in one sentence, not offered in --help
         assert all(flag not in command_parser(name).format_help() for flag in refused)

@@ -24,6 +24,7 @@ from worlds.config import (
     SensorConfig,
     observation_settings,
 )
+from worlds.own_env import EnvConfig
 from worlds.perception import observation_dim
 
 
@@ -54,7 +55,7 @@ def up_learner_config(tmp_path, *flags: str) -> NNQLConfig:
     given = options_from_args(
         NNQLConfig, learner_args, "NAVLEARN_NNQL", base=config_file(str(path), NNQLConfig)
     )
-    return learner_network(given, learner.observation, own_world=True)
+    return learner_network(given, learner.observation, EnvConfig())
 
 
 def test_up_with_no_flags_trains_the_recipe_train_local_trains(tmp_path):
