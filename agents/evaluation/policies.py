@@ -6,7 +6,9 @@ A policy directory holds two files (written atomically, temp + rename):
   ``MLP``): ``"0.weight"``, ``"0.bias"``, ``"2.weight"``, ... one linear layer at every
   even index, the activation between them; float32. An NNQL Q-network with a CNN over the
   own-map patch (architecture entry ``patch``, :mod:`agents.nnql.patch_network`) names its
-  tensors ``"cnn.*"`` and ``"head.*"`` and is run by that torch module (:mod:`agents.forward`).
+  tensors ``"cnn.*"`` and ``"head.*"`` and is run by that torch module (:mod:`agents.forward`); so
+  does the CNN over a Gymnasium env's image observation (architecture entry ``image``,
+  :mod:`agents.nnql.image_network`).
 * ``config.json`` - ``{"model": name, "kind": kind, "version": int, "architecture":
   {"obs_dim", "n_actions", "hidden_sizes", "activation"}, "observation": {...}, ...}`` plus any
   metadata. ``observation`` holds the settings that fix what the policy observes
