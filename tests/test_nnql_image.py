@@ -22,7 +22,10 @@ from worlds.own_env import image_description
 
 MINIGRID = spaces.Box(0, 255, (7, 7, 3), np.uint8)
 IMAGE = image_description(MINIGRID)
-SMALL = {"hidden_sizes": (16,), "batch_size": 8, "learning_starts": 8, "replay_capacity": 64, "seed": 2}
+SMALL = {
+    "network": "cnn", "hidden_sizes": (16,), "batch_size": 8, "learning_starts": 8, "replay_capacity": 64,
+    "seed": 2,
+}  # fmt: skip
 
 
 def image_obs(shape=(7, 7, 3), n: int = 6, seed: int = 0) -> np.ndarray:
@@ -115,9 +118,15 @@ def test_the_architecture_rebuilds_the_same_network_on_the_wire_and_in_files(tmp
     np.testing.assert_allclose(loaded.q_values(obs), learner.q_values(obs), atol=1e-6)
 
 
-def test_auto_picks_the_cnn_for_an_image_and_cnn_elsewhere_is_refused_naming_the_fix():
+def test_auto_picks_the_cnn_for_a_frame_of_36_px_and_cnn_elsewhere_is_refused_naming_the_fix():
     auto = NNQLConfig()
-    assert auto.resolved(None, IMAGE).network == "cnn"
+    frame = image_description(spaces.Box(0, 255, (4, 84, 84), np.uint8))
+    assert auto.resolved(None, frame).network == "cnn"  # a rendered frame: the CNN
+    assert auto.resolved(None, IMAGE).network == "mlp"  # MiniGrid's 7x7 codes: flattened (measured better)
+    side = image_description(spaces.Box(0, 255, (36, 40, 3), np.uint8))
+    assert auto.resolved(None, side).network == "cnn"  # from AUTO_CNN_MIN_SIDE on
+    assert auto.resolved(None, image_description(spaces.Box(0, 255, (35, 64, 3), np.uint8))).network == "mlp"
+    assert NNQLConfig(network="cnn").resolved(None, IMAGE).network == "cnn"  # asked for: built
     assert auto.resolved(None).network == "mlp"  # another own env
     assert auto.resolved(observation_settings(LEARNING_NAV), None).network == "local"  # navlearn's world
     assert NNQLConfig(network="mlp").resolved(None, IMAGE).network == "mlp"  # flattened, as before
@@ -152,6 +161,6 @@ def test_a_cnn_learner_resumes_from_its_checkpoint(tmp_path):
     restored = NNQLLearner.from_checkpoint(path)
     assert restored.config.network == "cnn" and restored.architecture == learner.architecture
     np.testing.assert_array_equal(restored.q_values(obs), learner.q_values(obs))
-    flat = NNQLLearner(NNQLConfig(**SMALL), 147, 7)  # the same env learned flattened: not this checkpoint
+    flat = NNQLLearner(NNQLConfig(**{**SMALL, "network": "mlp"}), 147, 7, image=IMAGE)  # not this checkpoint
     with pytest.raises(ValueError, match="checkpoint architecture"):
         flat.load_checkpoint(path)

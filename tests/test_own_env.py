@@ -245,13 +245,14 @@ def test_up_trains_and_evaluates_a_users_env_through_the_real_processes(
 def test_up_learns_an_image_env_with_the_cnn_through_the_real_processes(
     user_module: str, tmp_path: Path
 ) -> None:
-    """An env observing an 8x8x3 uint8 image: the learner builds the CNN (network auto), the actors and
+    """An env observing an 8x8x3 uint8 image: the learner builds the CNN (--network cnn: auto would
+    flatten an image this small into the MLP), the actors and
     the evaluator run it from the weights' architecture, and the saved policy evaluates alone."""
     out, name = tmp_path / "run", f"{user_module}:GridImage"
     done = navlearn(
         "up", "--env", name, "--run", "tinyimage", "--out", str(out), "--actors", "1", "--envs", "4",
-        "--duration", "8", "--eval-episodes", "10", "--hidden-sizes", "16", "--learning-starts", "200",
-        "--checkpoint-every", "30",
+        "--network", "cnn", "--duration", "8", "--eval-episodes", "10", "--hidden-sizes", "16",
+        "--learning-starts", "200", "--checkpoint-every", "30",
     )  # fmt: skip
     assert done.returncode == 0, (done.stdout, done.stderr)
     learner_log = (out / "logs" / "learner.log").read_text()
