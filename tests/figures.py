@@ -7,8 +7,10 @@ in the same order, where each comes from: one backquoted expression per bold fig
 
 ``EXPR`` on a ``.json`` file is a dotted path (``metrics.unseen.success.value``); a list step may
 pick its element by a field (``results[robots=64].ours.robot_steps_per_cpu_s``) or by position
-(``rounds.0``). On a ``.jsonl`` file (one JSON object per line) it is an aggregate over the lines
-that match ``| key=value ...``:
+(``rounds.0``), and ``*`` steps into the one value of an object that has exactly one (a key with dots
+in it, such as an env's ``module:callable`` name: ``saved_policy.metrics.*.success.value``). On a
+``.jsonl`` file (one JSON object per line) it is an aggregate over the lines that match
+``| key=value ...``:
 
 - ``mean(PATH | ...)``: the mean of PATH over the matching lines (pooled success over seeds with the
   same episodes each);
@@ -97,7 +99,13 @@ def _walk(data: object, path: str) -> object:
         if match is None:
             raise KeyError(f"bad path step {step!r}")
         key, field, value = match["key"], match["field"], match["value"]
-        data = data[int(key)] if isinstance(data, list) else data[key]  # type: ignore[index]
+        if key == "*":
+            values = list(data.values())  # type: ignore[union-attr]
+            if len(values) != 1:
+                raise KeyError(f"*: {len(values)} values, not one")
+            data = values[0]
+        else:
+            data = data[int(key)] if isinstance(data, list) else data[key]  # type: ignore[index]
         if field is not None:
             picked = [item for item in data if str(item.get(field)) == value]  # type: ignore[union-attr]
             if len(picked) != 1:

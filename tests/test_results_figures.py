@@ -39,7 +39,8 @@ def test_results_md_stays_a_short_page_headline_first_one_table_per_area():
     assert len(text.splitlines()) < 300
     headings = [line[3:] for line in text.splitlines() if line.startswith("## ")]
     assert headings[0] == "Headline"
-    areas = ["World", "Wire", "Learner", "Training against Stable-Baselines3", "Navigation", "NIRL"]
+    areas = ["World", "Wire", "Learner", "Training against Stable-Baselines3", "Your own environment"]
+    areas += ["Navigation", "NIRL"]
     areas.append("Reliability")
     assert all(area in headings for area in areas), headings
 
@@ -81,6 +82,18 @@ def test_a_changed_file_fails(tmp_path):
     assert not check(doc, tmp_path)[0].ok
     (tmp_path / "r.json").unlink()
     assert "does not exist" in check(doc, tmp_path)[0].error
+
+
+def test_a_star_step_reads_the_one_value_of_an_object_and_refuses_several(tmp_path):
+    (tmp_path / "m.json").write_text(
+        json.dumps({"metrics": {"pkg.mod:env": {"success": 0.95}}, "two": {"a": 1, "b": 2}})
+    )
+    doc = tmp_path / "DOC.md"
+    doc.write_text(
+        "| Figure | Source |\n| --- | --- |\n| **95%** and **1** | `m.json:metrics.*.success` `:two.*` |\n"
+    )
+    first, second = check(doc, tmp_path)
+    assert first.ok and not second.ok and "2 values, not one" in second.error
 
 
 def test_a_figure_without_a_source_is_an_error(tmp_path):
