@@ -280,7 +280,7 @@ class NNQLConfig:
     where the readings are (a Gymnasium env, --env); cnn (convolutions over a Gymnasium env's image
     observation, then the MLP, ``cnn``): what auto picks for an env whose observation is an image (a Box
     (H, W, C) or (C, H, W) of uint8 0..255 with 1, 3 or 4 channels, Stable-Baselines3's rule) of at
-    least :data:`AUTO_CNN_MIN_SIDE` (36) pixels a side; a smaller one goes to the MLP, flattened"""
+    least 36 pixels a side (``AUTO_CNN_MIN_SIDE``); a smaller one goes to the MLP, flattened"""
     local: LocalConfig = field(default_factory=LocalConfig)
     """network local's own settings (the action-local branch)"""
     patch: PatchConfig = field(default_factory=PatchConfig)
