@@ -17,7 +17,9 @@ metre of A* path (``-ln(1 - collisions) / mean A*``): if that hazard stays flat 
 only fail more because paths are longer; if it grows, something in bigger maps is new to the policy.
 
 ``--cells`` adds the same geometry at finer cells (each cell split in k x k, the world in metres
-unchanged, A* re-measured): does the policy depend on the cell size?
+unchanged, A* re-measured): does the policy depend on the cell size? ``--cell-variants`` names the
+variants run there (default ``long``; ``long+known`` at fine cells tells the own map's part from the
+policy's).
 
     python -m bench.map_size_parts --episodes 200 --out results/navigation/parts.jsonl
 
@@ -102,6 +104,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--long-limit", type=int, default=2000, help="the step limit of the long variants")
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     parser.add_argument("--cells", type=int, nargs="*", default=[2, 4], help="finer-cell factors (mixed)")
+    parser.add_argument(
+        "--cell-variants",
+        nargs="+",
+        default=["long"],
+        choices=VARIANTS,
+        help="the variants run at finer cells",
+    )
     parser.add_argument("--out", help="JSON lines file for the rows")
     args = parser.parse_args(argv)
 
@@ -126,11 +135,11 @@ def main(argv: list[str] | None = None) -> int:
               "rows": []}  # fmt: skip
     print(f"{args.policy} (v{policy.version}), seed {args.seed}, {args.episodes} episodes per row, load "
           f"{report['load_average_before']:.1f}")  # fmt: skip
-    print(f"{'size':>4} {'family':<7} {'variant':<15} {'success %':>9} {'coll. %':>7} {'timeout %':>9} "
+    print(f"{'size':>4} {'family':<7} {'variant':<22} {'success %':>9} {'coll. %':>7} {'timeout %':>9} "
           f"{'SPL':>5} {'A* m':>6} {'coll./km':>8}")  # fmt: skip
 
     def show(r: dict) -> None:
-        print(f"{r['size']:>4} {r['family']:<7} {r['variant']:<15} {100 * r['success']:9.1f} "
+        print(f"{r['size']:>4} {r['family']:<7} {r['variant']:<22} {100 * r['success']:9.1f} "
               f"{100 * r['collision']:7.1f} {100 * r['timeout']:9.1f} {r['spl']:5.2f} "
               f"{r['astar_mean_m']:6.1f} "
               f"{1000 * r['collisions_per_m']:8.2f}")  # fmt: skip
@@ -149,10 +158,15 @@ def main(argv: list[str] | None = None) -> int:
                 tasks = tuple(finer(t, k) for t in es.tasks)
                 shortest = np.array([astar(t.grid, t.start, t.goal).length for t in tasks])
                 fine = replace(es, tasks=tasks, shortest=shortest)
-                r = row(
-                    evaluate(policy, fine, long_nav), size=size, family=family, variant=f"long, cell 1/{k}"
-                )
-                show({**r, "cell": 1.0 / k})
+                for variant in args.cell_variants:
+                    config, act = worlds[variant]
+                    r = row(
+                        evaluate(act, fine, config),
+                        size=size,
+                        family=family,
+                        variant=f"{variant}, cell 1/{k}",
+                    )
+                    show({**r, "cell": 1.0 / k})
     report["load_average_after"] = os.getloadavg()[0]
     if args.out:
         path = Path(args.out)
