@@ -114,7 +114,9 @@ def main(args: argparse.Namespace) -> int:
         nnql = options_from_args(NNQLConfig, args, "NAVLEARN_NNQL", seed=config.seed)
         env = options_from_args(EnvConfig, args, "NAVLEARN_ENV")
         map_notes = check_config(config, env)
-        learner_network(nnql, config.observation, env)  # the learner's Q-network variant, now
+        # the learner's Q-network variant, now; with --env one copy is built: a bad id, kwargs or action
+        # space refused with its sentence
+        learner_network(nnql, config.observation, env)
     except (OptionError, ValueError) as exc:
         print(f"navlearn up: {exc}", file=sys.stderr)
         return 2

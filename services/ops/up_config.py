@@ -9,7 +9,7 @@ from pathlib import Path
 
 from protocols import keys
 from worlds.config import OBSERVATIONS, TRAINING_DISCS, TRAINING_MAPS, observation_field
-from worlds.own_env import EnvConfig, env_spaces
+from worlds.own_env import EnvConfig
 
 
 @dataclass
@@ -73,8 +73,10 @@ class UpConfig:
 
 def check_config(config: UpConfig, env: EnvConfig | None = None) -> list[str]:
     """Raise ValueError, naming the value and the fix, for anything wrong that is cheap to see
-    before a process starts (counts, durations, port, the map spec, the output directory, and a
-    Gymnasium ``env`` that cannot be built or has no discrete actions: one copy is built here).
+    before a process starts (counts, durations, port, the map spec, the output directory, and the
+    flags a Gymnasium ``env`` cannot take). The env itself (an id that cannot be built, no discrete
+    actions) is checked by ``services.learner.config.learner_network``, which `up` calls next and
+    which builds the one copy the check needs.
     Returns what each map file of ``--maps`` was read as (its cell size and why), for `up` to print."""
     from worlds.tasks import parse_map_spec
 
@@ -104,13 +106,11 @@ def check_config(config: UpConfig, env: EnvConfig | None = None) -> list[str]:
     except (ValueError, OSError) as exc:
         raise ValueError(f"--maps: {exc}") from None
     check_nirl(config)
-    if env is not None and not env.own_world:
-        if config.nirl or config.imitation:
-            flag = "--nirl" if config.nirl else "--imitation"
-            raise ValueError(
-                f"{flag} works on navlearn's world (its expert and maps); with --env {env.env} drop it"
-            )
-        env_spaces(env)  # a bad id, kwargs or action space: refused now, with its sentence
+    if env is not None and not env.own_world and (config.nirl or config.imitation):
+        flag = "--nirl" if config.nirl else "--imitation"
+        raise ValueError(
+            f"{flag} works on navlearn's world (its expert and maps); with --env {env.env} drop it"
+        )
     out = Path(config.out or f"runs/{config.run}")
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out}: is a file; give a directory")
