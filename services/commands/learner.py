@@ -9,6 +9,7 @@ from services.common.env_options import add_env_options, env_from_args
 from services.common.options import add_options, config_file
 from services.common.transport import add_zenoh_args
 from services.learner.config import NNQL_REFUSED, LearnerConfig, learner_network
+from worlds.own_env import describe_env
 
 DESCRIPTION = """\
 Run the learner: it takes transition batches from actors (navlearn/<run>/transitions/*) and
@@ -73,7 +74,10 @@ def main(args: argparse.Namespace) -> int:
         nnql = options_from_args(
             NNQLConfig, args, "NAVLEARN_NNQL", base=config_file(args.nnql_config, NNQLConfig)
         )
-        learner_network(nnql, config.observation, env)  # its Q-network variant, before it starts
+        # its Q-network variant, before it starts; with --env one copy of the env is built, its spaces
+        # read once for the checks and the learner
+        spaces = None if env.own_world else describe_env(env)
+        learner_network(nnql, config.observation, env, spaces)
         nirl = nirl_config(args, nnql.seed) if config.nirl else None
         settings = settings_from_args(args)
         if args.zenoh_mode is None and settings.connect:
@@ -86,7 +90,7 @@ def main(args: argparse.Namespace) -> int:
     setup_logging(args.verbose)
     stop = stop_on_signals()
     try:
-        return run_learner(config, nnql, settings, stop, nirl=nirl, env=env)
+        return run_learner(config, nnql, settings, stop, nirl=nirl, env=env, spaces=spaces)
     except (TransportError, ValueError) as exc:
         print(f"navlearn learner: {exc}", file=sys.stderr)
         return 2

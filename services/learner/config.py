@@ -8,7 +8,7 @@ from pathlib import Path
 from agents.device import DEVICES
 from agents.nnql.config import STORAGES, NNQLConfig
 from worlds.config import OBSERVATIONS, observation_field, observation_settings
-from worlds.own_env import EnvConfig, describe_env
+from worlds.own_env import EnvConfig, EnvSpaces, describe_env
 
 SARSA_LOCAL_ONLY = (
     "the SARSA variant needs the next action taken, which transition batches do not carry; "
@@ -24,14 +24,16 @@ the arguments are parsed (services.common.options.add_options' ``refuse``; ``pat
 option of the patch network)"""
 
 
-def learner_network(nnql: NNQLConfig, observation: str, env: EnvConfig) -> NNQLConfig:
+def learner_network(
+    nnql: NNQLConfig, observation: str, env: EnvConfig, spaces: EnvSpaces | None = None
+) -> NNQLConfig:
     """``nnql`` with the Q-network variant the learner builds for the actors' ``observation`` (an
-    OBSERVATIONS name) or ``env`` (a Gymnasium env: one copy built, its image read): a variant it cannot
-    feed (``--network patch``, ``--network local`` with --env, ``--network cnn`` without an image) is a
-    ValueError while the arguments are checked, before any process starts."""
+    OBSERVATIONS name) or ``env`` (a Gymnasium env: its ``spaces``, or one copy built to read them): a
+    variant it cannot feed (``--network patch``, ``--network local`` with --env, ``--network cnn``
+    without an image) is a ValueError while the arguments are checked, before any process starts."""
     if env.own_world:
         return nnql.resolved(observation_settings(OBSERVATIONS[observation]))
-    return nnql.resolved(None, describe_env(env).image)
+    return nnql.resolved(None, (spaces or describe_env(env)).image)
 
 
 @dataclass

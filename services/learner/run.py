@@ -24,7 +24,7 @@ from services.learner.service import LearnerService
 from services.ops.router import exposure_warning
 from worlds.config import OBSERVATIONS, observation_settings
 from worlds.env import observation_space
-from worlds.own_env import EnvConfig, describe_env, image_hwc
+from worlds.own_env import EnvConfig, EnvSpaces, describe_env, image_hwc
 
 log = logging.getLogger("navlearn.learner")
 
@@ -36,16 +36,18 @@ def run_learner(
     stop: threading.Event,
     nirl: NIRLConfig | None = None,
     env: EnvConfig | None = None,
+    spaces: EnvSpaces | None = None,
 ) -> int:
     """Process set-up around the learner loop; returns the exit code. ``nirl`` configures NIRL
     when ``config.nirl`` is on (its defaults otherwise); ``env``: a Gymnasium env the actors run
-    instead of navlearn's world (its spaces size the networks and the wire's limits).
+    instead of navlearn's world (its spaces size the networks and the wire's limits; ``spaces``: those
+    already read by the caller's checks, else one copy of the env is built to read them).
     A checkpoint directory another live learner holds is refused
     (services.common.dirlock.DirectoryInUse, a ValueError) before anything in it is read or written."""
     with contextlib.ExitStack() as held:
         if config.checkpoint_dir:
             held.enter_context(learner_lock(config.checkpoint_dir))
-        return _run_learner(config, nnql, settings, stop, nirl, env or EnvConfig())
+        return _run_learner(config, nnql, settings, stop, nirl, env or EnvConfig(), spaces)
 
 
 def learner_lock(checkpoint_dir: str) -> DirLock:
@@ -69,6 +71,7 @@ def _run_learner(
     stop: threading.Event,
     nirl: NIRLConfig | None,
     env: EnvConfig,
+    spaces: EnvSpaces | None,
 ) -> int:
     nav = OBSERVATIONS[config.observation]  # what the actors observe
     image = None  # navlearn's world observes no image
@@ -81,8 +84,8 @@ def _run_learner(
                 f"--nirl learns from navlearn's world and its expert; with --env {env.env} train NNQL only "
                 "(drop --nirl)"
             )
-        # one copy built: the env's own spaces, flattened, and the image its observation is, if one
-        obs_dim, n_actions, image = describe_env(env)
+        # the env's own spaces, flattened, and the image its observation is, if one
+        obs_dim, n_actions, image = spaces or describe_env(env)
         observation = None  # no navlearn observation settings: the env record says what it is
     learner = NNQLLearner(
         nnql, obs_dim, n_actions, device=config.device, replay_dir=config.replay_dir, observation=observation,
