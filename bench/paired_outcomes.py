@@ -40,8 +40,21 @@ LONG_LIMIT = 2000
 """the step limit of the generated sets (``bench.map_size_parts``'s ``long`` variant)"""
 
 
-def outcomes(args: argparse.Namespace) -> dict[str, list[str]]:
-    """Each set's outcome names, episode by episode, in a fixed order."""
+def outcomes(args: argparse.Namespace, cost: dict[str, dict] | None = None) -> dict[str, list[str]]:
+    """Each set's outcome names, episode by episode, in a fixed order; ``cost`` gets each set's
+    robot-steps and the CPU seconds the evaluation took (the world and the policy's forward passes)."""
+    cost = {} if cost is None else cost
+
+    def run_set(name: str, eval_set, config) -> None:
+        cpu = time.process_time()
+        result = evaluate(policy, eval_set, config)
+        cpu = time.process_time() - cpu
+        out[name] = _names(result, eval_set)
+        steps = int(sum(e.steps for e in result.episodes[eval_set.family]))
+        cost[name] = {"robot_steps": steps, "cpu_s": cpu, "robot_steps_per_cpu_s": steps / max(cpu, 1e-9)}
+        print(f"{len(out)}. {name}: {_rate(out)}, {cost[name]['robot_steps_per_cpu_s']:,.0f} robot-steps "
+              "per CPU-second", flush=True)  # fmt: skip
+
     policy = load_policy(args.policy)
     nav = policy.nav_config()
     long_nav = replace(nav, max_steps=LONG_LIMIT)
@@ -54,12 +67,10 @@ def outcomes(args: argparse.Namespace) -> dict[str, list[str]]:
                 tasks = tuple(finer(t, k) for t in es.tasks)
                 shortest = np.array([astar(t.grid, t.start, t.goal).length for t in tasks])
                 run = replace(es, tasks=tasks, shortest=shortest)
-            out[f"mixed:{size}, cell {1.0 / k:g} m"] = _names(evaluate(policy, run, long_nav), run)
-            print(f"{len(out)}. mixed:{size}, cell {1.0 / k:g} m: {_rate(out)}", flush=True)
+            run_set(f"mixed:{size}, cell {1.0 / k:g} m", run, long_nav)
     for path in args.maps:
         es = make_map_eval_set(str(path), args.map_episodes, seed=args.seed)
-        out[Path(path).name] = _names(evaluate(policy, es, nav), es)
-        print(f"{len(out)}. {Path(path).name}: {_rate(out)}", flush=True)
+        run_set(Path(path).name, es, nav)
     return out
 
 
@@ -128,12 +139,13 @@ def main(argv: list[str] | None = None) -> int:
     record = {"bench": "paired_outcomes", "policy": args.policy, "seed": args.seed,
               "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
               "load_average_before": os.getloadavg()[0]}  # fmt: skip
-    sets = outcomes(args)
+    cost: dict[str, dict] = {}
+    sets = outcomes(args, cost)
     record["load_average_after"] = os.getloadavg()[0]
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps({**record, "sets": sets}) + "\n")
+    Path(args.out).write_text(json.dumps({**record, "cost": cost, "sets": sets}) + "\n")
     success = {k: float(np.mean(np.array(v) == GOAL)) for k, v in sets.items()}
-    print(json.dumps({**record, "success": success}))
+    print(json.dumps({**record, "success": success, "cost": cost}))
     return 0
 
 

@@ -171,9 +171,9 @@ def _rays_side_by_side(field, moff, mh, mw, mcell, poses, maps, beam_c, beam_s, 
 
 
 @njit(cache=False)
-def _searches(plans, height, width, cell, xs, ys, goals, along, work, exam, out):
+def _searches(plans, no_levels, height, width, cell, xs, ys, goals, along, work, exam, out):
     for k in range(plans.shape[0]):
-        out[k] = waypoint(plans[k], plans[k, :0], height, width, cell, xs[k], ys[k], goals[k, 0], goals[k, 1],
+        out[k] = waypoint(plans[k], *no_levels, height, width, cell, xs[k], ys[k], goals[k, 0], goals[k, 1],
                           along, work, exam, k + 1)[0]  # fmt: skip
 
 
@@ -228,7 +228,9 @@ def searches_alone(config: NavConfig, n: int, chunks: int, seed: int) -> dict:
     ray_args = (field, moff, mh, mw, mcell, poses, maps, b.beam_c, b.beam_s, config.sensors.max_range, rays)
     side_rays = np.empty_like(rays)
     side_args = (*ray_args[:-1], side_rays, tuple(np.empty(len(b.beam_c)) for _ in range(4)))
-    search_args = (plans, h, w, cell, at[:, 0], at[:, 1], goals, along, work, exam, found)
+    # 1 m cells: no inflation levels (worlds.own_map.waypoint's wide, near and reach, with no rows)
+    no_levels = (np.zeros((0, 0), np.uint8), np.zeros((0, 0), np.int32), np.zeros(0))
+    search_args = (plans, no_levels, h, w, cell, at[:, 0], at[:, 1], goals, along, work, exam, found)
     settle_args = (
         moves,
         moff,

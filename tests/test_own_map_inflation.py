@@ -43,9 +43,14 @@ def inflated(blocked: np.ndarray, radius: float, cell: float) -> np.ndarray:
     """The map cells of ``blocked`` that the inflation blocks, as a (h, w) bool array."""
     h, w = blocked.shape
     plan = padded(blocked)
-    wide, near = np.zeros_like(plan), np.zeros(plan.shape, np.int32)
-    inflate(plan, wide, near, h, w, radius / cell, inflation_cells(radius, cell))
-    return wide.reshape(h + 2, w + 2)[1:-1, 1:-1] == BLOCKED
+    wide, near = levels(plan, [radius / cell])
+    inflate(plan, wide, near, h, w, np.array([radius / cell]))
+    return wide[0].reshape(h + 2, w + 2)[1:-1, 1:-1] == BLOCKED
+
+
+def levels(plan: np.ndarray, reaches) -> tuple[np.ndarray, np.ndarray]:
+    """Empty inflated grids and counts of ``len(reaches)`` levels for the padded grid ``plan``."""
+    return np.zeros((len(reaches), plan.size), np.uint8), np.zeros((len(reaches), plan.size), np.int32)
 
 
 def test_inflation_cells_from_the_radius_and_the_cell():
@@ -80,21 +85,21 @@ def test_no_inflation_at_1m_cells_is_the_plan_grid():
 
 def test_incremental_inflation_equals_inflating_from_scratch():
     rng = np.random.default_rng(1)
-    h, w, radius, cell = 23, 17, 0.25, 0.1
-    reach, band = radius / cell, inflation_cells(radius, cell)
+    h, w, cell = 23, 17, 0.1
+    reach = np.array([0.4 / cell, 0.25 / cell])  # the clearance's level, then the radius's
     occ = np.zeros((h, w), np.int8)
     plan = np.zeros((h + 2) * (w + 2), np.uint8)
     plan_clear(plan, h, w)
-    wide, near = np.zeros_like(plan), np.zeros(plan.shape, np.int32)
-    inflate(plan, wide, near, h, w, reach, band)
+    wide, near = levels(plan, reach)
+    inflate(plan, wide, near, h, w, reach)
     exam = np.zeros(plan.shape, np.int32)
     for step in range(3000):
         r, c = int(rng.integers(h)), int(rng.integers(w))
         state = SEEN_BLOCKED if rng.random() < 0.4 else FREE
-        _set(occ, plan, exam, -1, w + 2, r, c, state, wide, near, h, reach, band)
+        _set(occ, plan, exam, -1, w + 2, r, c, state, wide, near, h, reach)
         if step % 500 == 499:
-            wide2, near2 = np.zeros_like(plan), np.zeros_like(near)
-            inflate(plan, wide2, near2, h, w, reach, band)
+            wide2, near2 = levels(plan, reach)
+            inflate(plan, wide2, near2, h, w, reach)
             assert np.array_equal(near, near2) and np.array_equal(wide, wide2)
     assert 0 < (occ == SEEN_BLOCKED).sum() < h * w  # both kinds of change happened
 
@@ -108,25 +113,28 @@ def test_a_change_reaches_the_plan_where_the_inflation_moved(band, reads, misses
         occ = np.zeros((h, w), np.int8)
         plan = np.zeros((h + 2) * (w + 2), np.uint8)
         plan_clear(plan, h, w)
-        wide, near = np.zeros_like(plan), np.zeros(plan.shape, np.int32)
-        inflate(plan, wide, near, h, w, 2.5, band)
+        reach = np.array([2.5] if band else [])  # reach 2.5 cells: band 2; none: no level
+        wide, near = levels(plan, reach)
+        inflate(plan, wide, near, h, w, reach)
         exam = np.zeros(plan.shape, np.int32)
         exam[(7 + 1) * (w + 2) + 7 + away + 1] = 5  # the last search (5) expanded cell (7, 7 + away)
-        assert _set(occ, plan, exam, 5, w + 2, 7, 7, SEEN_BLOCKED, wide, near, h, 2.5, band) == flags
+        assert _set(occ, plan, exam, 5, w + 2, 7, 7, SEEN_BLOCKED, wide, near, h, reach) == flags
 
 
-def search(blocked: np.ndarray, cell: float, start: tuple[int, int], goal: tuple[int, int], wide: bool):
-    """(waypoint cell as (row, col) or None for the goal, path length m) of the own-map search."""
+def search(blocked: np.ndarray, cell: float, start: tuple[int, int], goal: tuple[int, int], wide: bool,
+           radii=(0.25,), along: float = 0.3):  # fmt: skip
+    """(waypoint cell as (row, col) or None for the goal, path length m) of the own-map search, on the
+    plan grid inflated by ``radii`` (levels, widest first) when ``wide``."""
     h, w = blocked.shape
     plan = padded(blocked)
-    grid = np.zeros(0, np.uint8)
-    if wide:
-        grid, near = np.zeros_like(plan), np.zeros(plan.shape, np.int32)
-        inflate(plan, grid, near, h, w, 0.25 / cell, inflation_cells(0.25, cell))
+    reach = np.array(radii if wide else []) / cell
+    grid, near = levels(plan, reach)
+    inflate(plan, grid, near, h, w, reach)
     exam = np.zeros(plan.shape, np.int32)
     x, y = (start[1] + 0.5) * cell, (start[0] + 0.5) * cell
     work = new_work(plan.size)
-    node, searched, length = waypoint(plan, grid, h, w, cell, x, y, goal[0], goal[1], 0.3, work, exam, 1)
+    node, searched, length = waypoint(plan, grid, near, reach, h, w, cell, x, y, goal[0], goal[1], along, work,
+                                      exam, 1)  # fmt: skip
     assert searched
     return (None if node < 0 else (node // (w + 2) - 1, node % (w + 2) - 1)), length
 
@@ -142,6 +150,33 @@ def test_a_gap_narrower_than_the_robot_is_planned_round():
     _, wide = search(blocked, 0.1, (5, 4), (15, 4), wide=True)
     assert plain == pytest.approx(1.0)
     assert wide > 5.0  # through the door, 26 cells away and back
+
+
+def test_the_path_keeps_the_clearance_where_it_can():
+    # 0.1 m cells, a corridor 1.2 m wide (columns 1-12) along the rows; start and goal in column 3,
+    # 0.25 m from the wall: on the radius's level the path runs down column 3, on the clearance's
+    # level (0.4 m) it moves out to column 5, 0.45 m from the wall, as a path through 1 m cells does
+    # (the waypoint 1 m along, past the cells around the start that count free)
+    blocked = np.zeros((60, 14), bool)
+    blocked[:, 0] = blocked[:, 13] = True
+    radius_only, _ = search(blocked, 0.1, (3, 3), (56, 3), wide=True, radii=(0.25,), along=1.0)
+    both, length = search(blocked, 0.1, (3, 3), (56, 3), wide=True, radii=(0.4, 0.25), along=1.0)
+    assert radius_only[1] == 3
+    assert both[1] == 5 and length > 5.3  # out to column 5 and back
+
+
+def test_a_door_narrower_than_the_clearance_is_planned_on_the_radius_level():
+    # the gap and the door of the test above: the 0.7 m door closes on the clearance's level (its
+    # middle cell lies 0.35 m from the jambs), so the radius's level plans through it, not the plain
+    # grid through the 0.3 m gap
+    blocked = np.zeros((21, 40), bool)
+    blocked[10] = True
+    blocked[10, 3:6] = False
+    blocked[10, 30:37] = False
+    _, clearance_only = search(blocked, 0.1, (5, 4), (15, 4), wide=True, radii=(0.4,))
+    _, both = search(blocked, 0.1, (5, 4), (15, 4), wide=True, radii=(0.4, 0.25))
+    assert clearance_only == pytest.approx(1.0)  # no path on its level: the plain grid's, through the gap
+    assert both > 5.0  # through the door
 
 
 def test_a_start_next_to_a_wall_still_plans_away_from_it():

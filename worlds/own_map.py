@@ -6,16 +6,21 @@ flat uint8 row per robot, :data:`~worlds.fields.BLOCKED` on seen-blocked cells (
 blocked cells (known map) and on a ring around the map.
 
 **Configuration space.** The search plans for the robot's centre, so on maps whose cells are finer
-than the robot it searches an *inflated* copy of the plan grid (``wide``): a cell is blocked there
-when its centre lies closer than the robot's radius to a blocked cell of the plan grid (the ring
-included), the inscribed inflation of ROS costmap_2d's / nav2's inflation layer
-(``nav2_costmap_2d::InflationLayer``: cells within the inscribed radius of a lethal cell are
-``INSCRIBED_INFLATED_OBSTACLE``, which nav2's grid planners refuse). Without it, at 0.1 m cells a
-path runs through gaps narrower than the robot and along walls closer than its radius; at 1 m cells
-and the default 0.25 m radius nothing is inflated (:func:`inflation_cells` is 0) and nothing of the
-inflation runs. ``near`` counts, per cell, the blocked cells within the radius; :func:`_set` adds
-or takes one over the disk around a cell whose blocked state changed, so the inflated grid follows
-the own map per changed cell, as the plan grid does.
+than the robot it searches *inflated* copies of the plan grid (``wide``, one row per level): a cell
+is blocked in a level when its centre lies closer than the level's reach to a blocked cell of the
+plan grid (the ring included). The levels, widest first (:func:`level_radius`): the subgoal's
+clearance (the path keeps that far from walls where it can, as a path through 1 m cells keeps
+0.5 m), then the robot's radius (the inscribed inflation of ROS costmap_2d's / nav2's inflation
+layer, ``nav2_costmap_2d::InflationLayer``: cells within the inscribed radius of a lethal cell are
+``INSCRIBED_INFLATED_OBSTACLE``, which nav2's grid planners refuse; its cost decaying beyond that
+radius is what the clearance level stands in for). :func:`waypoint` searches the levels in turn
+and the plan grid last, so a door narrower than twice the clearance is still planned through, on
+the radius level. Without inflation, at 0.1 m cells a path runs through gaps narrower than the robot
+and along walls closer than its radius; at 1 m cells (the default radius 0.25 m, clearance 0.4 m)
+nothing is inflated (:func:`inflation_cells` is 0) and nothing of the inflation runs. ``near``
+counts, per level and cell, the blocked cells within its reach; :func:`_set` adds or takes one over
+the disk around a cell whose blocked state changed, so the inflated grids follow the own map per
+changed cell, as the plan grid does.
 """
 
 from __future__ import annotations
@@ -54,6 +59,28 @@ def inflation_cells(radius, cell):
     return max(math.ceil(radius / cell - 0.5), 0)
 
 
+LEVELS = 2
+"""inflated plan grids at most: the subgoal's clearance, then the robot's radius"""
+
+
+@njit(cache=True)
+def level_radius(radius, clearance, level):
+    """The radius (m) of inflation level ``level`` (0: the widest; 0.0: no such level): the subgoal's
+    clearance when it is wider than the robot's ``radius``, then the radius. A level inflates only on
+    cells where :func:`inflation_cells` of its radius is above 0."""
+    if level == 0:
+        return max(radius, clearance)
+    if level == 1 and clearance > radius:
+        return radius
+    return 0.0
+
+
+@njit(cache=True)
+def _band(reach):
+    """:func:`inflation_cells` of a reach given in cells."""
+    return max(math.ceil(reach - 0.5), 0)
+
+
 @njit(cache=True)
 def _reaches(dr, dc, reach):
     """Does the centre of a cell ``dr`` rows and ``dc`` columns from a blocked cell lie closer than
@@ -76,26 +103,28 @@ def _spread(wide, near, stride, height, width, r, c, delta, reach, band):
 
 
 @njit(cache=True, _nrt=False)
-def inflate(plan, wide, near, height, width, reach, band):
-    """The inflated grid ``wide`` (and its counts ``near``) of the padded plan grid ``plan`` from
-    scratch: the ring blocked, a map cell blocked when its centre lies closer than ``reach`` cells
-    to a blocked cell of ``plan`` (see the module docstring)."""
+def inflate(plan, wide, near, height, width, reach):
+    """The inflated grids ``wide`` (one row per level; and their counts ``near``) of the padded plan
+    grid ``plan`` from scratch: the ring blocked, a map cell blocked in level l when its centre lies
+    closer than ``reach[l]`` cells to a blocked cell of ``plan`` (see the module docstring)."""
     stride = width + 2
-    for at in range((height + 2) * stride):
-        near[at], wide[at] = 0, BLOCKED
-    for r in range(height):
-        for c in range(width):
-            wide[(r + 1) * stride + c + 1] = 0
-    for r in range(-1, height + 1):
-        for c in range(-1, width + 1):
-            if plan[(r + 1) * stride + c + 1] == BLOCKED:
-                _spread(wide, near, stride, height, width, r, c, 1, reach, band)
+    for level in range(wide.shape[0]):
+        row, counts, band = wide[level], near[level], _band(reach[level])
+        for at in range((height + 2) * stride):
+            counts[at], row[at] = 0, BLOCKED
+        for r in range(height):
+            for c in range(width):
+                row[(r + 1) * stride + c + 1] = 0
+        for r in range(-1, height + 1):
+            for c in range(-1, width + 1):
+                if plan[(r + 1) * stride + c + 1] == BLOCKED:
+                    _spread(row, counts, stride, height, width, r, c, 1, reach[level], band)
 
 
 @njit(cache=True)
-def _set(occ, plan, exam, exam_id, stride, r, c, state, wide, near, height, reach, band):
+def _set(occ, plan, exam, exam_id, stride, r, c, state, wide, near, height, reach):
     """Cell (r, c) of the own map becomes ``state``; the plan grid (if tracked: ``plan`` not empty)
-    follows, and with ``band`` > 0 its inflated grid ``wide`` (``near``, ``reach``, ``band``: see
+    follows, and its inflated grids ``wide`` (levels; none: no rows; ``near``, ``reach``: see
     :func:`inflate`).
     Returns :data:`CHANGED` | :data:`ON_PLAN` flags."""
     old = occ[r, c]
@@ -103,11 +132,13 @@ def _set(occ, plan, exam, exam_id, stride, r, c, state, wide, near, height, reac
     if (old == SEEN_BLOCKED) == (state == SEEN_BLOCKED):
         return 0
     at = (r + 1) * stride + c + 1
+    band = _band(reach[0]) if wide.shape[0] > 0 else 0  # the widest level's
     if plan.shape[0] > 0:
         plan[at] = BLOCKED if state == SEEN_BLOCKED else 0
-        if band > 0:
-            delta = 1 if state == SEEN_BLOCKED else -1
-            _spread(wide, near, stride, height, stride - 2, r, c, delta, reach, band)
+        delta = 1 if state == SEEN_BLOCKED else -1
+        for level in range(wide.shape[0]):
+            lr = reach[level]
+            _spread(wide[level], near[level], stride, height, stride - 2, r, c, delta, lr, _band(lr))
     if exam_id < 0:
         return CHANGED | ON_PLAN
     if band > 0:  # the inflated cells it changed lie within band: next to an expanded cell within band + 1
@@ -124,7 +155,7 @@ def _set(occ, plan, exam, exam_id, stride, r, c, state, wide, near, height, reac
 
 @njit(cache=True, _nrt=False)
 def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta, ray_c, ray_s, ranges,
-             max_range, per, wide, near, reach, band):  # fmt: skip
+             max_range, per, wide, near, reach):  # fmt: skip
     """Write one step's rays and pose into a robot's own map ``occ`` (and its padded plan grid
     ``plan``, seen-blocked cells blocked, unknown and free ones free, when not empty): the cell
     past the end of every ray that hit something is blocked, the cells that the middle ray of each
@@ -132,8 +163,8 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
     cells; tracing one keeps the map's cost near the sensor's). Returns flags: :data:`CHANGED`
     when a cell became blocked or stopped being blocked (unknown and free plan alike), with
     :data:`ON_PLAN` when such a cell lies next to one the search ``exam_id`` expanded (``exam``
-    holds their stamps; ``exam_id < 0``: unknown, every change counts). With ``band`` > 0 the plan
-    grid's inflated copy ``wide`` follows too (:func:`_set`)."""
+    holds their stamps; ``exam_id < 0``: unknown, every change counts). The plan grid's inflated
+    copies ``wide`` (levels, none: no rows) follow too (:func:`_set`)."""
     flags = 0
     stride = width + 2
     px, py = x / cell, y / cell
@@ -141,7 +172,7 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
         return 0
     c0, r0 = int(px), int(py)
     visits[r0, c0] += 1
-    flags |= _set(occ, plan, exam, exam_id, stride, r0, c0, FREE, wide, near, height, reach, band)
+    flags |= _set(occ, plan, exam, exam_id, stride, r0, c0, FREE, wide, near, height, reach)
     cos_t, sin_t = math.cos(theta), math.sin(theta)
     for k in range(ray_c.shape[0]):
         dx = cos_t * ray_c[k] - sin_t * ray_s[k]
@@ -152,7 +183,7 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
             hx, hy = px + (length + HIT_MARGIN) * dx, py + (length + HIT_MARGIN) * dy
             if 0.0 <= hx < width and 0.0 <= hy < height:
                 flags |= _set(occ, plan, exam, exam_id, stride, int(hy), int(hx), SEEN_BLOCKED, wide, near,
-                               height, reach, band)  # fmt: skip
+                               height, reach)  # fmt: skip
         if k % per != per // 2:
             continue
         # exact traversal of the cells the ray crosses before its end (Amanatides & Woo)
@@ -173,7 +204,7 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
             next_r = next_r if on_c else next_r + delta_r
             if t >= stop or c < 0 or r < 0 or c >= width or r >= height:
                 break
-            flags |= _set(occ, plan, exam, exam_id, stride, r, c, FREE, wide, near, height, reach, band)
+            flags |= _set(occ, plan, exam, exam_id, stride, r, c, FREE, wide, near, height, reach)
     return flags
 
 
@@ -221,7 +252,19 @@ def _in_clear(plan, stride, height, width, cell, x0, y0, x1, y1, clearance, exam
 
 
 @njit(cache=True, _nrt=False)
-def waypoint(plan, wide, height, width, cell, x, y, goal_r, goal_c, along, work, exam, exam_id,
+def _open(grid, near, plan, stride, height, width, centre, band, opened):
+    """Open (``opened``) the cells of an inflated ``grid`` within ``band`` rows and columns of the padded
+    cell ``centre`` that are free on the plan grid, or close them again as the counts ``near`` say."""
+    r0, c0 = centre // stride - 1, centre % stride - 1
+    for r in range(max(r0 - band, 0), min(r0 + band, height - 1) + 1):
+        for c in range(max(c0 - band, 0), min(c0 + band, width - 1) + 1):
+            at = (r + 1) * stride + c + 1
+            if plan[at] != BLOCKED:
+                grid[at] = 0 if opened or near[at] == 0 else BLOCKED
+
+
+@njit(cache=True, _nrt=False)
+def waypoint(plan, wide, near, reach, height, width, cell, x, y, goal_r, goal_c, along, work, exam, exam_id,
              clearance=0.0):  # fmt: skip
     """A* (8-connected, no corner cutting) on the padded grid ``plan`` from the robot's cell to the
     goal cell (counted free); the centre of the cell ``along`` metres down the path, or the goal
@@ -236,11 +279,14 @@ def waypoint(plan, wide, height, width, cell, x, y, goal_r, goal_c, along, work,
     goal itself; searched; the path's length in metres from the robot's cell to the goal's, -1.0
     when there is no path or no search).
 
-    With an inflated grid ``wide`` (:func:`inflate`; empty: none) the search runs on it first, the
-    robot's cell and the goal's counted free (a robot whose cell centre lies within its radius of a
-    wall still finds the way out, away from the wall); when it finds no path (the robot hemmed in by
-    the inflation, or a gap that the cell rounding closed), the search runs again on ``plan``, so the
-    subgoal is never lost to the inflation. The clearance check reads ``plan`` either way."""
+    With inflated grids ``wide`` (:func:`inflate`, one row per level, widest first; no rows: none;
+    ``near``, ``reach``: their counts and reaches) the search runs on each in turn until one has a
+    path. On each, the cells within the level's band of the robot's cell and of the goal's that are
+    free on the plan grid count free (:func:`_open`): a robot whose cell centre lies within the
+    level's reach of a wall still finds the way out, away from the wall (``band`` cells straight
+    away from it lie beyond the reach), and a goal beside a wall is still reached. When no level has
+    a path (a gap that the cell rounding closed), the search runs again on ``plan``, so the subgoal is
+    never lost to the inflation. The clearance check reads ``plan`` either way."""
     g, parent, seen, order, meta = work[0], work[1], work[3], work[7], work[8]
     stride = width + 2
     c, r = int(x / cell), int(y / cell)
@@ -250,15 +296,22 @@ def waypoint(plan, wide, height, width, cell, x, y, goal_r, goal_c, along, work,
     if plan[start] == BLOCKED:
         return -1, False, -1.0
     found = False
-    if wide.shape[0] > 0:
-        was_start, was_goal = wide[start], wide[goal]
-        wide[start], wide[goal] = 0, 0
+    for level in range(wide.shape[0]):
+        grid, counts, band = wide[level], near[level], _band(reach[level])
+        _open(grid, counts, plan, stride, height, width, start, band, True)
+        _open(grid, counts, plan, stride, height, width, goal, band, True)
+        was_goal = grid[goal]
+        grid[goal] = 0  # counted free, as on the plan grid
         search_start(start, goal, stride, DIAGONAL, *work)
-        expanded = search_run(wide, 0, stride, goal, DIAGONAL, *work)
-        wide[goal], wide[start] = was_goal, was_start
+        expanded = search_run(grid, 0, stride, goal, DIAGONAL, *work)
+        grid[goal] = was_goal
+        _open(grid, counts, plan, stride, height, width, goal, band, False)
+        _open(grid, counts, plan, stride, height, width, start, band, False)
         for k in range(expanded):
             exam[order[k]] = exam_id
         found = seen[goal] == meta[GEN]
+        if found:
+            break
     if not found:
         was = plan[goal]
         plan[goal] = 0

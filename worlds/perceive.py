@@ -23,6 +23,7 @@ from worlds.own_map import (
     centre,
     inflate,
     inflation_cells,
+    level_radius,
     map_rays,
     plan_clear,
     plan_from_field,
@@ -96,13 +97,13 @@ def _frame(out, base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions,
 
 @njit(cache=True, _nrt=False)
 def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell, along, reuse, plans, work,
-             clearance, wide):  # fmt: skip
+             clearance, wide, near, reach):  # fmt: skip
     """Robot ``i``'s waypoint into ``wpt[i]`` (``plans``). The plan depends on the map, the goal and
     the robot's cell only: it is searched again when one of them changed (``fresh``: a new episode;
     ``dirty``: a cell became blocked or free; ``replan``: one where the last search looked), else
     kept; with ``reuse``, from the plans kept per cell of this plan map, and kept on a new plan map
     when no change lies where the search that made it looked. ``wide``: robot ``i``'s inflated plan
-    grid, empty when its map's cells need none."""
+    grids (levels; ``near``, ``reach``: their counts and reaches), no rows when its map's cells need none."""
     plan, wpt, last, plan_node, stamp, version, exam, exam_id, searches, plan_length, path_length = plans[:11]
     rc, cc = int(y / cell), int(x / cell)
     moved = rc != last[i, 0] or cc != last[i, 1]
@@ -129,8 +130,9 @@ def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell,
             searches[i] = 0
         searches[i] += 1
         node, searched, path_length[i] = waypoint(
-            plan[i], wide, height, width, cell, x, y, gr, gc, along, work, exam[i], searches[i], clearance
-        )
+            plan[i], wide, near, reach, height, width, cell, x, y, gr, gc, along, work, exam[i], searches[i],
+            clearance,
+        )  # fmt: skip
         exam_id[i] = searches[i] if searched else -1
         if on_map:
             plan_node[i, rc, cc], stamp[i, rc, cc] = node, version[i]
@@ -166,10 +168,16 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     occ, visits, plans, moves, geo, pgeo, stack = mem
     plan, wpt, exam, exam_id, path_length = plans[0], plans[1], plans[6], plans[7], plans[10]
     height, width, cell, at = mh[m], mw[m], mcell[m], moff[m]
-    inflated = sub_kind != SUB_NONE and plans[11].shape[1] > 0  # worlds.perception allocates for fine cells
-    band = inflation_cells(params[RADIUS_PARAM], cell) if inflated else 0
-    reach = params[RADIUS_PARAM] / cell
-    wide, near = (plans[11][i], plans[12][i]) if band > 0 else (plans[11][i, :0], plans[12][i, :0])
+    # the inflation levels on this map's cells, widest first (worlds.own_map.level_radius; worlds.perception
+    # allocates their grids when a map of the bank has cells fine enough for one)
+    reach, levels = plans[13][i], 0
+    if sub_kind != SUB_NONE:
+        for level in range(plans[11].shape[1]):
+            metres = level_radius(params[RADIUS_PARAM], clearance, level)
+            if metres > 0.0 and inflation_cells(metres, cell) > 0:
+                reach[levels] = metres / cell
+                levels += 1
+    wide, near, reach = plans[11][i, :levels], plans[12][i, :levels], reach[:levels]
     uses_map = occ.shape[1] > 0
     shaped, shaping = False, 0.0
     if fresh:
@@ -185,8 +193,8 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
             plan_from_field(field, at, plan[i], height, width)
         elif sub_kind == SUB_OWN:
             plan_clear(plan[i], height, width)
-        if band > 0:
-            inflate(plan[i], wide, near, height, width, reach, band)
+        if levels > 0:
+            inflate(plan[i], wide, near, height, width, reach)
     elif w_geo > 0.0:
         now = field_distance(moves, at, height, width, geo, i, cell, x, y)
         if math.isfinite(now) and math.isfinite(pgeo[i]):
@@ -196,9 +204,9 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     if uses_map:
         own = sub_kind == SUB_OWN  # the plan grid follows the own map
         tracked, seen_by = (plan[i], exam_id[i]) if own else (plan[i, :0], -1)
+        mapped = wide if own else wide[:0]  # the inflated grids follow the own map only
         flags = map_rays(occ[i], visits[i], tracked, exam[i], seen_by, height, width, cell, x, y, theta,
-                         ray_c, ray_s, rays, max_range, per, wide, near, reach,
-                         band if own else 0)  # fmt: skip
+                         ray_c, ray_s, rays, max_range, per, mapped, near, reach)  # fmt: skip
         dirty = dirty or (own and flags & CHANGED != 0)
         replan = replan or (own and flags & ON_PLAN != 0)
     wx, wy, length = gx, gy, 0.0
@@ -223,6 +231,8 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
             work,
             clearance,
             wide,
+            near,
+            reach,
         )
         wx, wy, length = wpt[i, 0], wpt[i, 1], path_length[i]
         if length < 0.0:  # no path on the plan map: the straight line

@@ -22,8 +22,9 @@ step, the last ``frame_stack`` frames observed newest first::
 * **The subgoal**: the shortest 8-connected grid path (:func:`worlds.gridsearch.grid_search`,
   the search behind the expert's A*) from the goal to every cell of the robot's own map,
   unknown cells counted free, so the robot cannot "see" unseen walls, in the robot's configuration
-  space: on cells finer than the robot the grid is inflated by its radius (:mod:`worlds.own_map`;
-  nothing is inflated at 1 m cells and the default radius); the waypoint is the cell
+  space: on cells finer than the robot the grid is inflated by the subgoal's clearance where a path
+  keeps it, else by the robot's radius (:mod:`worlds.own_map`; nothing is inflated at 1 m cells and
+  the default radius and clearance); the waypoint is the cell
   ``subgoal_distance`` metres along the path from the robot's cell (the goal itself when
   nearer); the frame gets its squashed distance and bearing. It is replanned whenever the map
   changed in a way that matters (a cell became blocked or stopped being blocked next to a cell
@@ -50,7 +51,7 @@ import numpy as np
 from worlds.config import NavConfig
 from worlds.geodesic import move_masks, new_fields
 from worlds.gridsearch import new_work
-from worlds.own_map import FREE, SEEN_BLOCKED, UNKNOWN, inflation_cells
+from worlds.own_map import FREE, LEVELS, SEEN_BLOCKED, UNKNOWN, inflation_cells, level_radius
 from worlds.perceive import (
     PATCH_VALUE,
     REUSE_PARAM,
@@ -170,6 +171,8 @@ class Perception:
         self.pgeo = np.zeros(n, np.float64)
         self.shape, self._sized_for = (0, 0), None
         self.inflates = False  # does a map of the bank have cells the plan grid is inflated on?
+        radius, clearance = config.robot.radius, o.subgoal_clearance
+        self.levels = sum(level_radius(radius, clearance, k) > 0.0 for k in range(LEVELS))
         self.moves, self._moves_for = np.zeros(0, np.uint8), None  # the geodesic field's move table
         self._allocate((1, 1), False)
 
@@ -193,9 +196,19 @@ class Perception:
         self.occ = grow(getattr(self, "occ", None), np.int8, self.uses_map)
         self.visits = grow(getattr(self, "visits", None), np.int32, self.uses_map)
         self.plan = grow(getattr(self, "plan", None), np.uint8, self.plans, flat=True)
-        # the inflated plan grid and its counts (worlds.own_map.inflate), on maps of fine cells only
-        self.wide = grow(getattr(self, "wide", None), np.uint8, self.plans and inflates, flat=True)
-        self.near = grow(getattr(self, "near", None), np.int32, self.plans and inflates, flat=True)
+        # the inflated plan grids and their counts (worlds.own_map.inflate), one row per level, on maps of
+        # fine cells only; the levels' reaches on the robot's map (cells)
+        levels = self.levels if self.plans and inflates else 0
+
+        def grow_levels(old, dtype):
+            new = np.zeros((self.n, levels, cells if levels else 0), dtype)
+            if levels and old is not None and old.size:
+                new[:, :, : old.shape[2]] = old
+            return new
+
+        self.wide = grow_levels(getattr(self, "wide", None), np.uint8)
+        self.near = grow_levels(getattr(self, "near", None), np.int32)
+        self.reach = np.zeros((self.n, LEVELS), np.float64)
         # per cell: the waypoint cell planned from it (-1: the goal), valid on plan-map version ``stamp``
         self.plan_node = grow(getattr(self, "plan_node", None), np.int32, self.plans)
         self.plan_length = grow(getattr(self, "plan_length", None), np.float64, self.plans)  # and its length
@@ -213,15 +226,15 @@ class Perception:
     def _memory(self, maps) -> tuple:
         field, moff, mh, mw, mcell = maps[:5]
         if mh is not self._sized_for:  # the bank's maps changed: grids big enough for its largest
-            radius = self.config.robot.radius
-            inflates = any(inflation_cells(radius, float(cell)) > 0 for cell in mcell)
+            widest = level_radius(self.config.robot.radius, self.config.observation.subgoal_clearance, 0)
+            inflates = any(inflation_cells(widest, float(cell)) > 0 for cell in mcell)
             self._allocate((int(mh.max()), int(mw.max())), inflates)
             self._sized_for = mh
         if self.geodesic and field is not self._moves_for:
             self.moves, self._moves_for = move_masks(field, moff, mh, mw), field
         plans = (self.plan, self.waypoint, self.last, self.plan_node, self.stamp, self.version, self.exam,
                  self.exam_id, self.searches, self.plan_length, self.path_length, self.wide,
-                 self.near)  # fmt: skip
+                 self.near, self.reach)  # fmt: skip
         return self.occ, self.visits, plans, self.moves, self.geo, self.pgeo, self.stack
 
     def _state(self, maps) -> tuple:

@@ -17,6 +17,8 @@ def test_a_run_records_each_set_and_compares_with_itself(tmp_path, capsys):
     assert all(len(v) == 4 for v in sets.values())
     summary = json.loads(capsys.readouterr().out.splitlines()[-1])
     assert summary["success"] == {k: sum(n == GOAL for n in v) / 4 for k, v in sets.items()}
+    assert list(summary["cost"]) == list(sets)
+    assert all(c["robot_steps"] >= 4 and c["cpu_s"] > 0 for c in summary["cost"].values())
     assert main(["--compare", str(out), str(out)]) == 0
     rows = json.loads(capsys.readouterr().out.splitlines()[-1])["rows"]
     assert [(r["only_before"], r["only_after"], r["p"]) for r in rows] == [(0, 0, 1.0)] * 2
