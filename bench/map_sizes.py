@@ -132,10 +132,12 @@ def paired_p(a: np.ndarray, b: np.ndarray) -> dict:
     return {"episodes": n, "only_policy": a_only, "only_other": b_only, "p": mcnemar_exact(a_only, b_only)}
 
 
-def throughput(nav: NavConfig, size: int, seconds: float, seed: int) -> dict:
-    """Robot-steps per CPU-second of the world at ``size`` (one thread, the heuristic driving)."""
+def throughput(nav: NavConfig, size: int, seconds: float, seed: int, maps=None) -> dict:
+    """Robot-steps per CPU-second of the world at ``size`` (or on ``maps``, a spec or sampler; one
+    thread, the heuristic driving)."""
     config = replace(nav, obstacles=ObstacleConfig(count=0))
-    env = NavigationVectorEnv(THROUGHPUT_ROBOTS, config, maps=f"mixed:{size}", seed=seed, threads=1)
+    maps = f"mixed:{size}" if maps is None else maps
+    env = NavigationVectorEnv(THROUGHPUT_ROBOTS, config, maps=maps, seed=seed, threads=1)
     heuristic, width = goal_seeking_policy(config), config.sensors.n_beams + 3
     obs, _ = env.reset(seed=seed)
     for _ in range(3):

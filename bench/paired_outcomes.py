@@ -30,8 +30,10 @@ from agents.evaluation import evaluate, make_eval_set, make_map_eval_set
 from agents.evaluation.compare import mcnemar_exact
 from agents.evaluation.metrics import wilson_interval
 from agents.evaluation.policies import load_policy
+from agents.evaluation.runner import fixed_sampler
 from agents.planning.astar import astar
 from bench.map_size_parts import finer
+from bench.map_sizes import throughput
 from worlds.outcomes import OUTCOME_NAMES, Outcome
 from worlds.tasks import MIXED_FAMILIES
 
@@ -41,19 +43,19 @@ LONG_LIMIT = 2000
 
 
 def outcomes(args: argparse.Namespace, cost: dict[str, dict] | None = None) -> dict[str, list[str]]:
-    """Each set's outcome names, episode by episode, in a fixed order; ``cost`` gets each set's
-    robot-steps and the CPU seconds the evaluation took (the world and the policy's forward passes)."""
+    """Each set's outcome names, episode by episode, in a fixed order; ``cost`` gets the world's
+    robot-steps per CPU-second on each generated set's maps (:func:`bench.map_sizes.throughput`: the
+    heuristic driving 16 robots, ``--throughput-seconds`` each; 0: not measured)."""
     cost = {} if cost is None else cost
 
     def run_set(name: str, eval_set, config) -> None:
-        cpu = time.process_time()
-        result = evaluate(policy, eval_set, config)
-        cpu = time.process_time() - cpu
-        out[name] = _names(result, eval_set)
-        steps = int(sum(e.steps for e in result.episodes[eval_set.family]))
-        cost[name] = {"robot_steps": steps, "cpu_s": cpu, "robot_steps_per_cpu_s": steps / max(cpu, 1e-9)}
-        print(f"{len(out)}. {name}: {_rate(out)}, {cost[name]['robot_steps_per_cpu_s']:,.0f} robot-steps "
-              "per CPU-second", flush=True)  # fmt: skip
+        out[name] = _names(evaluate(policy, eval_set, config), eval_set)
+        line = f"{len(out)}. {name}: {_rate(out)}"
+        if args.throughput_seconds > 0 and name.startswith("mixed"):
+            maps = fixed_sampler(eval_set.tasks, name)
+            cost[name] = throughput(nav, 0, args.throughput_seconds, args.seed, maps=maps)
+            line += f"; world {cost[name]['robot_steps_per_cpu_s']:,.0f} robot-steps per CPU-second"
+        print(line, flush=True)
 
     policy = load_policy(args.policy)
     nav = policy.nav_config()
@@ -126,6 +128,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=200, help="episodes per generated set")
     parser.add_argument("--maps", nargs="*", default=[], help="map files, each a set of its own")
     parser.add_argument("--map-episodes", type=int, default=100, help="episodes per map file")
+    parser.add_argument(
+        "--throughput-seconds", type=float, default=5.0, help="world timing per generated set (0: none)"
+    )
     parser.add_argument("--out", help="JSON file for this tree's outcomes")
     parser.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"), help="two --out files")
     args = parser.parse_args(argv)
