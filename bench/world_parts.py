@@ -228,8 +228,8 @@ def searches_alone(config: NavConfig, n: int, chunks: int, seed: int) -> dict:
     ray_args = (field, moff, mh, mw, mcell, poses, maps, b.beam_c, b.beam_s, config.sensors.max_range, rays)
     side_rays = np.empty_like(rays)
     side_args = (*ray_args[:-1], side_rays, tuple(np.empty(len(b.beam_c)) for _ in range(4)))
-    # 1 m cells: no inflation levels (worlds.own_map.waypoint's wide, near and reach, with no rows)
-    no_levels = (np.zeros((0, 0), np.uint8), np.zeros((0, 0), np.int32), np.zeros(0))
+    # 1 m cells: no inflation (worlds.own_map.waypoint's wide, near and reach, empty)
+    no_levels = (np.zeros(0, np.uint8), np.zeros((0, 0), np.int32), np.zeros(0))
     search_args = (plans, no_levels, h, w, cell, at[:, 0], at[:, 1], goals, along, work, exam, found)
     settle_args = (
         moves,

@@ -5,6 +5,7 @@ nothing of it runs."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -45,12 +46,14 @@ def inflated(blocked: np.ndarray, radius: float, cell: float) -> np.ndarray:
     plan = padded(blocked)
     wide, near = levels(plan, [radius / cell])
     inflate(plan, wide, near, h, w, np.array([radius / cell]))
-    return wide[0].reshape(h + 2, w + 2)[1:-1, 1:-1] == BLOCKED
+    return wide.reshape(h + 2, w + 2)[1:-1, 1:-1] == BLOCKED
 
 
 def levels(plan: np.ndarray, reaches) -> tuple[np.ndarray, np.ndarray]:
-    """Empty inflated grids and counts of ``len(reaches)`` levels for the padded grid ``plan``."""
-    return np.zeros((len(reaches), plan.size), np.uint8), np.zeros((len(reaches), plan.size), np.int32)
+    """An empty inflated grid (none without ``reaches``) and the counts of ``len(reaches)`` levels for
+    the padded grid ``plan``."""
+    n = len(reaches)
+    return np.zeros(plan.size if n else 0, np.uint8), np.zeros((n, plan.size), np.int32)
 
 
 def test_inflation_cells_from_the_radius_and_the_cell():
@@ -162,21 +165,36 @@ def test_the_path_keeps_the_clearance_where_it_can():
     radius_only, _ = search(blocked, 0.1, (3, 3), (56, 3), wide=True, radii=(0.25,), along=1.0)
     both, length = search(blocked, 0.1, (3, 3), (56, 3), wide=True, radii=(0.4, 0.25), along=1.0)
     assert radius_only[1] == 3
-    assert both[1] == 5 and length > 5.3  # out to column 5 and back
+    assert both[1] == 5
+    # its length in metres, not its cost (two diagonals out, 49 cells down, two back; the soft cells it
+    # crossed on the way out and back cost more but are no longer)
+    assert length == pytest.approx(4 * math.sqrt(2) * 0.1 + 4.9)
 
 
-def test_a_door_narrower_than_the_clearance_is_planned_on_the_radius_level():
-    # the gap and the door of the test above: the 0.7 m door closes on the clearance's level (its
-    # middle cell lies 0.35 m from the jambs), so the radius's level plans through it, not the plain
-    # grid through the 0.3 m gap
+def test_a_door_narrower_than_the_clearance_is_taken_at_a_cost():
+    # the gap and the door of the test above: the 0.7 m door lies in the clearance's band (its middle
+    # cell 0.35 m from the jambs), passable at a cost, so the path goes through it, not through the
+    # 0.3 m gap (blocked within the radius); with the 0.4 m as the only, blocking, level there is no
+    # inflated path and the plain grid's goes through the gap
     blocked = np.zeros((21, 40), bool)
     blocked[10] = True
     blocked[10, 3:6] = False
     blocked[10, 30:37] = False
-    _, clearance_only = search(blocked, 0.1, (5, 4), (15, 4), wide=True, radii=(0.4,))
+    _, blocking = search(blocked, 0.1, (5, 4), (15, 4), wide=True, radii=(0.4,))
     _, both = search(blocked, 0.1, (5, 4), (15, 4), wide=True, radii=(0.4, 0.25))
-    assert clearance_only == pytest.approx(1.0)  # no path on its level: the plain grid's, through the gap
-    assert both > 5.0  # through the door
+    assert blocking == pytest.approx(1.0)
+    assert both > 5.0
+
+
+def test_a_door_in_the_band_beats_a_long_detour():
+    # 0.25 m cells: a 1 m door (4 cells: the middle two in the 0.4 m band, the outer two within the
+    # radius) next to the start and goal, a wide opening 13 m away: through the door, not round
+    blocked = np.zeros((41, 80), bool)
+    blocked[20] = True
+    blocked[20, 4:8] = False  # the door
+    blocked[20, 60:76] = False  # the opening
+    _, length = search(blocked, 0.25, (10, 5), (30, 5), wide=True, radii=(0.4, 0.25))
+    assert length < 6.0  # 20 cells of 0.25 m and a step sideways; round by the opening: over 30 m
 
 
 def test_a_start_next_to_a_wall_still_plans_away_from_it():

@@ -45,6 +45,10 @@ CLOSED = -2
 """``pos`` of an expanded cell"""
 GEN, SIZE = 0, 1
 """indices into a search's ``meta``: its generation stamp and its heap's size"""
+SOFT = 1
+"""a grid value a search with ``penalty`` > 0 enters at ``1 + penalty`` times the move's cost (the own
+map's band of the subgoal's clearance, :mod:`worlds.own_map`); searches without a penalty (the
+kernel's field, whose free cells hold gap values) read it as any free value"""
 
 
 def new_work(cells: int) -> tuple:
@@ -129,10 +133,13 @@ def search_start(start, goal, stride, diagonal, g, parent, pos, seen, heap, key_
 def _relax(ctx, step, cand, hr, hc, size):
     """Offer the neighbour ``node + step`` the cost ``cand`` (via the expanded ``node`` of ``ctx``;
     ``hr``, ``hc``: its offset from the goal); returns the heap's size."""
-    grid, at, node, goal, diagonal, gen, work = ctx
+    grid, at, node, goal, diagonal, gen, work, penalty = ctx
     g, parent, pos, seen, heap, key_f, key_g = work
-    if grid[at + step] == BLOCKED:
+    value = grid[at + step]
+    if value == BLOCKED:
         return size
+    if penalty > 0.0 and value == SOFT:
+        cand = g[node] + (cand - g[node]) * (1.0 + penalty)
     nb = node + step
     if seen[nb] == gen:
         if pos[nb] == CLOSED or not cand < g[nb]:
@@ -151,10 +158,12 @@ def _relax(ctx, step, cand, hr, hc, size):
 
 
 @njit(cache=True, _nrt=False)
-def search_run(grid, base, stride, goal, diagonal, g, parent, pos, seen, heap, key_f, key_g, order, meta):
+def search_run(grid, base, stride, goal, diagonal, g, parent, pos, seen, heap, key_f, key_g, order, meta,
+               penalty=0.0):  # fmt: skip
     """Run the search held in the work arrays on the padded grid at ``grid[base:]`` until it
     expands ``goal`` (A*; not expanded further) or the heap is empty. Returns the number of nodes
-    expanded."""
+    expanded. With ``penalty`` > 0, entering a :data:`SOFT` cell costs ``1 + penalty`` times the move
+    (the octile heuristic stays a lower bound: no move costs less than before)."""
     gen, size = meta[GEN], meta[SIZE]
     gr, gc = goal // stride, goal % stride
     work = (g, parent, pos, seen, heap, key_f, key_g)
@@ -173,7 +182,7 @@ def search_run(grid, base, stride, goal, diagonal, g, parent, pos, seen, heap, k
         r, c = node // stride, node % stride
         at, one, diag = base + node, g[node] + 1.0, g[node] + SQRT2
         hr, hc = r - gr, c - gc  # the heuristic's offsets (A* only)
-        ctx = (grid, at, node, goal, diagonal, gen, work)
+        ctx = (grid, at, node, goal, diagonal, gen, work, penalty)
         size = _relax(ctx, -stride, one, hr - 1, hc, size)
         size = _relax(ctx, stride, one, hr + 1, hc, size)
         size = _relax(ctx, -1, one, hr, hc - 1, size)

@@ -6,20 +6,20 @@ flat uint8 row per robot, :data:`~worlds.fields.BLOCKED` on seen-blocked cells (
 blocked cells (known map) and on a ring around the map.
 
 **Configuration space.** The search plans for the robot's centre, so on maps whose cells are finer
-than the robot it searches *inflated* copies of the plan grid (``wide``, one row per level): a cell
-is blocked in a level when its centre lies closer than the level's reach to a blocked cell of the
-plan grid (the ring included). The levels, widest first (:func:`level_radius`): the subgoal's
-clearance (the path keeps that far from walls where it can, as a path through 1 m cells keeps
-0.5 m), then the robot's radius (the inscribed inflation of ROS costmap_2d's / nav2's inflation
-layer, ``nav2_costmap_2d::InflationLayer``: cells within the inscribed radius of a lethal cell are
-``INSCRIBED_INFLATED_OBSTACLE``, which nav2's grid planners refuse; its cost decaying beyond that
-radius is what the clearance level stands in for). :func:`waypoint` searches the levels in turn
-and the plan grid last, so a door narrower than twice the clearance is still planned through, on
-the radius level. Without inflation, at 0.1 m cells a path runs through gaps narrower than the robot
-and along walls closer than its radius; at 1 m cells (the default radius 0.25 m, clearance 0.4 m)
+than the robot it searches an *inflated* copy of the plan grid (``wide``), a small costmap in the
+manner of ROS costmap_2d's / nav2's inflation layer (``nav2_costmap_2d::InflationLayer``): a cell
+whose centre lies closer than the robot's radius to a blocked cell of the plan grid (the ring
+included) is blocked (nav2's ``INSCRIBED_INFLATED_OBSTACLE``, which its grid planners refuse), and
+a cell closer than the subgoal's clearance is :data:`~worlds.gridsearch.SOFT`: entering it costs
+``1 +`` :data:`PENALTY` times the move (nav2's cost decaying beyond the inscribed radius, in one
+step). So the path keeps the clearance from walls where that costs little, as a path through 1 m
+cells keeps 0.5 m, and still takes a door narrower than twice the clearance rather than a long
+detour. The levels, widest first (:func:`level_radius`): the clearance's (soft), the radius's
+(blocked). Without inflation, at 0.1 m cells a path runs through gaps narrower than the robot and
+along walls closer than its radius; at 1 m cells (the default radius 0.25 m, clearance 0.4 m)
 nothing is inflated (:func:`inflation_cells` is 0) and nothing of the inflation runs. ``near``
 counts, per level and cell, the blocked cells within its reach; :func:`_set` adds or takes one over
-the disk around a cell whose blocked state changed, so the inflated grids follow the own map per
+the disk around a cell whose blocked state changed, so the inflated grid follows the own map per
 changed cell, as the plan grid does.
 """
 
@@ -30,7 +30,7 @@ import math
 from numba import njit
 
 from worlds.fields import BLOCKED
-from worlds.gridsearch import DIAGONAL, GEN, search_run, search_start
+from worlds.gridsearch import DIAGONAL, GEN, SOFT, SQRT2, search_run, search_start
 
 UNKNOWN, FREE, SEEN_BLOCKED = 0, 1, 2
 """cell states of the robot's own map"""
@@ -60,7 +60,10 @@ def inflation_cells(radius, cell):
 
 
 LEVELS = 2
-"""inflated plan grids at most: the subgoal's clearance, then the robot's radius"""
+"""inflation levels at most: the subgoal's clearance (soft), then the robot's radius (blocked)"""
+PENALTY = 1.0
+"""a move into a cell of the clearance's band costs ``1 + PENALTY`` times its length: the path leaves
+the band where a detour of up to that many times the band's length avoids it"""
 
 
 @njit(cache=True)
@@ -89,56 +92,71 @@ def _reaches(dr, dc, reach):
     return dx * dx + dy * dy < reach * reach
 
 
+@njit(cache=True)
+def _value(near, at):
+    """The inflated grid's value of padded map cell ``at`` from the levels' counts ``near``: blocked
+    within the last level's reach (the robot's radius), :data:`SOFT` within another's, else free."""
+    last = near.shape[0] - 1
+    if near[last, at] > 0:
+        return BLOCKED
+    return SOFT if last > 0 and near[0, at] > 0 else 0
+
+
 @njit(cache=True, _nrt=False)
-def _spread(wide, near, stride, height, width, r, c, delta, reach, band):
-    """Add ``delta`` (+1 or -1) to the count ``near`` of every map cell within the robot's radius
-    (``reach`` cells; ``band``: :func:`inflation_cells`) of the padded cell (r, c) (-1 and height / width
-    are the ring), and block ``wide`` where the count is above 0."""
+def _spread(wide, near, level, stride, height, width, r, c, delta, reach, band):
+    """Add ``delta`` (+1 or -1) to level ``level``'s count ``near`` of every map cell within ``reach``
+    cells (``band``: :func:`inflation_cells`) of the padded cell (r, c) (-1 and height / width are the
+    ring), and set those cells of ``wide`` (:func:`_value`)."""
     for rr in range(max(r - band, 0), min(r + band, height - 1) + 1):
         for cc in range(max(c - band, 0), min(c + band, width - 1) + 1):
             if _reaches(rr - r, cc - c, reach):
                 at = (rr + 1) * stride + cc + 1
-                near[at] += delta
-                wide[at] = BLOCKED if near[at] > 0 else 0
+                near[level, at] += delta
+                wide[at] = _value(near, at)
 
 
 @njit(cache=True, _nrt=False)
 def inflate(plan, wide, near, height, width, reach):
-    """The inflated grids ``wide`` (one row per level; and their counts ``near``) of the padded plan
-    grid ``plan`` from scratch: the ring blocked, a map cell blocked in level l when its centre lies
-    closer than ``reach[l]`` cells to a blocked cell of ``plan`` (see the module docstring)."""
+    """The inflated grid ``wide`` (and the levels' counts ``near``, one row per level, of reaches
+    ``reach`` cells) of the padded plan grid ``plan`` from scratch: the ring blocked, each map cell
+    :func:`_value` of the blocked cells of ``plan`` around it (see the module docstring). Nothing
+    without a grid (``wide`` empty)."""
+    if wide.shape[0] == 0:
+        return
     stride = width + 2
-    for level in range(wide.shape[0]):
-        row, counts, band = wide[level], near[level], _band(reach[level])
-        for at in range((height + 2) * stride):
-            counts[at], row[at] = 0, BLOCKED
-        for r in range(height):
-            for c in range(width):
-                row[(r + 1) * stride + c + 1] = 0
+    for at in range((height + 2) * stride):
+        wide[at] = BLOCKED
+        for level in range(near.shape[0]):
+            near[level, at] = 0
+    for r in range(height):
+        for c in range(width):
+            wide[(r + 1) * stride + c + 1] = 0
+    for level in range(near.shape[0]):
+        band = _band(reach[level])
         for r in range(-1, height + 1):
             for c in range(-1, width + 1):
                 if plan[(r + 1) * stride + c + 1] == BLOCKED:
-                    _spread(row, counts, stride, height, width, r, c, 1, reach[level], band)
+                    _spread(wide, near, level, stride, height, width, r, c, 1, reach[level], band)
 
 
 @njit(cache=True)
 def _set(occ, plan, exam, exam_id, stride, r, c, state, wide, near, height, reach):
     """Cell (r, c) of the own map becomes ``state``; the plan grid (if tracked: ``plan`` not empty)
-    follows, and its inflated grids ``wide`` (levels; none: no rows; ``near``, ``reach``: see
-    :func:`inflate`).
+    follows, and its inflated grid ``wide`` (empty: none; ``near``, ``reach``: see :func:`inflate`).
     Returns :data:`CHANGED` | :data:`ON_PLAN` flags."""
     old = occ[r, c]
     occ[r, c] = state
     if (old == SEEN_BLOCKED) == (state == SEEN_BLOCKED):
         return 0
     at = (r + 1) * stride + c + 1
-    band = _band(reach[0]) if wide.shape[0] > 0 else 0  # the widest level's
+    levels = near.shape[0] if wide.shape[0] > 0 else 0
+    band = _band(reach[0]) if levels > 0 else 0  # the widest level's
     if plan.shape[0] > 0:
         plan[at] = BLOCKED if state == SEEN_BLOCKED else 0
         delta = 1 if state == SEEN_BLOCKED else -1
-        for level in range(wide.shape[0]):
+        for level in range(levels):
             lr = reach[level]
-            _spread(wide[level], near[level], stride, height, stride - 2, r, c, delta, lr, _band(lr))
+            _spread(wide, near, level, stride, height, stride - 2, r, c, delta, lr, _band(lr))
     if exam_id < 0:
         return CHANGED | ON_PLAN
     if band > 0:  # the inflated cells it changed lie within band: next to an expanded cell within band + 1
@@ -164,7 +182,7 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
     when a cell became blocked or stopped being blocked (unknown and free plan alike), with
     :data:`ON_PLAN` when such a cell lies next to one the search ``exam_id`` expanded (``exam``
     holds their stamps; ``exam_id < 0``: unknown, every change counts). The plan grid's inflated
-    copies ``wide`` (levels, none: no rows) follow too (:func:`_set`)."""
+    copy ``wide`` (empty: none) follows too (:func:`_set`)."""
     flags = 0
     stride = width + 2
     px, py = x / cell, y / cell
@@ -252,15 +270,23 @@ def _in_clear(plan, stride, height, width, cell, x0, y0, x1, y1, clearance, exam
 
 
 @njit(cache=True, _nrt=False)
-def _open(grid, near, plan, stride, height, width, centre, band, opened):
-    """Open (``opened``) the cells of an inflated ``grid`` within ``band`` rows and columns of the padded
-    cell ``centre`` that are free on the plan grid, or close them again as the counts ``near`` say."""
+def _open(wide, near, plan, stride, height, width, centre, band, opened):
+    """Open (``opened``) the cells of the inflated grid ``wide`` within ``band`` rows and columns of the
+    padded cell ``centre`` that are free on the plan grid (blocked ones become :data:`SOFT`: passable,
+    at the band's cost), or set them again as the counts ``near`` say (:func:`_value`)."""
     r0, c0 = centre // stride - 1, centre % stride - 1
     for r in range(max(r0 - band, 0), min(r0 + band, height - 1) + 1):
         for c in range(max(c0 - band, 0), min(c0 + band, width - 1) + 1):
             at = (r + 1) * stride + c + 1
             if plan[at] != BLOCKED:
-                grid[at] = 0 if opened or near[at] == 0 else BLOCKED
+                wide[at] = SOFT if opened and wide[at] == BLOCKED else _value(near, at)
+
+
+@njit(cache=True)
+def _move(a, b, stride):
+    """Length (cells) of the move between neighbouring padded cells ``a`` and ``b``."""
+    d = abs(a - b)
+    return SQRT2 if d == stride - 1 or d == stride + 1 else 1.0
 
 
 @njit(cache=True, _nrt=False)
@@ -279,14 +305,15 @@ def waypoint(plan, wide, near, reach, height, width, cell, x, y, goal_r, goal_c,
     goal itself; searched; the path's length in metres from the robot's cell to the goal's, -1.0
     when there is no path or no search).
 
-    With inflated grids ``wide`` (:func:`inflate`, one row per level, widest first; no rows: none;
-    ``near``, ``reach``: their counts and reaches) the search runs on each in turn until one has a
-    path. On each, the cells within the level's band of the robot's cell and of the goal's that are
-    free on the plan grid count free (:func:`_open`): a robot whose cell centre lies within the
-    level's reach of a wall still finds the way out, away from the wall (``band`` cells straight
-    away from it lie beyond the reach), and a goal beside a wall is still reached. When no level has
-    a path (a gap that the cell rounding closed), the search runs again on ``plan``, so the subgoal is
-    never lost to the inflation. The clearance check reads ``plan`` either way."""
+    With an inflated grid ``wide`` (:func:`inflate`; empty: none; ``near``, ``reach``: its levels'
+    counts and reaches) the search runs on it first, its :data:`SOFT` cells at ``1 +`` :data:`PENALTY`
+    times a move's cost; the cells within the robot's radius of the robot's cell and of the goal's
+    that are free on the plan grid count soft (:func:`_open`): a robot whose cell centre lies within
+    its radius of a wall still finds the way out, away from the wall (``band`` cells straight away
+    from it lie beyond the reach), and a goal beside a wall is still reached. The waypoint and the
+    length are then measured along the path in metres, not in its costs. When it finds no path (a
+    gap that the cell rounding closed), the search runs again on ``plan``, so the subgoal is never
+    lost to the inflation. The clearance check reads ``plan`` either way."""
     g, parent, seen, order, meta = work[0], work[1], work[3], work[7], work[8]
     stride = width + 2
     c, r = int(x / cell), int(y / cell)
@@ -296,23 +323,35 @@ def waypoint(plan, wide, near, reach, height, width, cell, x, y, goal_r, goal_c,
     if plan[start] == BLOCKED:
         return -1, False, -1.0
     found = False
-    for level in range(wide.shape[0]):
-        grid, counts, band = wide[level], near[level], _band(reach[level])
-        _open(grid, counts, plan, stride, height, width, start, band, True)
-        _open(grid, counts, plan, stride, height, width, goal, band, True)
-        was_goal = grid[goal]
-        grid[goal] = 0  # counted free, as on the plan grid
+    if wide.shape[0] > 0:
+        band = _band(reach[near.shape[0] - 1])  # the robot's radius
+        _open(wide, near, plan, stride, height, width, start, band, True)
+        _open(wide, near, plan, stride, height, width, goal, band, True)
+        was_goal = wide[goal]
+        wide[goal] = 0  # counted free, as on the plan grid
         search_start(start, goal, stride, DIAGONAL, *work)
-        expanded = search_run(grid, 0, stride, goal, DIAGONAL, *work)
-        grid[goal] = was_goal
-        _open(grid, counts, plan, stride, height, width, goal, band, False)
-        _open(grid, counts, plan, stride, height, width, start, band, False)
+        expanded = search_run(wide, 0, stride, goal, DIAGONAL, *work, PENALTY)
+        wide[goal] = was_goal
+        _open(wide, near, plan, stride, height, width, goal, band, False)
+        _open(wide, near, plan, stride, height, width, start, band, False)
         for k in range(expanded):
             exam[order[k]] = exam_id
         found = seen[goal] == meta[GEN]
-        if found:
-            break
-    if not found:
+    if found:  # the path's costs are not its length: measure it, then walk back from the goal to the
+        # cell ``along`` metres from the start (the first whose predecessor is nearer than that)
+        total, node = 0.0, goal
+        while parent[node] >= 0:
+            total += _move(node, parent[node], stride)
+            node = parent[node]
+        node, from_goal = goal, 0.0
+        while parent[node] >= 0:
+            step = _move(node, parent[node], stride)
+            if (total - from_goal - step) * cell < along:
+                break
+            from_goal += step
+            node = parent[node]
+        length = total
+    else:
         was = plan[goal]
         plan[goal] = 0
         search_start(start, goal, stride, DIAGONAL, *work)
@@ -322,11 +361,11 @@ def waypoint(plan, wide, near, reach, height, width, cell, x, y, goal_r, goal_c,
             exam[order[k]] = exam_id
         if seen[goal] != meta[GEN]:
             return -1, True, -1.0
-    # parent links run goal -> start: the node at path length >= along is the last one walking back
-    # from the goal whose g is still >= along (g grows along the path from the start)
-    node = goal
-    while parent[node] >= 0 and g[parent[node]] * cell >= along:
-        node = parent[node]
+        # parent links run goal -> start: the node at path length >= along is the last one walking back
+        # from the goal whose g is still >= along (g grows along the path from the start)
+        node, length = goal, g[goal]
+        while parent[node] >= 0 and g[parent[node]] * cell >= along:
+            node = parent[node]
     if clearance > 0.0 and node != start:
         sx, sy = (c + 0.5) * cell, (r + 0.5) * cell
         while parent[node] >= 0 and parent[node] != start:
@@ -337,7 +376,7 @@ def waypoint(plan, wide, near, reach, height, width, cell, x, y, goal_r, goal_c,
             if _in_clear(plan, stride, height, width, cell, sx, sy, nx, ny, clearance, exam, exam_id):
                 break
             node = parent[node]
-    return (-1 if node == goal else node), True, g[goal] * cell
+    return (-1 if node == goal else node), True, length * cell
 
 
 @njit(cache=True)

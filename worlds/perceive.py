@@ -169,15 +169,18 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     plan, wpt, exam, exam_id, path_length = plans[0], plans[1], plans[6], plans[7], plans[10]
     height, width, cell, at = mh[m], mw[m], mcell[m], moff[m]
     # the inflation levels on this map's cells, widest first (worlds.own_map.level_radius; worlds.perception
-    # allocates their grids when a map of the bank has cells fine enough for one)
+    # allocates the inflated grid when a map of the bank has cells fine enough for one)
+    # (all of them when the widest inflates: a narrower one with no band blocks the blocked cells alone)
     reach, levels = plans[13][i], 0
-    if sub_kind != SUB_NONE:
-        for level in range(plans[11].shape[1]):
+    widest = level_radius(params[RADIUS_PARAM], clearance, 0)
+    if sub_kind != SUB_NONE and inflation_cells(widest, cell) > 0:
+        for level in range(plans[12].shape[1]):
             metres = level_radius(params[RADIUS_PARAM], clearance, level)
-            if metres > 0.0 and inflation_cells(metres, cell) > 0:
+            if metres > 0.0:
                 reach[levels] = metres / cell
                 levels += 1
-    wide, near, reach = plans[11][i, :levels], plans[12][i, :levels], reach[:levels]
+    wide = plans[11][i] if levels > 0 else plans[11][i, :0]
+    near, reach = plans[12][i, :levels], reach[:levels]
     uses_map = occ.shape[1] > 0
     shaped, shaping = False, 0.0
     if fresh:

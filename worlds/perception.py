@@ -196,18 +196,14 @@ class Perception:
         self.occ = grow(getattr(self, "occ", None), np.int8, self.uses_map)
         self.visits = grow(getattr(self, "visits", None), np.int32, self.uses_map)
         self.plan = grow(getattr(self, "plan", None), np.uint8, self.plans, flat=True)
-        # the inflated plan grids and their counts (worlds.own_map.inflate), one row per level, on maps of
-        # fine cells only; the levels' reaches on the robot's map (cells)
+        # the inflated plan grid and its levels' counts (worlds.own_map.inflate), on maps of fine cells
+        # only; the levels' reaches on the robot's map (cells)
         levels = self.levels if self.plans and inflates else 0
-
-        def grow_levels(old, dtype):
-            new = np.zeros((self.n, levels, cells if levels else 0), dtype)
-            if levels and old is not None and old.size:
-                new[:, :, : old.shape[2]] = old
-            return new
-
-        self.wide = grow_levels(getattr(self, "wide", None), np.uint8)
-        self.near = grow_levels(getattr(self, "near", None), np.int32)
+        self.wide = grow(getattr(self, "wide", None), np.uint8, levels > 0, flat=True)
+        old = getattr(self, "near", None)
+        self.near = np.zeros((self.n, levels, cells if levels else 0), np.int32)
+        if levels and old is not None and old.size:
+            self.near[:, :, : old.shape[2]] = old
         self.reach = np.zeros((self.n, LEVELS), np.float64)
         # per cell: the waypoint cell planned from it (-1: the goal), valid on plan-map version ``stamp``
         self.plan_node = grow(getattr(self, "plan_node", None), np.int32, self.plans)
