@@ -42,7 +42,7 @@ its free trace stops this far short of its end, so no trace clears the cell a ra
 margin the trace's boundary crossings, computed apart from the range, enter the hit cell a rounding
 error before the range half the time and clear it: at 0.1 m cells 8.5% of the wall cells the rays had
 marked were cleared again a step later (a heuristic's 150 steps on mixed:32 split 10x10), at 1 m
-cells 0.15%; the plan then ran through walls (``tests/test_worlds_perception.py``)."""
+cells 0.15% (``tests/test_own_map_inflation.py``)."""
 
 CHANGED, ON_PLAN = 1, 2
 """flags of :func:`map_rays`: a cell became blocked or stopped being blocked; one of them lies where
@@ -69,8 +69,9 @@ the band where a detour of up to that many times the band's length avoids it"""
 @njit(cache=True)
 def level_radius(radius, clearance, level):
     """The radius (m) of inflation level ``level`` (0: the widest; 0.0: no such level): the subgoal's
-    clearance when it is wider than the robot's ``radius``, then the radius. A level inflates only on
-    cells where :func:`inflation_cells` of its radius is above 0."""
+    clearance when it is wider than the robot's ``radius``, then the radius. The last level blocks,
+    the one before it is soft (:func:`_value`); a map is inflated when :func:`inflation_cells` of the
+    widest is above 0 on its cells."""
     if level == 0:
         return max(radius, clearance)
     if level == 1 and clearance > radius:
