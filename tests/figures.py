@@ -8,7 +8,8 @@ in the same order, where each comes from: one backquoted expression per bold fig
 ``EXPR`` on a ``.json`` file is a dotted path (``metrics.unseen.success.value``); a list step may
 pick its element by a field (``results[robots=64].ours.robot_steps_per_cpu_s``) or by position
 (``rounds.0``), and ``*`` steps into the one value of an object that has exactly one (a key with dots
-in it, such as an env's ``module:callable`` name: ``saved_policy.metrics.*.success.value``). On a
+in it, such as an env's ``module:callable`` name: ``saved_policy.metrics.*.success.value``), ``*NAME``
+into the one value whose key contains NAME (a map file's path: ``maps.*nav2_depot.policy.success``). On a
 ``.jsonl`` file (one JSON object per line) it is an aggregate over the lines that match
 ``| key=value ...``:
 
@@ -99,10 +100,11 @@ def _walk(data: object, path: str) -> object:
         if match is None:
             raise KeyError(f"bad path step {step!r}")
         key, field, value = match["key"], match["field"], match["value"]
-        if key == "*":
-            values = list(data.values())  # type: ignore[union-attr]
+        if key.startswith("*"):
+            part = key[1:]
+            values = [v for k, v in data.items() if part in k]  # type: ignore[union-attr]
             if len(values) != 1:
-                raise KeyError(f"*: {len(values)} values, not one")
+                raise KeyError(f"{key}: {len(values)} values, not one")
             data = values[0]
         else:
             data = data[int(key)] if isinstance(data, list) else data[key]  # type: ignore[index]

@@ -136,8 +136,8 @@ def search(blocked: np.ndarray, cell: float, start: tuple[int, int], goal: tuple
     exam = np.zeros(plan.shape, np.int32)
     x, y = (start[1] + 0.5) * cell, (start[0] + 0.5) * cell
     work = new_work(plan.size)
-    node, searched, length = waypoint(plan, grid, near, reach, h, w, cell, x, y, goal[0], goal[1], along, work,
-                                      exam, 1)  # fmt: skip
+    node, searched, length = waypoint(plan, grid, near, reach, h, w, cell, x, y, goal[0], goal[1], along,
+                                      work, exam, 1)  # fmt: skip
     assert searched
     return (None if node < 0 else (node // (w + 2) - 1, node % (w + 2) - 1)), length
 

@@ -96,6 +96,19 @@ def test_a_star_step_reads_the_one_value_of_an_object_and_refuses_several(tmp_pa
     assert first.ok and not second.ok and "2 values, not one" in second.error
 
 
+def test_a_star_name_step_reads_the_one_value_whose_key_contains_the_name(tmp_path):
+    (tmp_path / "m.json").write_text(
+        json.dumps({"maps": {"/data/depot.yaml": {"ok": 0.97}, "/data/warehouse.yaml": {"ok": 0.95}}})
+    )
+    doc = tmp_path / "DOC.md"
+    doc.write_text(
+        "| Figure | Source |\n| --- | --- |\n"
+        "| **95%**, **97%**, **1** | `m.json:maps.*warehouse.ok` `:maps.*depot.ok` `:maps.*data.ok` |\n"
+    )
+    warehouse, depot, both = check(doc, tmp_path)
+    assert warehouse.ok and depot.ok and not both.ok and "2 values, not one" in both.error
+
+
 def test_a_figure_without_a_source_is_an_error(tmp_path):
     doc = write_doc(tmp_path, "| **98.8%** and **7.7x** | `r.json:a.success` |")
     with pytest.raises(ValueError, match="2 bold figures but 1 sources"):
