@@ -183,8 +183,8 @@ class ObservationConfig:
     door's jamb. 0: the cell ``subgoal_distance`` along the path, round corners or not (what policies
     saved before the setting observe). Learned policies use 0.4 (the robot's radius and 0.15 m;
     issue 39: nearly every collision on bigger room maps was at a jamb). On maps of cells finer than
-    it, the path itself keeps this far from walls where it can (:mod:`worlds.own_map`'s inflation
-    levels)"""
+    it, the path itself keeps this far from walls where it can (:mod:`worlds.own_map`: the plan
+    grid's soft band)"""
     patch_size: int = 0
     """side of the egocentric, heading-aligned patch of the robot's own map (cells; 0: off), two
     channels: occupancy (1 seen blocked, 0 seen free, 0.5 unknown) and visits (1 - 1/(1+n))"""

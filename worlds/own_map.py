@@ -50,13 +50,19 @@ the last search (:func:`waypoint`) looked"""
 
 
 @njit(cache=True)
+def _band(reach):
+    """:func:`inflation_cells` of a reach given in cells: ceil(reach - 0.5), at least 0."""
+    return max(math.ceil(reach - 0.5), 0)
+
+
+@njit(cache=True)
 def inflation_cells(radius, cell):
     """How many cells the plan grid is inflated by for a robot of ``radius`` metres on cells of
     ``cell`` metres: the largest offset k (in rows or columns) at which a cell's centre can lie
     closer than ``radius`` to a blocked cell, k = ceil(radius / cell - 0.5) (a cell d rows away is
     (d - 0.5) cells from the centre). 0 at 1 m cells and the default 0.25 m radius: no inflation.
     Which cells of the (2k+1)^2 square count is :func:`_reaches`'s."""
-    return max(math.ceil(radius / cell - 0.5), 0)
+    return _band(radius / cell)
 
 
 LEVELS = 2
@@ -77,12 +83,6 @@ def level_radius(radius, clearance, level):
     if level == 1 and clearance > radius:
         return radius
     return 0.0
-
-
-@njit(cache=True)
-def _band(reach):
-    """:func:`inflation_cells` of a reach given in cells."""
-    return max(math.ceil(reach - 0.5), 0)
 
 
 @njit(cache=True)

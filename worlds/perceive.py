@@ -103,7 +103,7 @@ def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell,
     ``dirty``: a cell became blocked or free; ``replan``: one where the last search looked), else
     kept; with ``reuse``, from the plans kept per cell of this plan map, and kept on a new plan map
     when no change lies where the search that made it looked. ``wide``: robot ``i``'s inflated plan
-    grids (levels; ``near``, ``reach``: their counts and reaches), no rows when its map's cells need none."""
+    grid, empty when its map's cells need none (``near``, ``reach``: its levels' counts and reaches)."""
     plan, wpt, last, plan_node, stamp, version, exam, exam_id, searches, plan_length, path_length = plans[:11]
     rc, cc = int(y / cell), int(x / cell)
     moved = rc != last[i, 0] or cc != last[i, 1]
@@ -207,7 +207,7 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     if uses_map:
         own = sub_kind == SUB_OWN  # the plan grid follows the own map
         tracked, seen_by = (plan[i], exam_id[i]) if own else (plan[i, :0], -1)
-        mapped = wide if own else wide[:0]  # the inflated grids follow the own map only
+        mapped = wide if own else wide[:0]  # the inflated grid follows the own map only
         flags = map_rays(occ[i], visits[i], tracked, exam[i], seen_by, height, width, cell, x, y, theta,
                          ray_c, ray_s, rays, max_range, per, mapped, near, reach)  # fmt: skip
         dirty = dirty or (own and flags & CHANGED != 0)

@@ -22,9 +22,9 @@ step, the last ``frame_stack`` frames observed newest first::
 * **The subgoal**: the shortest 8-connected grid path (:func:`worlds.gridsearch.grid_search`,
   the search behind the expert's A*) from the goal to every cell of the robot's own map,
   unknown cells counted free, so the robot cannot "see" unseen walls, in the robot's configuration
-  space: on cells finer than the robot the grid is inflated by the subgoal's clearance where a path
-  keeps it, else by the robot's radius (:mod:`worlds.own_map`; nothing is inflated at 1 m cells and
-  the default radius and clearance); the waypoint is the cell
+  space: on cells finer than the robot the grid is inflated, cells within the robot's radius of a
+  wall blocked and those within the subgoal's clearance dearer to cross (:mod:`worlds.own_map`;
+  nothing is inflated at 1 m cells and the default radius and clearance); the waypoint is the cell
   ``subgoal_distance`` metres along the path from the robot's cell (the goal itself when
   nearer); the frame gets its squashed distance and bearing. It is replanned whenever the map
   changed in a way that matters (a cell became blocked or stopped being blocked next to a cell
