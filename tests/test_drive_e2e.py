@@ -159,12 +159,19 @@ def test_navlearn_status_shows_the_drive_and_the_sim(stack):
     assert robots["sim:sim"]["collided"] is False and len(robots["sim:sim"]["pose"]) == 3
 
 
-def test_zero_velocity_within_half_a_second_of_a_stale_scan(stack):
-    trial, commands, sim = stack["trial"], stack["commands"], stack["sim"]
+def drive_somewhere(stack) -> None:
+    """Give the drive a goal away from the robot and wait until it moves (each test that needs motion
+    sets it up itself: under ``pytest -n 2`` a worker may run any test of this module first)."""
+    trial = stack["trial"]
     sim_status = robot_status(trial.session, trial.sim_key)
     start_goal = (13.5, 13.5) if math.dist(sim_status["pose"][:2], (13.5, 13.5)) > 4 else (2.5, 2.5)
     trial.publish_goal(start_goal)
-    commands.wait_moving()
+    stack["commands"].wait_moving()
+
+
+def test_zero_velocity_within_half_a_second_of_a_stale_scan(stack):
+    trial, commands, sim = stack["trial"], stack["commands"], stack["sim"]
+    drive_somewhere(stack)
     time.sleep(0.3)
     os.kill(sim.pid, signal.SIGUSR2)  # the simulated lidar stops publishing
     time.sleep(1.5)
@@ -182,7 +189,7 @@ def test_zero_velocity_within_half_a_second_of_a_stale_scan(stack):
 
 def test_sigterm_sends_zero_velocity_first(stack):
     commands, drive = stack["commands"], stack["drive"]
-    commands.wait_moving()
+    drive_somewhere(stack)
     sent = time.monotonic()
     drive.send_signal(signal.SIGTERM)
     assert drive.wait(10) == 0
