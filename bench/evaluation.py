@@ -7,7 +7,9 @@ for the heuristic of ``worlds.heuristics`` (numpy only, no matrix product). It a
 policy call alone on a ``(--batch, 11)`` observation batch with BLAS at its library default
 threads and held to one thread: on a busy machine the difference is what made evaluation slow.
 Then it compares the two policies on the same episodes (``agents.evaluation.compare``: exact
-McNemar, per map family, path ratio on jointly solved episodes) and prints the table.
+McNemar, per map family, path ratio on jointly solved episodes) and prints the table. The policy
+acts through its reading shield, as ``navlearn evaluate`` runs it (:mod:`agents.shield`); the same
+network without the shield (``network``) is run and compared on the same episodes too.
 
     python bench/evaluation.py       # human lines, then one JSON object on the last line
 """
@@ -56,7 +58,8 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=100, help="policy calls per timing")
     args = parser.parse_args()
 
-    nnql = load_policy(PRETRAINED)
+    network = load_policy(PRETRAINED)
+    nnql = load_policy(PRETRAINED).use_shield(network.nav_config())
     heuristic = goal_seeking_policy()
     sets, set_wall, _ = timed(
         lambda: [make_eval_set(f, args.episodes, seed=0) for f in ("unseen", "dynamic")]
@@ -81,7 +84,7 @@ def main() -> None:
         "load_avg_1m": round(os.getloadavg()[0], 2),
     }
     results = {}
-    for name, policy in (("nnql", nnql), ("heuristic", heuristic)):
+    for name, policy in (("nnql", nnql), ("network", network), ("heuristic", heuristic)):
         result, wall, cpu = timed(evaluate, policy, sets)
         results[name] = result
         report[name] = {
@@ -96,6 +99,9 @@ def main() -> None:
     comparison = compare(results["nnql"], results["heuristic"], names=("nnql (pretrained)", "heuristic"))
     print(comparison.table())
     report["compare"] = comparison.to_dict()
+    shield = compare(results["nnql"], results["network"], names=("nnql (shielded)", "network alone"))
+    print(shield.table())
+    report["compare_shield"] = shield.to_dict()
     report["load_avg_1m_end"] = round(os.getloadavg()[0], 2)
     print(json.dumps(report))
 

@@ -4,12 +4,13 @@ For every map side in ``--sizes`` (default 16, 32, 48, 64 cells of 1 m) two sets
 evaluation (:func:`agents.evaluation.make_eval_set`, generated maps of the ``mixed`` families, never
 trained on): ``static`` and ``dynamic`` with moving discs - 4 up to 32 cells, then scaled with the
 area (:func:`discs_for`: 9 at 48, 16 at 64). On the same episodes (same maps, starts, goals, seeds)
-it runs the policy (default the shipped ``pretrained/nnql``), the goal-seeking heuristic and the A*
-expert (lattice A* on the true map, the demonstrations' source; ``--expert-episodes`` caps its
-episodes per set, it is the slow one) and prints per set: success with its 95% Wilson interval,
-SPL, static / dynamic collisions, timeouts, and the exact McNemar p-value of the policy against
-each baseline on the episodes both ran. Episodes run in the world's default step rule (what a user
-gets), stated in the JSON.
+it runs the policy (default the shipped ``pretrained/nnql``, through its reading shield as
+``navlearn evaluate`` runs it, and its network without the shield: row ``network``), the
+goal-seeking heuristic and the A* expert (lattice A* on the true map, the demonstrations' source;
+``--expert-episodes`` caps its episodes per set, it is the slow one) and prints per set: success
+with its 95% Wilson interval, SPL, static / dynamic collisions, timeouts, and the exact McNemar
+p-value of the policy against each baseline on the episodes both ran. Episodes run in the world's
+default step rule (what a user gets), stated in the JSON.
 
 It also measures the world's throughput against map size: robot-steps per CPU-second of
 ``NavigationVectorEnv`` (one thread, 16 robots, the policy's observation with its own-map subgoal,
@@ -54,7 +55,7 @@ from worlds.outcomes import Outcome
 from worlds.tasks import parse_map_spec
 from worlds.vector_env import NavigationVectorEnv
 
-METHODS = ("policy", "previous", "heuristic", "expert")
+METHODS = ("policy", "network", "previous", "heuristic", "expert")
 THROUGHPUT_ROBOTS = 16
 
 
@@ -156,11 +157,14 @@ def throughput(nav: NavConfig, size: int, seconds: float, seed: int, maps=None) 
 @dataclass
 class Methods:
     """What the bench runs on every episode: the policy (in its own observation and ``nav``, whose
-    step rule everything shares), the goal-seeking heuristic and, when given, a previous policy."""
+    step rule everything shares; through its reading shield unless ``--no-shield``), the same network
+    without the shield when the policy has one (``network``: what the shield adds, paired), the
+    goal-seeking heuristic and, when given, a previous policy."""
 
     policy: object
     nav: NavConfig
     previous: object | None = None
+    network: object | None = None
 
     def runs(self, es: EvalSet, expert_episodes: int) -> dict[str, dict[str, np.ndarray]]:
         """Outcome, path length and steps per episode of each method on ``es`` (the expert on the
@@ -168,6 +172,11 @@ class Methods:
         heuristic, width = goal_seeking_policy(self.nav), self.nav.sensors.n_beams + 3
         runs = {
             "policy": episode_arrays(evaluate(self.policy, es, self.nav), es.family),
+            **(
+                {"network": episode_arrays(evaluate(self.network, es, self.nav), es.family)}
+                if self.network
+                else {}
+            ),
             "heuristic": episode_arrays(evaluate(lambda o: heuristic(o[:, :width]), es, self.nav), es.family),
         }
         if self.previous is not None:  # its own observation, the same episodes and step rule
@@ -349,6 +358,13 @@ def main(argv: list[str] | None = None) -> int:
         "one row per file instead of the size sweep",
     )
     parser.add_argument("--out", help="directory for map_sizes.json and map_sizes.png (--map: maps.json)")
+    parser.add_argument(
+        "--shield",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="act through the reading shield (agents.shield), as `navlearn evaluate` does; with it the "
+        "same network is also run without it (row 'network'), paired",
+    )
     args = parser.parse_args(argv)
 
     policy = load_policy(args.policy)
@@ -357,7 +373,10 @@ def main(argv: list[str] | None = None) -> int:
         nav = replace(nav, max_steps=args.max_steps)
     if args.step_factor is not None:
         nav = replace(nav, step_factor=args.step_factor)
-    methods = Methods(policy, nav, load_policy(args.previous) if args.previous else None)
+    if args.shield:
+        policy.use_shield(nav)
+    network = load_policy(args.policy) if args.shield else None
+    methods = Methods(policy, nav, load_policy(args.previous) if args.previous else None, network)
     if args.map:
         return run_maps(args, methods)
     report: dict = {

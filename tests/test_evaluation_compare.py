@@ -128,8 +128,12 @@ def test_shipped_evaluation_is_reproduced():
     """The shipped policy's recorded episodes come out the same (same seeds, same episode definition).
     If the episode definition changed on purpose, re-run
     ``navlearn evaluate --policy pretrained/nnql --out pretrained/nnql/eval``."""
-    recorded = json.loads((PRETRAINED / "eval" / "eval.json").read_text())["episodes"]["unseen"][:30]
-    result = evaluate(load_policy(PRETRAINED), make_eval_set("unseen", len(recorded), seed=0))
+    recorded = json.loads((PRETRAINED / "eval" / "eval.json").read_text())
+    assert recorded["shield"] is True  # recorded as `navlearn evaluate` runs it by default
+    recorded = recorded["episodes"]["unseen"][:30]
+    policy = load_policy(PRETRAINED)
+    policy.use_shield(policy.nav_config())
+    result = evaluate(policy, make_eval_set("unseen", len(recorded), seed=0))
     keys = ("map_id", "start", "goal", "seed", "outcome", "path_length", "steps", "shortest")
     for old, new in zip(recorded, result.to_dict()["episodes"]["unseen"], strict=True):
         assert {k: old[k] for k in keys} == {k: new[k] for k in keys}

@@ -43,7 +43,9 @@ from safetensors.numpy import load_file
 from agents.forward import network_forward
 from agents.mlp import ACTIVATION_NAMES, ARCHITECTURE_KEYS, CONFIG_FILE, KINDS, WEIGHTS_FILE, save_policy
 from agents.nnql.config import RECURRENT_RETIRED
-from worlds.config import NavConfig, saved_observation, with_observation
+from agents.shield import ReadingShield
+from agents.shield import for_nav as shield_for
+from worlds.config import NavConfig, check_observation, saved_observation, with_observation
 from worlds.heuristics import goal_seeking_policy
 from worlds.perception import observation_dim
 
@@ -73,6 +75,8 @@ class GreedyMLPPolicy:
         self.version = int(config.get("version", 0))
         self.env = config.get("env")
         """the Gymnasium env it was trained on (``worlds.own_env.EnvConfig.record``); None: our world"""
+        self.shield: ReadingShield | None = None
+        """the reading shield it acts through (:meth:`use_shield`); None: the network's argmax"""
         if self.env is not None:  # a user's env: its spaces, not navlearn's observation, size the input
             self.observation = None
             self._load(weights)
@@ -113,11 +117,28 @@ class GreedyMLPPolicy:
             raise ValueError(f"expected observations (N, {self.obs_dim}), got {obs.shape}")
         return self.forward(obs)
 
+    def use_shield(self, nav: NavConfig | None) -> GreedyMLPPolicy:
+        """Act through the reading shield of ``nav``'s robot and sensor (:mod:`agents.shield`: never an
+        action the current readings say hits something), or through none when ``nav`` is None;
+        returns the policy. ``nav`` must observe what the policy observes."""
+        if nav is not None and self.env is not None:
+            raise ValueError(f"{self!r} acts in a Gymnasium env; the reading shield is for navlearn's robot")
+        if nav is not None:
+            check_observation(self.observation, nav)
+        self.shield = None if nav is None else shield_for(nav)
+        return self
+
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        return self.outputs(obs).argmax(axis=1).astype(np.int64)
+        outputs = self.outputs(obs)
+        if self.shield is None:
+            return outputs.argmax(axis=1).astype(np.int64)
+        return self.shield.choose(outputs, obs)
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}(model={self.model!r}, kind={self.kind!r}, version={self.version})"
+        shield = ", shielded" if self.shield is not None else ""
+        return (
+            f"{type(self).__name__}(model={self.model!r}, kind={self.kind!r}, version={self.version}{shield})"
+        )
 
 
 def load_policy(path: str | Path) -> GreedyMLPPolicy:

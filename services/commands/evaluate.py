@@ -94,6 +94,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="moving discs per episode in the dynamic set (default: %(default)s)",
     )
     parser.add_argument(
+        "--shield",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="a learned policy acts through its reading shield: never an action its current range "
+        "readings say hits something (agents.shield; the heuristic is never shielded). --no-shield: "
+        "the network's own choice (default: shielded)",
+    )
+    parser.add_argument(
         "--out", help="directory for eval.json and the path plots (with --compare: compare.json)"
     )
     add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE + "; default: the env the policy records")
@@ -158,6 +166,12 @@ def run(args: argparse.Namespace) -> int:
         policies.append(policy)
         # a saved policy's env observes what it was trained to (the observation in its config.json)
         configs.append(policy.nav_config(config) if isinstance(policy, GreedyMLPPolicy) else config)
+        if isinstance(policy, GreedyMLPPolicy) and args.shield:
+            try:
+                policy.use_shield(configs[-1])
+            except ValueError as exc:
+                print(f"navlearn evaluate: {spec}: {exc}", file=sys.stderr)
+                return 2
     if len(configs) < len(policies):  # a Gymnasium env: its own episodes, not navlearn's map sets
         return evaluate_on_env(args, specs, policies)
     try:
@@ -211,6 +225,7 @@ def run(args: argparse.Namespace) -> int:
             "policy": str(Path(args.policy).resolve()),
             "model": getattr(policy, "model", args.policy),
             "version": getattr(policy, "version", 0),
+            "shield": getattr(policy, "shield", None) is not None,
             "seed": args.seed,
             **result.to_dict(),
         }

@@ -59,6 +59,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     show.add_argument("--beams", type=int, default=8, help="number of range beams (default 8)")
     show.add_argument("--random", action="store_true", help="drive with uniformly random actions")
     show.add_argument(
+        "--shield",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="a --policy acts through its reading shield, as `navlearn evaluate` runs it (agents.shield; "
+        "default: shielded)",
+    )
+    show.add_argument(
         "--learning",
         action="store_true",
         help="the observation learned policies use (worlds.config.LEARNING_NAV): 24 sector minima of 96 "
@@ -143,6 +150,7 @@ def show_main(args: argparse.Namespace) -> int:
                 raise ValueError(str(exc)) from None
             if isinstance(policy, GreedyMLPPolicy):  # its env observes what it was trained to
                 config = replace(policy.nav_config(config), obstacles=config.obstacles)
+                policy.use_shield(config if args.shield else None)
             driver = f"policy {args.policy}"
         sampler = parse_map_spec(args.map)
         for mf in sampler.maps:

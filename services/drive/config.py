@@ -75,6 +75,9 @@ class DriveConfig(RosSettings):
     """goal reached within this distance (m; 0: the policy's world setting, 0.5 m)"""
     max_actions: int = 0
     """give up a goal after this many actions, stopping the robot (0: never; the world's limit is 200)"""
+    shield: bool = True
+    """act through the policy's reading shield: never an action the current scan's readings say hits
+    something (agents.shield; --no-shield: the network's own choice)"""
 
 
 @dataclass

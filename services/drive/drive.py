@@ -279,6 +279,8 @@ class Driver:
 def run_drive(config, settings, stop: threading.Event) -> int:
     """``navlearn drive``'s process: load the policy, join the robot's router, drive until ``stop``."""
     policy = load_policy(config.policy)
+    if config.shield:
+        policy.use_shield(policy.nav_config())
     limits = Limits(
         config.max_linear,
         config.max_angular,
