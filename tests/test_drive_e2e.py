@@ -156,6 +156,7 @@ def test_navlearn_status_shows_the_drive_and_the_sim(stack):
     assert done.returncode == 0, done.stderr  # no learner here, but the drive and the sim answer
     robots = json.loads(done.stdout)["robots"]
     assert robots["drive:drive"]["state"] in ("reached", "driving") and robots["drive:drive"]["goal"]
+    assert robots["drive:drive"]["shield"] is True  # the default: it acts through its reading shield
     assert robots["sim:sim"]["collided"] is False and len(robots["sim:sim"]["pose"]) == 3
 
 

@@ -344,14 +344,16 @@ def run_drive(config, settings, stop: threading.Event) -> int:
             view = driver.status(time.monotonic())
             view["rejected"] = dict(node.rejected)
             view["policy"] = config.policy
+            view["shield"] = policy.shield is not None
             report = StatusReport(sender=f"{keys.DRIVE_STATUS_PREFIX}{config.id}", robot=view)
             query.reply(status_key, encode_message(report))
 
         queryable = session.declare_queryable(status_key, on_status)
         token = declare_alive(session, settings.run, "drive", config.id)
         log.info(
-            "driving %s as ROS node %s (domain %d): %s + %s -> %s (%s), goals on %s",
+            "driving %s%s as ROS node %s (domain %d): %s + %s -> %s (%s), goals on %s",
             config.policy,
+            " through its reading shield" if policy.shield is not None else " (no shield)",
             config.node_name,
             config.domain_id,
             config.scan_topic,
