@@ -3,7 +3,8 @@
 For each of the first ``--episodes`` episodes of the ``unseen`` evaluation set (seed ``--seed``):
 
 1. ``agents.evaluation.evaluate`` (what ``navlearn evaluate`` runs) gives the policy's outcome in
-   the world, with its discrete steps;
+   the world, with its discrete steps; both sides act through the policy's reading shield
+   (:mod:`agents.shield`), the default of ``navlearn evaluate`` and ``navlearn drive``;
 2. the same episode through the ROS 2 wire: a Zenoh router (``navlearn router``), one
    ``navlearn drive`` for the whole run, and per episode a ``navlearn ros2-sim --map unseen:<k>``
    (the episode's map, start cell, start heading and goal); the goal is published as a
@@ -39,7 +40,9 @@ def world_outcomes(policy_dir: str, episodes: int, seed: int) -> list[str]:
     from agents.evaluation.policies import load_policy
     from worlds.outcomes import OUTCOME_NAMES
 
-    result = evaluate(load_policy(policy_dir), make_eval_set("unseen", episodes, seed=seed))
+    policy = load_policy(policy_dir)
+    policy.use_shield(policy.nav_config())  # both sides act through the reading shield, their default
+    result = evaluate(policy, make_eval_set("unseen", episodes, seed=seed))
     return [OUTCOME_NAMES[r.outcome] for r in result.episodes["unseen"]]
 
 
