@@ -159,7 +159,7 @@ class Methods:
     """What the bench runs on every episode: the policy (in its own observation and ``nav``, whose
     step rule everything shares; through its reading shield unless ``--no-shield``), the same network
     without the shield when the policy has one (``network``: what the shield adds, paired), the
-    goal-seeking heuristic and, when given, a previous policy."""
+    goal-seeking heuristic and, when given, a previous policy (shielded like the policy)."""
 
     policy: object
     nav: NavConfig
@@ -242,6 +242,7 @@ def report_head(args: argparse.Namespace, methods: Methods, bench: str) -> dict:
         "seed": args.seed,
         "episodes": args.episodes,
         "expert_episodes": args.expert_episodes,
+        "shield": args.shield,
         "load_average_before": os.getloadavg()[0],
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
     }
@@ -373,10 +374,13 @@ def main(argv: list[str] | None = None) -> int:
         nav = replace(nav, max_steps=args.max_steps)
     if args.step_factor is not None:
         nav = replace(nav, step_factor=args.step_factor)
-    if args.shield:
+    previous = load_policy(args.previous) if args.previous else None
+    if args.shield:  # both policies as `navlearn evaluate` runs them; the network alone beside them
         policy.use_shield(nav)
+        if previous is not None:
+            previous.use_shield(previous.nav_config())
     network = load_policy(args.policy) if args.shield else None
-    methods = Methods(policy, nav, load_policy(args.previous) if args.previous else None, network)
+    methods = Methods(policy, nav, previous, network)
     if args.map:
         return run_maps(args, methods)
     report: dict = {
