@@ -99,7 +99,7 @@ OTHER_PROGRAMS = {
     "--once",  # ros2 topic
     "--index-url",  # pip (a CPU-only torch, docs/install.md)
     "--before",  # bench/first_run.py
-    "--sizes", "--expert-episodes",  # bench/map_sizes.py
+    "--sizes", "--expert-episodes", "--throughput-seconds",  # bench/map_sizes.py
     "--tls-",  # the --tls-* family, named as a prefix
 }  # fmt: skip
 """flags the guides name that belong to other programs than navlearn"""
