@@ -1,4 +1,5 @@
-"""bench/map_sizes.py: the disc rule, and one tiny sweep whose last line is the JSON report."""
+"""bench/map_sizes.py: the disc rule, and one tiny sweep whose last line is the JSON report; the policy
+runs through its reading shield with the same network alone beside it, paired (--no-shield: alone)."""
 
 from __future__ import annotations
 
@@ -27,8 +28,9 @@ def test_a_tiny_sweep_prints_every_method_and_ends_with_its_json(tmp_path, capsy
     for size in ("16", "20"):
         for kind in ("static", "dynamic"):
             rows = report["results"][size][kind]
-            assert set(rows) == {"policy", "heuristic", "expert"}
-            assert rows["policy"]["episodes"] == 6 and rows["expert"]["episodes"] == 3
+            assert set(rows) == {"policy", "network", "heuristic", "expert"}
+            assert rows["policy"]["episodes"] == rows["network"]["episodes"] == 6
+            assert rows["expert"]["episodes"] == 3 and rows["network"]["paired"]["episodes"] == 6
             for row in rows.values():
                 total = row["success"] + row["collision_static"] + row["collision_dynamic"] + row["timeout"]
                 assert abs(total - 1) < 1e-9
@@ -36,6 +38,15 @@ def test_a_tiny_sweep_prints_every_method_and_ends_with_its_json(tmp_path, capsy
         assert report["throughput"][size]["robot_steps_per_cpu_s"] > 0
     assert (tmp_path / "map_sizes.png").stat().st_size > 10_000
     assert json.loads((tmp_path / "map_sizes.json").read_text())["seed"] == 1
+    assert report["shield"] is True
+
+
+def test_no_shield_runs_the_network_alone(capsys):
+    main(["--sizes", "16", "--episodes", "4", "--expert-episodes", "0", "--throughput-seconds", "0",
+          "--no-shield"])  # fmt: skip
+    report = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert report["shield"] is False
+    assert set(report["results"]["16"]["static"]) == {"policy", "heuristic"}
 
 
 def test_the_sweep_runs_in_the_worlds_default_step_rule(capsys):
@@ -70,7 +81,7 @@ def test_map_mode_gives_one_row_per_file_and_method_and_ends_with_its_json(tmp_p
     report = json.loads(lines[-1])
     assert list(report["maps"]) == files and "ceil(4 x" in report["step_rule"]
     for rows in report["maps"].values():
-        assert {"policy", "heuristic", "expert"} <= set(rows) and rows["note"]
+        assert {"policy", "network", "heuristic", "expert"} <= set(rows) and rows["note"]
         assert rows["policy"]["episodes"] == rows["expert"]["episodes"] == 4
         assert rows["expert"]["paired"]["episodes"] == 4
         solved = rows["policy"]["where_expert_succeeds"]
