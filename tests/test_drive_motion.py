@@ -31,14 +31,14 @@ def execute(start, turn, step, limits, dt=0.05, lag=0):
     return (x, y, th), np.array(commands), motion.timed_out
 
 
-@pytest.mark.parametrize("action", range(5))
+@pytest.mark.parametrize("action", range(RobotConfig().n_actions + 1))  # the shield's turn-around too
 @pytest.mark.parametrize("lag", [0, 2])
 def test_each_action_lands_where_the_world_puts_it(action, lag):
     robot, limits = RobotConfig(), Limits()
     start = (2.0, 3.0, 0.7)
-    turn = float(robot.turns[action])
-    (x, y, th), commands, timed_out = execute(start, turn, robot.step, limits, lag=lag)
-    wx, wy, wth = move(start[0], start[1], start[2], turn, robot.step)
+    turn, step = robot.motion(action)
+    (x, y, th), commands, timed_out = execute(start, turn, step, limits, lag=lag)
+    wx, wy, wth = move(start[0], start[1], start[2], turn, step)
     assert not timed_out
     assert math.hypot(x - wx, y - wy) < 0.05 and abs(wrap(th - wth)) < 0.05
     v, w = commands[:, 0], commands[:, 1]

@@ -12,10 +12,12 @@ import pytest
 
 from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import evaluate, make_eval_set
-from agents.shield import exit_distance, for_nav, reach_table
+from agents.shield import MARGINS, exit_distance, for_nav, reach_table
 from services.cli import main
 from worlds.config import LEARNING_NAV, SensorConfig
+from worlds.env import NavigationEnv
 from worlds.outcomes import Outcome
+from worlds.robot import wrap_angle
 
 PRETRAINED = Path(__file__).resolve().parents[1] / "pretrained" / "nnql"
 
@@ -61,26 +63,53 @@ def test_exit_distance_leaves_the_capsule_exactly_once():
             assert (math.hypot(x - t, y) <= 0.25) == inside, (d, r, f)
 
 
-def test_choice_keeps_the_argmax_among_clear_actions_and_the_roomiest_when_none_is():
+def test_choice_prefers_room_to_spare_then_the_capsule_then_turns_around():
     nav = LEARNING_NAV
     shield = for_nav(nav)
+    assert MARGINS[0] > 0 and MARGINS[-1] == 0  # room to spare first, the robot's own capsule last
     n, k = nav.sensors.n_beams, nav.robot.n_actions
-    obs = np.zeros((3, 30), np.float32)
+    step_reach = nav.robot.step + nav.robot.radius  # driving straight reaches this far ahead
+    obs = np.zeros((4, 30), np.float32)
     obs[:, :n] = 1.0  # every reading at max range: everything is clear
     straight = int(np.argmin(np.abs(nav.robot.turns)))
     ahead = int(np.argmin(np.abs(nav.sensors.beam_angles)))
     obs[1, ahead] = 0.6 / nav.sensors.max_range  # a wall 0.6 m ahead: driving 0.5 m there hits it
-    obs[2, :n] = 0.3 / nav.sensors.max_range  # 0.05 m of room all round: nothing is clear
-    obs[2, ahead + 6] = 0.45 / nav.sensors.max_range  # a little more to the left
-    outputs = np.zeros((3, k))
+    obs[2, ahead] = (step_reach + MARGINS[0] / 2) / nav.sensors.max_range  # clear, but not with room
+    obs[2, n // 2 :] = (step_reach + MARGINS[0] / 2) / nav.sensors.max_range  # nor on the left
+    obs[3, :n] = 0.3 / nav.sensors.max_range  # 0.05 m of room all round: nothing is clear
+    outputs = np.zeros((4, k))
     outputs[:, straight] = 1.0  # the network wants to drive straight on
-    outputs[:, 0] = 0.5
+    outputs[:, 0] = 0.5  # then 90 degrees right
     room = shield.room(obs)
-    assert (room[0] >= 0).all() and not room[1, straight] >= 0 and not (room[2] >= 0).any()
+    assert room.shape == (len(MARGINS), 4, k)
+    wide, tight = room[0] >= 0, room[-1] >= 0
+    assert wide[0].all() and not tight[1, straight] and not tight[3].any()
+    assert tight[2, straight] and not wide[2, straight] and wide[2, 0]
     chosen = shield.choose(outputs, obs)
     assert chosen[0] == straight  # nothing in the way: the network's choice
     assert chosen[1] == 0  # the wall: the next best clear action
-    assert chosen[2] == int(np.argmax(room[2])) == straight + 2  # boxed in: the roomiest (90 degrees left)
+    assert chosen[2] == 0  # straight on is clear but tight; the right has room to spare
+    assert chosen[3] == nav.robot.turn_around == k  # boxed in: half a turn in place
+    obs[2, : n // 2] = obs[2, n // 2]  # tight on the right too: clear at the last margin is enough
+    assert shield.choose(outputs, obs)[2] == straight
+
+
+def test_the_turn_around_turns_in_place_in_the_world():
+    """The world executes the shield's turn-around as half a turn in place (no drive, so no wall
+    can be hit), a Gymnasium step like any other (the drive's: tests/test_drive_motion.py)."""
+    nav = replace(LEARNING_NAV, robot=replace(LEARNING_NAV.robot, trans_noise=0.0, rot_noise=0.0))
+    env = NavigationEnv(nav, maps="rooms:16")
+    x, y, theta = env.reset(seed=3)[1]["pose"]
+    _, _, terminated, truncated, info = env.step(nav.robot.turn_around)
+    assert not (terminated or truncated) and info["path_length"] == 0.0
+    x1, y1, theta1 = info["pose"]
+    assert (x1, y1) == (x, y) and math.isclose(abs(wrap_angle(theta1 - theta)), math.pi, abs_tol=1e-9)
+    assert nav.robot.motion(nav.robot.turn_around) == (math.pi, 0.0)
+    assert nav.robot.motion(0) == (float(nav.robot.turns[0]), nav.robot.step)
+    with pytest.raises(ValueError, match=r"action 6 is not in \[0, 5\]"):
+        nav.robot.motion(6)
+    with pytest.raises(ValueError, match=r"actions must be integers in \[0, 5\]"):
+        env.step(6)
 
 
 def test_a_narrower_field_of_view_is_refused_naming_the_setting():

@@ -180,8 +180,8 @@ class NavBatch:
     def step(self, actions: np.ndarray, autoreset: bool) -> int:
         """Step every robot with ``actions`` (n,) ints; returns how many episodes ended."""
         actions = np.asarray(actions, dtype=np.int64).reshape(self.n)
-        if actions.min() < 0 or actions.max() >= len(self.turns):
-            raise ValueError(f"actions must be integers in [0, {len(self.turns)})")
+        if actions.min() < 0 or actions.max() > len(self.turns):
+            raise ValueError(f"actions must be integers in [0, {len(self.turns)}]")
         if self.threads > 1:
             n_done = self._step_threaded(actions, autoreset)
         else:

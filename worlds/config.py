@@ -46,6 +46,23 @@ class RobotConfig:
             return np.zeros(1)
         return np.linspace(-self.max_turn, self.max_turn, self.n_actions)
 
+    @property
+    def turn_around(self) -> int:
+        """The index of the robot's turn-around, ``n_actions``: half a turn in place, no drive.
+        It lies outside the learned actions (a policy's ``Discrete(n_actions)``): the world and
+        ``navlearn drive`` execute it, and only the reading shield (:mod:`agents.shield`) takes it, when
+        its readings leave no action clear (a robot that must drive ``step`` would otherwise hit
+        something). The kernel (:mod:`worlds.kernel`) tests ``action == len(turns)``."""
+        return self.n_actions
+
+    def motion(self, action: int) -> tuple[float, float]:
+        """``(turn, forward distance)`` of ``action``, :attr:`turn_around` included."""
+        if action == self.turn_around:
+            return math.pi, 0.0
+        if not 0 <= action < self.n_actions:
+            raise ValueError(f"action {action} is not in [0, {self.n_actions}] (the last is the turn-around)")
+        return float(self.turns[action]), self.step
+
 
 @dataclass(frozen=True)
 class SensorConfig:

@@ -186,11 +186,12 @@ def _step(
     m = mp[i]
     off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
     radius = params[P_RADIUS]
-    heading = th[i] + turns[action]
+    turn_around = action == turns.shape[0]  # RobotConfig.turn_around: half a turn in place, no drive
+    heading = th[i] + (math.pi if turn_around else turns[action])
     if params[P_RNOISE] > 0.0:
         heading += params[P_RNOISE] * gauss(rng, i)
-    distance = params[P_STEP]
-    if params[P_TNOISE] > 0.0:
+    distance = 0.0 if turn_around else params[P_STEP]
+    if params[P_TNOISE] > 0.0 and not turn_around:
         distance = max(distance + params[P_TNOISE] * gauss(rng, i), 0.0)
     heading = _wrap(heading)
     th[i] = heading

@@ -1,7 +1,9 @@
 """Unicycle kinematics and collision geometry (thesis ch. 2.5).
 
 An action turns the robot in place by ``turn`` then drives it ``step`` metres
-straight ahead, so one action sweeps the robot disc along a segment (a capsule).
+straight ahead, so one action sweeps the robot disc along a segment (a capsule);
+the turn-around (``RobotConfig.turn_around``, taken only by the reading shield)
+turns half a turn in place and sweeps nothing.
 The compiled helpers here are shared by the environment kernel; the numpy
 functions are the same maths for callers outside it (planners, tests).
 """

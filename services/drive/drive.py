@@ -106,7 +106,7 @@ class Driver:
         self.policy, self.inputs, self._send, self.limits = policy, inputs, send, limits
         self.nav = policy.nav_config()
         self.observer = LiveObserver(self.nav, snap_hits=True)
-        self.turns, self.step = self.nav.robot.turns, self.nav.robot.step
+        self.robot = self.nav.robot
         self.stale_after, self.cell, self.margin = stale_after, cell, margin
         self.goal_tolerance = goal_tolerance or self.nav.goal_tolerance
         self.hit_margin = hit_margin
@@ -246,7 +246,7 @@ class Driver:
         )
         obs = self.observer.observe(rays, pose, -1 if self.last_action is None else self.last_action)
         action = int(np.asarray(self.policy(obs[None, :])).reshape(-1)[0])
-        self.motion = ActionMotion(pose, float(self.turns[action]), self.step, self.limits)
+        self.motion = ActionMotion(pose, *self.robot.motion(action), self.limits)  # the turn-around too
         self.last_action, self.actions = action, self.actions + 1
         return True
 
