@@ -5,8 +5,10 @@ evaluation (:func:`agents.evaluation.make_eval_set`, generated maps of the ``mix
 trained on): ``static`` and ``dynamic`` with moving discs - 4 up to 32 cells, then scaled with the
 area (:func:`discs_for`: 9 at 48, 16 at 64). On the same episodes (same maps, starts, goals, seeds)
 it runs the policy (default the shipped ``pretrained/nnql``, through its reading shield as
-``navlearn evaluate`` runs it, and its network without the shield: row ``network``), the
-goal-seeking heuristic and the A* expert (lattice A* on the true map, the demonstrations' source;
+``navlearn evaluate`` runs it, and its network without the shield: row ``network``), the subgoal
+follower (``follower``: turn towards the own map's subgoal through the same shield, the classical
+mapless planner; :func:`worlds.heuristics.subgoal_scores`), the goal-seeking heuristic and the A*
+expert (lattice A* on the true map, the demonstrations' source;
 ``--expert-episodes`` caps its episodes per set, it is the slow one) and prints per set: success
 with its 95% Wilson interval, SPL, static / dynamic collisions, timeouts, and the exact McNemar
 p-value of the policy against each baseline on the episodes both ran. Episodes run in the world's
@@ -50,12 +52,13 @@ from agents.evaluation.runner import EvalSet, fixed_sampler
 from agents.planning.expert import Expert
 from worlds.config import NavConfig, ObstacleConfig
 from worlds.env import NavigationEnv
-from worlds.heuristics import goal_seeking_policy
+from worlds.heuristics import goal_seeking_policy, subgoal_scores
 from worlds.outcomes import Outcome
+from worlds.perception import frame_layout
 from worlds.tasks import parse_map_spec
 from worlds.vector_env import NavigationVectorEnv
 
-METHODS = ("policy", "network", "previous", "heuristic", "expert")
+METHODS = ("policy", "network", "previous", "follower", "heuristic", "expert")
 THROUGHPUT_ROBOTS = 16
 
 
@@ -159,7 +162,10 @@ class Methods:
     """What the bench runs on every episode: the policy (in its own observation and ``nav``, whose
     step rule everything shares; through its reading shield unless ``--no-shield``), the same network
     without the shield when the policy has one (``network``: what the shield adds, paired), the
-    goal-seeking heuristic and, when given, a previous policy (shielded like the policy)."""
+    goal-seeking heuristic, when given a previous policy (shielded like the policy) and, when the
+    policy observes a subgoal and acts through its shield, the subgoal follower (``follower``:
+    :func:`worlds.heuristics.subgoal_scores` through the same shield, the classical mapless planner:
+    what the own map's plan gives without the network)."""
 
     policy: object
     nav: NavConfig
@@ -179,6 +185,11 @@ class Methods:
             ),
             "heuristic": episode_arrays(evaluate(lambda o: heuristic(o[:, :width]), es, self.nav), es.family),
         }
+        shield = getattr(self.policy, "shield", None)
+        if shield is not None and "subgoal" in frame_layout(self.nav):
+            scores = subgoal_scores(self.nav)  # in the policy's observation (self.nav), as the policy
+            follower = evaluate(lambda o: shield.choose(scores(o), o), es, self.nav)
+            runs["follower"] = episode_arrays(follower, es.family)
         if self.previous is not None:  # its own observation, the same episodes and step rule
             own = replace(
                 self.previous.nav_config(), max_steps=self.nav.max_steps, step_factor=self.nav.step_factor
@@ -296,7 +307,7 @@ def plot(report: dict, path: Path) -> Path:
     sizes = report["sizes"]
     rows = report["results"]
     fig, axes = plt.subplots(1, 4, figsize=(17, 3.8))
-    styles = {"policy": "o-", "previous": "d-.", "heuristic": "s--", "expert": "^:"}
+    styles = {"policy": "o-", "previous": "d-.", "follower": "x-.", "heuristic": "s--", "expert": "^:"}
     for name, style in styles.items():
         for kind, colour in (("static", "C0"), ("dynamic", "C3")):
             ys = [

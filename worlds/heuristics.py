@@ -1,9 +1,14 @@
-"""A simple goal-seeking reactive policy: a baseline and the robot of `navlearn world show`.
+"""Hand-written policies that read only the observation (like a learned policy): baselines.
 
-It reads only the observation (like a learned policy): among the actions whose new heading
-has enough free range in front and to both sides (judged from the nearest beam and its two
-neighbours), it takes the one closest to the goal bearing. It is not a planner: it gets
-stuck behind walls that face the goal.
+- :func:`goal_seeking_policy`, the robot of `navlearn world show`: among the actions whose new
+  heading has enough free range in front and to both sides (judged from the nearest beam and its
+  two neighbours), it takes the one closest to the goal bearing. It is not a planner: it gets
+  stuck behind walls that face the goal.
+- :func:`subgoal_scores`: the classical mapless planner's choice, turn towards the subgoal of the
+  robot's own map (:mod:`worlds.own_map`: A* on what the readings have shown so far, unknown cells
+  free, re-planned as the map grows). It needs an observation with a subgoal, and something that
+  keeps it off walls (``bench/map_sizes.py`` runs it through the reading shield, as the learned
+  policy acts); it says how much of a policy's result its own map's plan already gives.
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from worlds.config import NavConfig
+from worlds.perception import frame_layout
 
 
 def goal_seeking_policy(config: NavConfig | None = None, margin: float = 0.3):
@@ -40,3 +46,20 @@ def goal_seeking_policy(config: NavConfig | None = None, margin: float = 0.3):
         return score.argmax(axis=1).astype(np.int64)
 
     return policy
+
+
+def subgoal_scores(config: NavConfig):
+    """``scores(obs (N, obs_dim)) -> (N, n_actions)``: minus each action's turn away from the
+    bearing of the own map's subgoal (highest: the action heading closest to it), for ``config``'s
+    observation, which must have a subgoal."""
+    layout = frame_layout(config)
+    if "subgoal" not in layout:
+        raise ValueError("subgoal_scores: the observation has no subgoal (observation.subgoal is 'none')")
+    at, turns = layout["subgoal"][0], config.robot.turns
+
+    def scores(obs: np.ndarray) -> np.ndarray:
+        obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
+        bearing = np.arctan2(obs[:, at + 1], obs[:, at + 2])  # (sin, cos) of the subgoal's bearing
+        return -np.abs(np.angle(np.exp(1j * (bearing[:, None] - turns[None, :]))))
+
+    return scores
