@@ -1,5 +1,6 @@
 """bench/map_sizes.py: the disc rule, and one tiny sweep whose last line is the JSON report; the policy
-runs through its reading shield with the same network alone beside it, paired (--no-shield: alone)."""
+runs through its reading shield with the same network alone and the subgoal follower beside it,
+paired (--no-shield: alone, and no follower)."""
 
 from __future__ import annotations
 
@@ -28,8 +29,10 @@ def test_a_tiny_sweep_prints_every_method_and_ends_with_its_json(tmp_path, capsy
     for size in ("16", "20"):
         for kind in ("static", "dynamic"):
             rows = report["results"][size][kind]
-            assert set(rows) == {"policy", "network", "heuristic", "expert"}
-            assert rows["policy"]["episodes"] == rows["network"]["episodes"] == 6
+            assert set(rows) == {"policy", "network", "follower", "heuristic", "expert"}
+            assert (
+                rows["policy"]["episodes"] == rows["network"]["episodes"] == rows["follower"]["episodes"] == 6
+            )
             assert rows["expert"]["episodes"] == 3 and rows["network"]["paired"]["episodes"] == 6
             for row in rows.values():
                 total = row["success"] + row["collision_static"] + row["collision_dynamic"] + row["timeout"]
@@ -81,7 +84,7 @@ def test_map_mode_gives_one_row_per_file_and_method_and_ends_with_its_json(tmp_p
     report = json.loads(lines[-1])
     assert list(report["maps"]) == files and "ceil(4 x" in report["step_rule"]
     for rows in report["maps"].values():
-        assert {"policy", "network", "heuristic", "expert"} <= set(rows) and rows["note"]
+        assert {"policy", "network", "follower", "heuristic", "expert"} <= set(rows) and rows["note"]
         assert rows["policy"]["episodes"] == rows["expert"]["episodes"] == 4
         assert rows["expert"]["paired"]["episodes"] == 4
         solved = rows["policy"]["where_expert_succeeds"]
