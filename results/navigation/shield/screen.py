@@ -4,7 +4,9 @@ Each spec is ``M1/M2/...[:2]``: margins in metres added to the robot's radius, t
 policy's argmax among the actions clear with the first margin, else with the second, ..., else the
 roomiest action at the last); ``:2`` keeps first the actions after which some action is clear again
 (a two-step look-ahead from the same readings, every point of both capsules inside the readings'
-free region). ``0`` is the shipped shield; ``none`` the network alone. The same episodes for every
+free region). ``0`` was the shipped shield until the turn-around (it reproduces that shield itself,
+the roomiest action when nothing is clear; today's: ``screen_turn_around.py``); ``none`` the network
+alone. The same episodes for every
 spec; one JSON line.
 
     PYTHONPATH=. python results/navigation/shield/screen.py 48 300 static none 0 0.03 0.06 0.1 0.05/0 0:2
@@ -20,13 +22,15 @@ import numpy as np
 
 from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import evaluate, make_eval_set
-from agents.shield import exit_distance, for_nav
+from agents.shield import exit_distance, reach_table
 from worlds.config import LEARNING_NAV, NavConfig, ObstacleConfig
 from worlds.outcomes import Outcome
+from worlds.perception import frame_layout
 
 VALIDATION_SEED = 1
 POLICY = load_policy("pretrained/nnql")
 NAV = POLICY.nav_config(LEARNING_NAV)
+READINGS = slice(*frame_layout(NAV)["readings"])
 
 
 def with_margin(margin: float) -> NavConfig:
@@ -58,14 +62,15 @@ class Screened:
     def __init__(self, spec: str):
         margins, _, look = spec.partition(":")
         self.observation = POLICY.observation
-        self.shields = [for_nav(with_margin(float(m))) for m in margins.split("/")]
+        self.reach = [reach_table(with_margin(float(m))) for m in margins.split("/")]
         self.two = look == "2"
         if self.two:
             self.second = second_reach(NAV)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         q = POLICY.outputs(obs)
-        rooms = [s.room(obs) for s in self.shields]
+        readings = obs[:, READINGS].astype(np.float64) * NAV.sensors.max_range
+        rooms = [(readings[:, None, :] - reach[None]).min(axis=2) for reach in self.reach]
         action = rooms[-1].argmax(axis=1)
         for room in reversed(rooms):
             clear = room >= 0
