@@ -42,7 +42,9 @@ class NavigationEnv(gym.Env):
     ## Action Space
     ``Discrete(n_actions)`` (default 5): action ``k`` turns the robot by
     ``linspace(-max_turn, max_turn, n_actions)[k]`` (default -90, -45, 0, 45, 90 degrees),
-    then drives ``step`` metres (default 0.5) straight ahead.
+    then drives ``step`` metres (default 0.5) straight ahead. ``step`` also takes ``n_actions``, outside
+    the space: the turn-around (``RobotConfig.turn_around``, half a turn in place, no drive), which only
+    the reading shield takes (:mod:`agents.shield`).
 
     ## Observation Space
     ``Box(n_beams + 3,)`` float32:
