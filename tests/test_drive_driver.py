@@ -35,14 +35,14 @@ def open_scan(beams: int = 360):
 class Rig:
     """A Driver on a unicycle: ``run(seconds)`` ticks at 50 Hz, feeding odometry and a scan per tick."""
 
-    def __init__(self, scan=None, **kw):
+    def __init__(self, scan=None, policy=None, **kw):
         self.sent: list[tuple[float, float, float]] = []
         self.now, self.pose = 0.0, [0.0, 0.0, 0.0]
         self.inputs = Inputs()
         self.scan = open_scan() if scan is None else scan
         options = {"stale_after": 0.3, "cell": 1.0, "margin": 4.0, "goal_tolerance": 0.0, "max_actions": 0}
         self.driver = Driver(
-            Straight(), self.inputs, self.send, Limits(1.0, 3.0, 4.0, 12.0), **{**options, **kw}
+            policy or Straight(), self.inputs, self.send, Limits(1.0, 3.0, 4.0, 12.0), **{**options, **kw}
         )
         self.scans_on = True
 
@@ -72,6 +72,29 @@ def test_reaches_a_goal_ahead_and_stops():
     assert status["state"] == "reached" and status["goals_reached"] == 1
     assert status["distance"] <= 0.5 and 4 <= status["actions"] <= 6
     assert rig.sent[-1][1:] == (0.0, 0.0) and max(v for _, v, _ in rig.sent) <= 1.0
+
+
+class TurnAround(Straight):
+    """A policy that always takes the robot's turn-around (what the reading shield takes when nothing
+    is clear)."""
+
+    def __call__(self, obs):
+        super().__call__(obs)
+        return np.array([LEARNING_NAV.robot.turn_around])
+
+
+def test_the_turn_around_is_half_a_turn_in_place():
+    policy = TurnAround()
+    rig = Rig(policy=policy)
+    rig.run(0.1)
+    rig.inputs.on_goal((3.0, 0.0), "odom")
+    rig.run(3.0)  # long enough for half a turn at 3 rad/s, with its ramps and final approach
+    assert policy.calls >= 2  # the first action done, the next chosen
+    w = np.array([w for _, _, w in rig.sent])
+    first = w[: int(np.flatnonzero((w == 0) & (np.cumsum(w != 0) > 0))[0])]  # up to its final stop
+    assert abs(abs(first.sum() * 0.02) - math.pi) < 0.05  # half a turn (the rig ticks at 50 Hz)
+    assert all(v == 0.0 for _, v, _ in rig.sent)  # never a forward speed: it turned in place
+    assert math.hypot(rig.pose[0], rig.pose[1]) < 1e-9
 
 
 def test_watchdog_stops_within_a_tick_of_the_scan_going_stale_and_drives_on():
