@@ -77,7 +77,8 @@ class DriveConfig(RosSettings):
     """give up a goal after this many actions, stopping the robot (0: never; the world's limit is 200)"""
     shield: bool = True
     """act through the policy's reading shield: never an action the current scan's readings say hits
-    something (agents.shield; --no-shield: the network's own choice)"""
+    something, half a turn in place when every action would (agents.shield; --no-shield: the
+    network's own choice)"""
 
 
 @dataclass
