@@ -116,7 +116,7 @@ def test_per_robot_tasks_discs_maps_and_reset_mask():
     with pytest.raises(ValueError, match="one entry"):
         env.reset(options={"tasks": [fixed]})
     with pytest.raises(ValueError, match="actions"):
-        env.step(np.array([0, 5, 1]))
+        env.step(np.array([0, 6, 1]))  # 5 is the turn-around (RobotConfig.turn_around)
     with pytest.raises(ValueError, match="3 robots"):
         NavigationVectorEnv(3, ZERO_NOISE, maps=["rooms:16"])
 
