@@ -7,7 +7,7 @@ JSON line.
     PYTHONPATH=. python results/navigation/shield/residual.py
 
 ``residual.json`` measured the shield of 9a9c128, which took the roomiest action when nothing was
-clear. Today's shield turns round there (``screen_turn_around.py``), so a trap no longer ends in a
+clear. Today's shield turns round there (``screen.py``, option ``t``), so a trap no longer ends in a
 collision and this script run today counts (almost) no traps.
 """
 
