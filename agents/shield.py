@@ -115,7 +115,7 @@ class ReadingShield:
     def room(self, obs: np.ndarray) -> np.ndarray:
         """``(len(MARGINS), N, n_actions)``: the least ``reading[j] - reach[k, j]`` over the sectors
         (m), per margin; an action is clear at a margin where it is >= 0."""
-        readings = np.asarray(obs, dtype=np.float64)[:, self.readings] * self.max_range
+        readings = np.asarray(obs)[:, self.readings].astype(np.float64) * self.max_range
         return (readings[None, :, None, :] - self.reach[:, None]).min(axis=3)
 
     def choose(self, outputs: np.ndarray, obs: np.ndarray) -> np.ndarray:

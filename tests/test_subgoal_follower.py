@@ -13,7 +13,7 @@ from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import evaluate, make_eval_set
 from agents.shield import for_nav
 from worlds.config import LEARNING_NAV, NavConfig
-from worlds.heuristics import subgoal_scores
+from worlds.heuristics import misalignment, subgoal_scores
 from worlds.outcomes import Outcome
 from worlds.perception import frame_layout
 
@@ -49,7 +49,7 @@ def test_through_the_shield_it_reaches_goals_the_goal_bearing_alone_does_not():
 
     def towards_goal(obs):
         bearing = np.arctan2(obs[:, goal_at + 1], obs[:, goal_at + 2])
-        return shield.choose(-np.abs(np.angle(np.exp(1j * (bearing[:, None] - nav.robot.turns)))), obs)
+        return shield.choose(-misalignment(bearing, nav.robot.turns), obs)
 
     goals = {}
     for name, policy in (("subgoal", lambda o: shield.choose(scores(o), o)), ("goal", towards_goal)):

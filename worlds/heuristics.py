@@ -19,6 +19,12 @@ from worlds.config import NavConfig
 from worlds.perception import frame_layout
 
 
+def misalignment(bearing: np.ndarray, turns: np.ndarray) -> np.ndarray:
+    """``(N, n_actions)``: how far (rad, in [0, pi]) each action's turn leaves the robot from
+    ``bearing`` (N,), a direction relative to its heading."""
+    return np.abs(np.angle(np.exp(1j * (bearing[:, None] - turns[None, :]))))
+
+
 def goal_seeking_policy(config: NavConfig | None = None, margin: float = 0.3):
     """A policy ``obs (N, n_beams + 3) -> actions (N,)`` for ``config``'s robot and sensors;
     an action is blocked when the beam nearest its heading reads less than
@@ -38,9 +44,8 @@ def goal_seeking_policy(config: NavConfig | None = None, margin: float = 0.3):
     def policy(obs: np.ndarray) -> np.ndarray:
         obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
         bearing = np.arctan2(obs[:, n + 1], obs[:, n + 2])  # goal direction relative to the heading
-        misalignment = np.abs(np.angle(np.exp(1j * (bearing[:, None] - turns[None, :]))))
         free = (obs[:, nearest_beam] >= needed) & (obs[:, sides].min(axis=2) >= needed_side)
-        score = np.where(free, -misalignment, -np.inf)
+        score = np.where(free, -misalignment(bearing, turns), -np.inf)
         stuck = ~free.any(axis=1)
         score[stuck] = obs[stuck][:, nearest_beam]  # nothing free: head for the most open side
         return score.argmax(axis=1).astype(np.int64)
@@ -60,6 +65,6 @@ def subgoal_scores(config: NavConfig):
     def scores(obs: np.ndarray) -> np.ndarray:
         obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
         bearing = np.arctan2(obs[:, at + 1], obs[:, at + 2])  # (sin, cos) of the subgoal's bearing
-        return -np.abs(np.angle(np.exp(1j * (bearing[:, None] - turns[None, :]))))
+        return -misalignment(bearing, turns)
 
     return scores
