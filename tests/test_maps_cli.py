@@ -57,6 +57,20 @@ def test_evaluate_on_three_map_formats(tmp_path, capsys):
     assert all(1.0 < e["shortest"] < 8.0 for e in report["episodes"]["office"])
 
 
+def test_evaluate_for_a_smaller_robot(tmp_path, capsys):
+    """--robot-radius reads the map scaled for the world's robot, says so, and runs on it."""
+    out_dir = tmp_path / "eval"
+    argv = ["evaluate", "--policy", str(PRETRAINED), "--map", str(office(tmp_path)), "--episodes", "4"]
+    assert main([*argv, "--robot-radius", "0.1", "--out", str(out_dir)]) == 0
+    out = capsys.readouterr().out
+    assert "office.yaml: 120x80 pixels of 0.05 m -> 120x80 cells of 0.125 m" in out
+    assert "scaled x2.5 for a robot of radius 0.1 m" in out
+    report = json.loads((out_dir / "eval.json").read_text())
+    assert len(report["episodes"]["office"]) == 4
+    assert main([*argv, "--robot-radius", "0"]) == 2
+    assert "radius=0.0 must be > 0" in capsys.readouterr().err
+
+
 def test_map_errors_are_one_line(tmp_path, capsys):
     bad = write_yaml(tmp_path, image="missing.pgm")
     assert main(["evaluate", "--policy", str(PRETRAINED), "--map", str(bad)]) == 2

@@ -227,3 +227,49 @@ def test_shared_and_holdout_maps_load():
         load_map_file(SHARED / "map_server/testmap.yaml")
     tiny = load_map_file(SHARED / "map_server/testmap.yaml", radius=0.04)
     assert tiny.grid.shape == (10, 10) and tiny.origin == (2.0, 3.0, 1.0)
+
+
+def corridor_map(tmp_path: Path, resolution: float, name: str) -> Path:
+    """A 3 m x 2 m map_server room at ``resolution`` (60 x 40 pixels): walls round it and a wall
+    across with a 0.5 m door."""
+    pixels = np.full((40, 60), 254, dtype=np.uint8)
+    pixels[:2, :] = pixels[-2:, :] = pixels[:, :2] = pixels[:, -2:] = 0
+    pixels[:, 30:32] = 0
+    pixels[15:25, 30:32] = 254
+    write_pgm(tmp_path / f"{name}.pgm", pixels.tolist())
+    return write_yaml(
+        tmp_path, image=f"{name}.pgm", name=f"{name}.yaml", resolution=resolution, origin=[-3.0, -2.0, 0.0]
+    )
+
+
+def test_a_map_for_a_smaller_robot_is_the_same_map_scaled(tmp_path):
+    """radius=0.1 reads a 0.05 m map as the 0.125 m map the world's 0.25 m robot stands in for it:
+    the same cells, the same cell size, the scale said, and ROS coordinates in the file's metres."""
+    small = load_map_file(corridor_map(tmp_path, 0.05, "small"), radius=0.1)
+    big = load_map_file(corridor_map(tmp_path, 0.125, "big"))
+    assert small.scale == 2.5 and big.scale == 1.0 and small.resolution == 0.05
+    np.testing.assert_array_equal(small.grid.blocked, big.grid.blocked)
+    assert math.isclose(small.grid.cell_size, big.grid.cell_size) and small.grid.shape == (40, 60)
+    assert "scaled x2.5 for a robot of radius 0.1 m" in small.note and "scaled" not in big.note
+    # the world is 7.5 m x 5 m; its top-left corner is the file's (-3, -2 + 2 m) in ROS's frame
+    assert np.allclose(small.to_ros(0.0, 0.0), (-3.0, 0.0)) and np.allclose(
+        small.to_ros(7.5, 5.0), (0.0, -2.0)
+    )
+    # without the radius the 0.25 m robot does not fit through the 0.5 m door at 0.1 m cells: the
+    # two rooms are apart, and pairs never cross; for the 0.1 m robot they do
+    crossing = 0
+    for task in parse_map_spec(f"{tmp_path / 'small.yaml'},radius=0.1,min_distance=1.0").draw_pool(40, 3):
+        assert astar(task.grid, task.start, task.goal).length >= 1.0 * 2.5  # the file's metres, scaled
+        crossing += (task.start[1] < 30) != (task.goal[1] < 30)
+    assert crossing > 0
+    for task in parse_map_spec(f"{tmp_path / 'small.yaml'},min_distance=1.0").draw_pool(40, 3):
+        assert (task.start[1] < 15) == (task.goal[1] < 15)
+
+
+def test_a_robot_too_big_for_the_map_is_named_in_the_files_metres(tmp_path):
+    with pytest.raises(
+        MapFormatError, match=r"small\.yaml: no two connected free cells a robot of radius 1\.5 m"
+    ):
+        load_map_file(corridor_map(tmp_path, 0.05, "small"), radius=1.5)
+    with pytest.raises(MapFormatError, match="robot radius -1"):
+        load_map_file(corridor_map(tmp_path, 0.05, "small"), radius=-1)

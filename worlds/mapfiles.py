@@ -27,6 +27,19 @@ so no wall disappears; it may narrow a gap by up to one world cell on each side.
 reason are in :attr:`MapFile.note`, which every command prints. MovingAI and ASCII files have no
 resolution: a cell is ``resolution`` metres (default 1 m, MovingAI's convention), never resampled.
 
+**Your robot's size** (``radius``): every navlearn world runs one robot, :class:`worlds.config.RobotConfig`'s
+(radius :data:`WORLD_RADIUS`, 0.25 m, a 0.5 m step, 6 m rays), the one its policies were trained with.
+A map for a robot of another radius is read *scaled* by ``WORLD_RADIUS / radius``
+(:attr:`MapFile.scale`): a TurtleBot3 Burger's map (``radius=0.105``) becomes a world 2.38 times as
+big, in which the world's robot stands for the Burger, its step for 0.21 m and its rays for 2.5 m.
+A policy reads every length over its sensor's range (readings, goal and subgoal distances), its
+shield and the baselines work in the world's metres, and success, SPL and step limits are ratios, so
+this is the same task as a robot and sensor scaled down on the file's map, without a second set of
+robot settings to keep in step with the policy's. The world's metres (path lengths, A* distances)
+are the file's times :attr:`MapFile.scale`; ``min_distance``, ``max_distance`` and ``cell_size`` are
+given in the file's metres and scaled with it. At the default radius the scale is 1 and nothing
+changes.
+
 **Usable**: a map needs two free cells, 4-connected through cells the robot's disc fits on
 (:func:`worlds.pairs.robot_cells`); otherwise it is one :class:`MapFormatError` naming the file.
 """
@@ -34,13 +47,14 @@ resolution: a cell is ``resolution`` metres (default 1 m, MovingAI's convention)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import yaml
 from PIL import Image, UnidentifiedImageError
 
+from worlds.config import RobotConfig
 from worlds.maps import GridMap, MapFormatError, Scenario, load_movingai, load_scenarios, parse_ascii
 from worlds.pairs import check_usable
 
@@ -49,6 +63,9 @@ MAP_SUFFIXES = (".yaml", ".yml", ".map", ".txt", ".ascii")
 MODES = ("trinary", "scale", "raw")
 UNKNOWN = ("blocked", "free")
 FREE, OCCUPIED, UNKNOWN_CELL = 0, 100, -1
+WORLD_RADIUS = RobotConfig().radius
+"""the radius (m) of the robot every world runs; a map for another robot is scaled by
+``WORLD_RADIUS / radius`` (see the module docstring)"""
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,12 +84,15 @@ class MapFile:
     """start/goal pairs the file carries (MovingAI ``.scen`` beside the map; ASCII S/G markers)"""
     note: str = ""
     """what cell size the world uses and why (printed by every command that loads the map)"""
+    scale: float = 1.0
+    """world metres per metre of the file: :data:`WORLD_RADIUS` over the robot radius the map was
+    loaded for (1 for the world's own robot)"""
 
     def to_ros(self, x: float, y: float) -> tuple[float, float]:
         """World coordinates (m, y down from the top row) as ROS map-frame coordinates (yaw ignored,
-        as most of ROS does)."""
+        as most of ROS does; the file's metres, :attr:`scale` undone)."""
         height = self.grid.height * self.grid.cell_size
-        return (self.origin[0] + x, self.origin[1] + height - y)
+        return (self.origin[0] + x / self.scale, self.origin[1] + (height - y) / self.scale)
 
 
 # --------------------------------------------------------------------------- map_server
@@ -221,52 +241,67 @@ def _is_movingai(path: Path) -> bool:
 def load_map_file(
     path: str | Path,
     *,
-    radius: float = 0.25,
+    radius: float = WORLD_RADIUS,
     cell_size: float | None = None,
     unknown: str = "blocked",
     resolution: float = 1.0,
 ) -> MapFile:
     """Load a map file by its format: ``.yaml``/``.yml`` map_server, a file starting ``type `` MovingAI
     (with the ``<name>.map.scen`` or ``<name>.scen`` beside it), anything else ASCII. ``radius`` is
-    the robot's (cell size rule, usability check); ``cell_size`` overrides the rule for map_server
-    maps; ``resolution`` is the metres per cell of MovingAI/ASCII files. Raises one
-    :class:`MapFormatError` naming the file (and field or line) on anything unusable."""
+    the robot's (m): the map is scaled by ``WORLD_RADIUS / radius`` (the module docstring), then the
+    cell-size rule and the usability check take the world's robot; ``cell_size`` overrides the rule
+    for map_server maps; ``resolution`` is the metres per cell of MovingAI/ASCII files (both in the
+    file's metres). Raises one :class:`MapFormatError` naming the file (and field or line) on
+    anything unusable."""
     path = Path(path)
     if not path.is_file():
         raise MapFormatError(path, None, "file not found" if not path.exists() else "not a file")
     if not (math.isfinite(resolution) and resolution > 0):
         raise MapFormatError(path, None, f"resolution {resolution} must be a positive number of metres")
+    if not (math.isfinite(radius) and radius > 0):
+        raise MapFormatError(path, None, f"robot radius {radius} must be a positive number of metres")
+    scale = WORLD_RADIUS / radius
     if path.suffix.lower() in (".yaml", ".yml"):
         cells, res, origin = read_map_server(path)
-        k, note = choose_factor(res, radius, cell_size)
+        k, note = choose_factor(res * scale, WORLD_RADIUS, None if cell_size is None else cell_size * scale)
         blocked = coarsen(occupancy_blocked(cells, unknown), k)
-        grid = GridMap(blocked, cell_size=k * res, name=path.stem)
+        grid = GridMap(blocked, cell_size=k * res * scale, name=path.stem)
         h, w = cells.shape
         note = f"{path}: {w}x{h} pixels of {res:g} m -> {grid.width}x{grid.height} {note}"
-        result = MapFile(grid, path, res, k, origin, [], note)
+        result = MapFile(grid, path, res, k, origin, [], note, scale)
     elif _is_movingai(path):
-        grid = load_movingai(path, cell_size=resolution)
+        grid = load_movingai(path, cell_size=resolution * scale)
         scen = next((p for p in (Path(f"{path}.scen"), path.with_suffix(".scen")) if p.is_file()), None)
         scenarios = load_scenarios(scen, grid) if scen is not None else []
-        note = f"{path}: {grid.width}x{grid.height} cells of {resolution:g} m (MovingAI, not resampled)"
+        note = f"{path}: {grid.width}x{grid.height} cells of {grid.cell_size:g} m (MovingAI, not resampled)"
         if scen is not None:
             note += f", {len(scenarios)} scenarios from {scen.name}"
-        result = MapFile(grid, path, resolution, 1, (0.0, 0.0, 0.0), scenarios, note)
+        result = MapFile(grid, path, resolution, 1, (0.0, 0.0, 0.0), scenarios, note, scale)
     else:
         try:
             text = path.read_text(encoding="ascii")
         except UnicodeDecodeError as exc:
             why = f"not an ASCII map, a MovingAI map or a map_server YAML ({exc.reason})"
             raise MapFormatError(path, None, why) from None
-        grid, markers = parse_ascii(text, path, resolution)
+        grid, markers = parse_ascii(text, path, resolution * scale)
         scenarios = []
         if "S" in markers and "G" in markers:
             marked = Scenario(0, path.name, grid.width, grid.height, markers["S"], markers["G"], math.nan)
             scenarios = [marked]
-        note = f"{path}: {grid.width}x{grid.height} cells of {resolution:g} m (ASCII, not resampled)"
-        result = MapFile(grid, path, resolution, 1, (0.0, 0.0, 0.0), scenarios, note)
-    check_usable(result.grid, radius, path)
+        note = f"{path}: {grid.width}x{grid.height} cells of {grid.cell_size:g} m (ASCII, not resampled)"
+        result = MapFile(grid, path, resolution, 1, (0.0, 0.0, 0.0), scenarios, note, scale)
+    if scale != 1.0:
+        result = replace(result, note=result.note + f"; {scaled(radius)}")
+    check_usable(result.grid, WORLD_RADIUS, path, scale)
     return result
+
+
+def scaled(radius: float) -> str:
+    """What the note of a map loaded for a robot of ``radius`` says of its scale."""
+    return (
+        f"scaled x{WORLD_RADIUS / radius:.4g} for a robot of radius {radius:g} m, for which the world's "
+        f"robot ({WORLD_RADIUS:g} m) stands: world metres are the file's x{WORLD_RADIUS / radius:.4g}"
+    )
 
 
 def map_paths(path: str | Path) -> list[Path]:

@@ -47,18 +47,19 @@ def robot_cells(grid: GridMap, radius: float) -> np.ndarray:
     return ~grown[reach:-reach, reach:-reach]
 
 
-def check_usable(grid: GridMap, radius: float, source: str | Path) -> None:
+def check_usable(grid: GridMap, radius: float, source: str | Path, scale: float = 1.0) -> None:
     """A :class:`MapFormatError` naming ``source`` unless two cells a robot of ``radius`` fits on are
-    4-connected through such cells."""
+    4-connected through such cells (``scale``: world metres per metre of the file, which the message
+    speaks in)."""
     labels, count = ndimage.label(robot_cells(grid, radius), structure=_FOUR)
     sizes = np.bincount(labels.ravel())[1:]
     if count == 0 or sizes.max() < 2:
         raise MapFormatError(
             source,
             None,
-            f"no two connected free cells a robot of radius {radius:g} m fits on ({grid.width}x{grid.height} "
-            f"cells of {grid.cell_size:g} m, {int((~grid.blocked).sum())} free): check the thresholds, "
-            "negate, or give unknown=free",
+            f"no two connected free cells a robot of radius {radius / scale:g} m fits on ({grid.width}x"
+            f"{grid.height} cells of {grid.cell_size / scale:g} m, {int((~grid.blocked).sum())} free): check "
+            "the thresholds, negate, or give unknown=free",
         )
 
 

@@ -27,8 +27,10 @@ distance buckets, ``pool_size`` of them per spec from the pool seed (split evenl
 Options (for map files): ``min_distance`` / ``max_distance`` (m, the pairs' A* distance range,
 default 2 m to the map's longest), ``unknown`` (``blocked``, the default, or ``free``: map_server
 cells of unknown occupancy), ``cell_size`` (m, overrides the cell-size rule of map_server maps),
-``resolution`` (m per cell of MovingAI/ASCII maps, default 1), ``radius`` (m, the robot's, default
-:class:`worlds.config.RobotConfig`'s). Example: ``--maps office.yaml,min_distance=5,unknown=free``.
+``resolution`` (m per cell of MovingAI/ASCII maps, default 1), ``radius`` (m, your robot's, default
+the world's robot, :class:`worlds.config.RobotConfig`'s: a map for a robot of another radius is
+scaled so that the world's robot stands for it, :mod:`worlds.mapfiles`). Distances and cell sizes
+are the file's metres. Example: ``--maps office.yaml,min_distance=5,unknown=free``.
 
 Generated training tasks use generator seeds below :data:`TRAIN_SEEDS`; held-out
 evaluation sets use seeds at or above it, so they never share a map with training.
@@ -45,9 +47,8 @@ from pathlib import Path
 
 import numpy as np
 
-from worlds.config import RobotConfig
 from worlds.generators import FAMILIES, generate, min_task_distance
-from worlds.mapfiles import UNKNOWN, MapFile, load_map_file, map_paths
+from worlds.mapfiles import UNKNOWN, WORLD_RADIUS, MapFile, load_map_file, map_paths
 from worlds.maps import GridMap, MapFormatError, Task, components, load_movingai, load_scenarios
 from worlds.pairs import draw_pairs
 
@@ -74,8 +75,10 @@ class MapOptions:
     """world cell size for map_server maps (m; default the rule of worlds.mapfiles)"""
     resolution: float = 1.0
     """metres per cell of MovingAI and ASCII maps"""
-    radius: float = RobotConfig().radius
-    """the robot's radius (m): pairs are reachable for it, maps must fit it"""
+    radius: float = WORLD_RADIUS
+    """the robot's radius (m): a map for a robot of another radius than the world's is scaled by
+    ``WORLD_RADIUS / radius`` (:mod:`worlds.mapfiles`), so the world's robot stands for it; pairs are
+    reachable for it, maps must fit it"""
 
     def __post_init__(self) -> None:
         if self.unknown not in UNKNOWN:
@@ -256,9 +259,9 @@ def file_tasks(maps: list[MapFile], options: MapOptions, size: int, seed: int) -
             tasks += [Task(mf.grid, sc.start, sc.goal, mf.grid.name) for sc in chosen]
             continue
         try:
-            pairs = draw_pairs(
-                mf.grid, share, int(seed) * 1_000_003 + k, options.radius, options.min_distance,
-                options.max_distance,
+            pairs = draw_pairs(  # on the world's grid: its robot, the distances in its metres
+                mf.grid, share, int(seed) * 1_000_003 + k, WORLD_RADIUS, options.min_distance * mf.scale,
+                options.max_distance * mf.scale,
             )  # fmt: skip
         except ValueError as exc:
             raise MapFormatError(mf.path, None, str(exc)) from None

@@ -68,6 +68,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="world cell size in metres for map_server maps (default: the largest multiple of the "
         "resolution up to half the robot radius; walls are never lost)",
     )
+    maps.add_argument(
+        "--robot-radius",
+        type=float,
+        metavar="M",
+        help="your robot's radius in metres, e.g. 0.105 for a TurtleBot3 Burger (default 0.25, the "
+        "world's robot, the one policies are trained with): the map is read scaled by 0.25 / M, so "
+        "the world's robot, its 0.5 m step and 6 m rays stand for yours (docs/maps.md)",
+    )
     parser.add_argument(
         "--step-factor",
         type=float,
@@ -142,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     map_specs = [
         with_options(
             spec, min_distance=args.min_distance, max_distance=args.max_distance, unknown=args.unknown,
-            cell_size=args.cell_size,
+            cell_size=args.cell_size, radius=args.robot_radius,
         )
         for spec in args.map or []
     ]  # fmt: skip
