@@ -158,3 +158,50 @@ def test_status_lists_input_ages():
     rig.run(0.2)
     ages = rig.driver.status(rig.now + 1.0)["input_age_s"]
     assert ages["scan"] == pytest.approx(1.0, abs=0.03) and ages["odometry"] == pytest.approx(1.0, abs=0.03)
+
+
+class Recorder(Straight):
+    """Drives straight ahead, keeping every observation it is given."""
+
+    def __init__(self):
+        self.seen: list[np.ndarray] = []
+
+    def __call__(self, obs):
+        super().__call__(obs)
+        self.seen.append(obs[0].copy())
+        return np.array([2])
+
+
+def wall_scan(distance: float, beams: int = 360):
+    """A wall across the robot's left, ``distance`` metres out (beams 60-120 degrees)."""
+    angles = -math.pi + np.arange(beams) * (2 * math.pi / beams)
+    side = (angles > math.radians(60)) & (angles < math.radians(120))
+    ranges = np.where(side, distance / np.sin(np.where(side, angles, 1.0)), np.inf)
+    return wire.laser_scan(ranges, -math.pi, 2 * math.pi / beams, 0.05, 8.0, 0, "laser")
+
+
+def test_a_smaller_robot_sees_its_scene_as_the_worlds_robot_and_drives_scaled_steps():
+    """--robot-radius 0.105: the same scene shrunk by 0.105 / 0.25 gives the policy the same
+    observations, and each step drives 0.21 m instead of 0.5 m (it reaches the shrunk goal in as many
+    actions, where it stops)."""
+    shrink = 0.105 / 0.25
+    big, small = Recorder(), Recorder()
+    rigs = [  # the lidar's hit margin is the robot's own metres: shrunk with it here
+        Rig(scan=wall_scan(1.5), policy=big, hit_margin=0.05),
+        Rig(scan=wall_scan(1.5 * shrink), policy=small, robot_radius=0.105, hit_margin=0.05 * shrink),
+    ]
+    for rig, goal in zip(rigs, (3.0, 3.0 * shrink), strict=True):
+        rig.run(0.1)
+        rig.inputs.on_goal((goal, 0.0), "odom")
+        rig.run(12.0)
+        assert rig.driver.status(rig.now)["state"] == "reached"
+    assert len(big.seen) == len(small.seen) >= 4
+    for a, b in zip(big.seen, small.seen, strict=True):
+        np.testing.assert_allclose(a[:24], b[:24], atol=1e-6)  # the readings
+        # the goal and subgoal: each action ends within the motion's own tolerance (the robot's
+        # metres, not scaled), a centimetre on the small robot's 2 m to go
+        np.testing.assert_allclose(a[24:], b[24:], atol=0.01)
+    assert rigs[1].driver.status(rigs[1].now)["distance"] <= 0.5 * shrink  # the world's tolerance, shrunk
+    assert rigs[1].pose[0] / len(small.seen) == pytest.approx(0.5 * shrink, abs=0.02)  # 0.21 m a step
+    with pytest.raises(ValueError, match="--robot-radius must be a positive"):
+        Rig(robot_radius=0.0)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from worlds.config import RobotConfig
+
 DISTROS = ("humble", "jazzy", "kilted", "rolling")
 """ROS 2 distributions whose rmw_zenoh wire services.drive.wire writes (kept here, free of Zenoh
 imports, so that building the CLI parser stays light)"""
@@ -72,7 +74,12 @@ class DriveConfig(RosSettings):
     margin: float = 6.0
     """the own map's extent: the box around the start and the goal, this much larger on every side (m)"""
     goal_tolerance: float = 0.0
-    """goal reached within this distance (m; 0: the policy's world setting, 0.5 m)"""
+    """goal reached within this distance (m; 0: the policy's world setting, 0.5 m, scaled to the robot
+    with --robot-radius)"""
+    robot_radius: float = RobotConfig().radius
+    """your robot's radius (m), e.g. 0.105 for a TurtleBot3 Burger: scans, odometry and goals are read
+    scaled by 0.25 / radius, so the world's 0.25 m robot the policy was trained as stands for yours,
+    and each action's 0.5 m step is driven scaled back (services.drive.drive; docs/maps.md)"""
     max_actions: int = 0
     """give up a goal after this many actions, stopping the robot (0: never; the world's limit is 200)"""
     shield: bool = True
@@ -108,5 +115,5 @@ class SimConfig(RosSettings):
     """standard deviation of the Gaussian noise on each beam (m)"""
     id: str = "sim"
     """status key navlearn/<run>/status/sim:<id>: pose, collision, path length"""
-    radius: float = 0.25
+    radius: float = RobotConfig().radius
     """robot radius (m): touching a wall is a collision, which stops the robot for good"""

@@ -20,6 +20,14 @@ loop, with no Zenoh in it (the publisher is handed in as ``send``), ticking at `
 * SIGINT and SIGTERM send zero velocity before anything else (the signal handler itself), and
   once more on the way out.
 
+**A robot of another size** (``--robot-radius R``): the policy's world is the world's robot, a
+0.25 m disc (:data:`worlds.mapfiles.WORLD_RADIUS`). The driver reads the robot's scan, odometry and
+goals scaled by ``0.25 / R`` into that world, and drives each action's step scaled back, as
+``navlearn evaluate --robot-radius`` reads a map file (docs/maps.md): a TurtleBot3 Burger (0.105 m)
+drives steps of 0.21 m and sees its 2.5 m as the policy's 6 m. The goal tolerance, the own map's
+cell and margin stay the world's (0.5 m, 1 m, 6 m: in the robot's metres 0.21, 0.42 and 2.5 m);
+``hit_margin`` and the speed limits are the robot's own metres.
+
 Its status (goal, distance, last action, stale inputs, counters) is answered on
 ``navlearn/<run>/status/drive:<id>`` (``navlearn status --drives`` shows it).
 """
@@ -47,6 +55,7 @@ from services.drive.motion import ActionMotion, Limits
 from services.drive.node import RosNode
 from services.drive.scan import ScanRefused, check_geometry, pad_returns, scan_rays
 from worlds.live import LiveObserver, Workspace
+from worlds.mapfiles import WORLD_RADIUS
 
 log = logging.getLogger("navlearn.drive")
 
@@ -102,13 +111,18 @@ class Driver:
         scan_topic: str = "/scan",
         scan_yaw: float = 0.0,
         hit_margin: float = 0.05,
+        robot_radius: float = WORLD_RADIUS,
     ) -> None:
+        if not (math.isfinite(robot_radius) and robot_radius > 0):
+            raise ValueError(f"--robot-radius must be a positive number of metres, got {robot_radius}")
         self.policy, self.inputs, self._send, self.limits = policy, inputs, send, limits
         self.nav = policy.nav_config()
         self.observer = LiveObserver(self.nav, snap_hits=True)
         self.robot = self.nav.robot
+        self.scale = WORLD_RADIUS / robot_radius
+        """the world's metres per metre of the robot (module docstring)"""
         self.stale_after, self.cell, self.margin = stale_after, cell, margin
-        self.goal_tolerance = goal_tolerance or self.nav.goal_tolerance
+        self.goal_tolerance = goal_tolerance or self.nav.goal_tolerance / self.scale  # the robot's metres
         self.hit_margin = hit_margin
         self.max_actions, self.scan_topic, self.scan_yaw = max_actions, scan_topic, scan_yaw
         self.state, self.detail = "waiting for a goal", ""
@@ -202,13 +216,14 @@ class Driver:
                 f"does no TF lookup: publish goals in {odom_frame!r}.",
             )
             return
+        start, target = self._world(pose[:2]), self._world(goal)
         try:
-            workspace = Workspace.around(pose[:2], goal, self.margin, self.cell)
+            workspace = Workspace.around(start, target, self.margin, self.cell)
         except ValueError as exc:
             self._finish("goal refused", "goals_refused", f"{exc}.")
             return
         self.goal, self.state, self.decided_after = goal, "driving", -math.inf
-        self.observer.start(workspace, goal)
+        self.observer.start(workspace, target)
         log.info("new goal (%.2f, %.2f), %.2f m away", goal[0], goal[1], math.dist(goal, pose[:2]))
 
     def _finish(self, state: str, counter: str, detail: str = "") -> None:
@@ -241,14 +256,22 @@ class Driver:
             return False
         self.detail = ""
         max_range = self.nav.sensors.max_range
+        reach = max_range / self.scale  # the policy's range in the robot's metres
         rays = pad_returns(
-            scan_rays(scan, self.nav.sensors.ray_angles, max_range, self.scan_yaw), self.hit_margin, max_range
+            scan_rays(scan, self.nav.sensors.ray_angles, reach, self.scan_yaw), self.hit_margin, reach
         )
-        obs = self.observer.observe(rays, pose, -1 if self.last_action is None else self.last_action)
+        rays = np.where(rays < reach, np.minimum(rays * self.scale, np.nextafter(max_range, 0.0)), max_range)
+        at = (*self._world(pose[:2]), pose[2])
+        obs = self.observer.observe(rays, at, -1 if self.last_action is None else self.last_action)
         action = int(np.asarray(self.policy(obs[None, :])).reshape(-1)[0])
-        self.motion = ActionMotion(pose, *self.robot.motion(action), self.limits)  # the turn-around too
+        turn, step = self.robot.motion(action)  # the turn-around too
+        self.motion = ActionMotion(pose, turn, step / self.scale, self.limits)
         self.last_action, self.actions = action, self.actions + 1
         return True
+
+    def _world(self, point) -> tuple[float, float]:
+        """A point of the robot's odometry frame in the policy's world (its metres times :attr:`scale`)."""
+        return (point[0] * self.scale, point[1] * self.scale)
 
     # ------------------------------------------------------------------ status
     def status(self, now: float) -> dict:
@@ -322,6 +345,7 @@ def run_drive(config, settings, stop: threading.Event) -> int:
             scan_topic=config.scan_topic,
             scan_yaw=config.scan_yaw,
             hit_margin=config.hit_margin,
+            robot_radius=config.robot_radius,
         )
         driver.warm_up()
         stop_on_signals(first=driver.halt, event=stop)  # from here on a signal sends zero velocity first
