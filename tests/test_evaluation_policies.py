@@ -209,3 +209,32 @@ def test_a_policy_or_config_of_the_retired_recurrent_variant_is_refused_in_one_s
         NNQLConfig.from_dict({**NNQLConfig().to_dict(), "recurrent": True, "lstm_size": 64})
     older = {**NNQLConfig().to_dict(), "recurrent": False, "lstm_size": 64}  # a feed-forward run's config
     assert NNQLConfig.from_dict(older) == NNQLConfig()
+
+
+def _with_config(tmp_path: Path, **changes) -> Path:
+    """A copy of the shipped policy with ``changes`` to its config.json."""
+    out = tmp_path / "policy"
+    out.mkdir(parents=True)
+    (out / "model.safetensors").write_bytes((PRETRAINED / "model.safetensors").read_bytes())
+    config = json.loads((PRETRAINED / "config.json").read_text())
+    config.update(changes)
+    (out / "config.json").write_text(json.dumps(config))
+    return out
+
+
+def test_the_goal_distance_cap_is_what_the_network_reads(tmp_path):
+    """goal_distance_cap: a goal further than the cap reads as the cap; a nearer one as it is."""
+    capped = load_policy(_with_config(tmp_path, goal_distance_cap=20.0))
+    plain = load_policy(_with_config(tmp_path / "b", goal_distance_cap=None))
+    assert capped.goal_distance_cap == 20.0 and plain.goal_distance_cap is None
+    rng = np.random.default_rng(0)
+    obs = rng.uniform(0.1, 1.0, size=(3, capped.obs_dim)).astype(np.float32)
+    squash = LEARNING_NAV.sensors.max_range
+    far, at_cap, near = obs.copy(), obs.copy(), obs.copy()
+    far[:, 24], at_cap[:, 24], near[:, 24] = 150 / (150 + squash), 20 / (20 + squash), 8 / (8 + squash)
+    np.testing.assert_allclose(capped.outputs(far), plain.outputs(at_cap), rtol=1e-6)
+    assert not np.allclose(plain.outputs(far), plain.outputs(at_cap))  # the cap changes what it reads
+    np.testing.assert_array_equal(capped.outputs(near), plain.outputs(near))
+    for bad in (0, -5, "far"):
+        with pytest.raises(PolicyFormatError, match="goal_distance_cap"):
+            load_policy(_with_config(tmp_path / f"bad{bad}", goal_distance_cap=bad))

@@ -26,6 +26,12 @@ the commit that still evaluates it (:data:`agents.nnql.config.RECURRENT_RETIRED`
 evaluated greedily (argmax over actions), with numpy only for MLPs, so loading one
 needs no torch.
 
+``goal_distance_cap`` (metres, optional) caps the goal distance the network reads: a goal further
+than that reads as that far (every frame's goal distance, in its squashed form ``d / (d +
+max_range)``). The shipped ``pretrained/nnql`` reads at most 20 m: trained on maps of at most 64 m, its
+network strays from its own-map subgoal towards the goal's bearing when the goal is much further,
+and on whole 512x512 maps it timed out (docs/navigation-by-size.md, section 11).
+
 ``load_policy_or_baseline`` also accepts the name ``heuristic``: the goal-seeking
 baseline of :mod:`worlds.heuristics`, for comparing a learned policy with it.
 """
@@ -47,7 +53,7 @@ from agents.shield import ReadingShield
 from agents.shield import for_nav as shield_for
 from worlds.config import NavConfig, check_observation, saved_observation, with_observation
 from worlds.heuristics import goal_seeking_policy
-from worlds.perception import observation_dim
+from worlds.perception import frame_dim, frame_layout, observation_dim
 
 __all__ = [
     "GreedyMLPPolicy",
@@ -77,6 +83,9 @@ class GreedyMLPPolicy:
         """the Gymnasium env it was trained on (``worlds.own_env.EnvConfig.record``); None: our world"""
         self.shield: ReadingShield | None = None
         """the reading shield it acts through (:meth:`use_shield`); None: the network's argmax"""
+        self.goal_distance_cap: float | None = None
+        """the farthest goal distance the network reads (m; module docstring); None: as observed"""
+        self._goal_read: float | None = None  # the cap as the observation writes it
         if self.env is not None:  # a user's env: its spaces, not navlearn's observation, size the input
             self.observation = None
             self._load(weights)
@@ -91,6 +100,14 @@ class GreedyMLPPolicy:
                 f"observation settings {self.observation} give {observation_dim(nav)} inputs, the network "
                 f"takes obs_dim={self.architecture['obs_dim']}"
             )
+        cap = config.get("goal_distance_cap")
+        if cap is not None and not (isinstance(cap, int | float) and cap > 0):
+            raise PolicyFormatError(f"goal_distance_cap={cap!r}: must be a positive number of metres")
+        if cap is not None:
+            self.goal_distance_cap = float(cap)
+            self._goal_read = self.goal_distance_cap / (self.goal_distance_cap + nav.sensors.max_range)
+        goal = frame_layout(nav)["goal"][0]
+        self._goal_columns = goal + frame_dim(nav) * np.arange(nav.observation.frame_stack)
         self._load(weights)
 
     def _load(self, weights: dict[str, np.ndarray]) -> None:
@@ -115,6 +132,9 @@ class GreedyMLPPolicy:
         obs = np.asarray(obs, dtype=np.float32)
         if obs.ndim != 2 or obs.shape[1] != self.obs_dim:
             raise ValueError(f"expected observations (N, {self.obs_dim}), got {obs.shape}")
+        if self._goal_read is not None:
+            obs = obs.copy()
+            obs[:, self._goal_columns] = np.minimum(obs[:, self._goal_columns], np.float32(self._goal_read))
         return self.forward(obs)
 
     def use_shield(self, nav: NavConfig | None) -> GreedyMLPPolicy:
