@@ -1,10 +1,12 @@
 """End to end through a real Zenoh router: `navlearn ros2-sim` + `navlearn drive` + a goal
 published as a PoseStamped. The robot reaches the goal, the ROS 2 graph (liveliness tokens) shows
 both nodes as rmw_zenoh would, a stale scan brings zero velocity within 0.5 s, and SIGTERM sends
-zero velocity first. Paired figures over many episodes: bench/ros2_drive.py (results/ros2/)."""
+zero velocity first; a smaller robot (--robot-radius) reaches the goal of the same episode shrunk to
+it. Paired figures over many episodes: bench/ros2_drive.py (results/ros2/)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import signal
@@ -55,8 +57,10 @@ class Commands:
         raise AssertionError("the robot never moved")
 
 
-@pytest.fixture(scope="module")
-def stack():
+@contextlib.contextmanager
+def running(sim_args: tuple[str, ...] = (), drive_args: tuple[str, ...] = ()):
+    """A router, `navlearn ros2-sim` on episode EPISODE and `navlearn drive` of the shipped policy,
+    all stopped on the way out."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     zenoh = ["--connect", endpoint, "--run", "e2e"]
     cli = ["-m", "services.cli"]
@@ -66,7 +70,7 @@ def stack():
     try:
         wait_for_line(router_lines, "listening", 20)
         sim, sim_lines = start(
-            [*cli, "ros2-sim", "--map", f"unseen:{EPISODE}", "--odom-rate", "100", *zenoh], env
+            [*cli, "ros2-sim", "--map", f"unseen:{EPISODE}", "--odom-rate", "100", *sim_args, *zenoh], env
         )
         drive, drive_lines = start(
             [
@@ -79,6 +83,7 @@ def stack():
                 str(STALE_AFTER),
                 "--max-actions",
                 "200",
+                *drive_args,
                 *zenoh,
             ],
             env,
@@ -101,6 +106,12 @@ def stack():
     finally:
         for proc in reversed(procs):
             stop(proc)
+
+
+@pytest.fixture(scope="module")
+def stack():
+    with running() as parts:
+        yield parts
 
 
 def test_the_robot_reaches_its_goal(stack):
@@ -200,3 +211,14 @@ def test_sigterm_sends_zero_velocity_first(stack):
     assert after and after[0][1:] == (0.0, 0.0) and after[-1][1:] == (0.0, 0.0)
     assert after[0][0] - sent < 0.2
     wait_for_line(stack["drive_lines"], "zero velocity sent", 5)
+
+
+def test_a_smaller_robot_reaches_its_goal():
+    """A TurtleBot3-sized robot (0.105 m) in the same episode shrunk to its size (the sim's --radius),
+    driven with --robot-radius 0.105: 0.21 m steps to the shrunk goal, stopping within 0.21 m of it."""
+    shrink = 0.105 / 0.25
+    with running(("--radius", "0.105", "--scan-range", "3.5"), ("--robot-radius", "0.105")) as parts:
+        result = parts["trial"].run_goal(timeout=25, tolerance=0.5 * shrink)
+    assert result["outcome"] == "success", result
+    assert result["final_distance"] <= 0.5 * shrink and result["action_timeouts"] == 0
+    assert result["path_length"] <= 5.7 * shrink * 2  # the episode's 5.7 m A* path, shrunk

@@ -116,4 +116,5 @@ class SimConfig(RosSettings):
     id: str = "sim"
     """status key navlearn/<run>/status/sim:<id>: pose, collision, path length"""
     radius: float = RobotConfig().radius
-    """robot radius (m): touching a wall is a collision, which stops the robot for good"""
+    """robot radius (m): touching a wall is a collision, which stops the robot for good; unseen:<k> is
+    scaled with it (radius / 0.25: the episode shrunk to a smaller robot, for drive --robot-radius)"""

@@ -13,7 +13,10 @@ task's goal). ``kill -USR2`` switches the lidar off and on (a watchdog drill).
 
 ``--map unseen:<k>`` drives episode k of ``navlearn evaluate``'s unseen set: the same map, start
 cell, start heading (drawn from the episode's seed by the same code) and goal; that is how the
-paired figures of bench/ros2_drive.py are made. Moving discs are not simulated.
+paired figures of bench/ros2_drive.py are made. With ``--radius R`` other than the world's 0.25 m the
+episode is shrunk (or grown) to the robot, map, start and goal scaled by ``R / 0.25``: the scene a
+robot of that size meets where the world's robot meets episode k, for ``navlearn drive
+--robot-radius R``. Moving discs are not simulated.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from services.drive import wire
 from services.drive.config import SimConfig
 from services.drive.node import RosNode
 from worlds.config import NavConfig
+from worlds.mapfiles import WORLD_RADIUS
 from worlds.maps import GridMap, Task, load_map
 from worlds.robot import collides
 from worlds.sensors import cast_rays
@@ -59,7 +63,7 @@ def scene(config: SimConfig) -> Scene:
     """The scene ``config.map`` names (see :class:`services.drive.config.SimConfig`)."""
     match = re.fullmatch(r"unseen:(\d+)", config.map)
     if match:
-        return eval_scene(int(match.group(1)), config.eval_seed)
+        return eval_scene(int(match.group(1)), config.eval_seed, config.radius / WORLD_RADIUS)
     grid = load_map(config.map)
     if config.start and len(config.start) != 3:
         raise ValueError(f"--start takes x y theta, got {config.start}")
@@ -74,17 +78,20 @@ def scene(config: SimConfig) -> Scene:
     return Scene(grid, start, None, config.map)
 
 
-def eval_scene(k: int, seed: int) -> Scene:
+def eval_scene(k: int, seed: int, scale: float = 1.0) -> Scene:
     """Episode ``k`` of evaluation set ``unseen`` of seed ``seed``: its map, its start pose as
-    ``navlearn evaluate`` starts it (heading from the episode's seed) and its goal cell's centre."""
+    ``navlearn evaluate`` starts it (heading from the episode's seed) and its goal cell's centre,
+    every length times ``scale`` (a robot of ``scale`` times the world's radius)."""
     es = make_eval_set("unseen", k + 1, seed=seed)
     task: Task = es.tasks[k]
     env = NavigationVectorEnv(1, NavConfig(), maps=fixed_sampler([task], f"ros2-sim:{seed}:{k}"))
     env.reset(seed=[es.seeds[k]], options={"tasks": [task]})
     x, y, theta = (float(v) for v in env.poses()[0])
-    cell = task.grid.cell_size
+    cell = task.grid.cell_size * scale
+    grid = task.grid if scale == 1.0 else GridMap(task.grid.blocked, cell, task.grid.name)
     goal = ((task.goal[1] + 0.5) * cell, (task.goal[0] + 0.5) * cell)
-    return Scene(task.grid, (x, y, theta), goal, f"unseen:{k} (seed {seed})")
+    shrunk = "" if scale == 1.0 else f", scaled x{scale:.4g}"
+    return Scene(grid, (x * scale, y * scale, theta), goal, f"unseen:{k} (seed {seed}{shrunk})")
 
 
 class SimRobot:
