@@ -22,6 +22,7 @@ the heuristic driving) - the own map and its A* grow with the map.
     python -m bench.map_sizes --seed 1 --episodes 200       # the validation seed (for tuning)
     python -m bench.map_sizes --out results/navigation/map_sizes   # + JSON lines and a PNG
     python -m bench.map_sizes --map office.yaml arena.map --episodes 200   # per map file
+    python -m bench.map_sizes --map tb3_world.yaml,radius=0.105            # a map for a smaller robot
 
 With ``--map`` it runs the same three on map files instead (static, the sets of
 :func:`agents.evaluation.make_map_eval_set`: a MovingAI map's own ``.scen`` pairs, else pairs drawn
