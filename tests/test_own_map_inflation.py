@@ -14,7 +14,7 @@ from agents.evaluation import make_eval_set
 from agents.evaluation.runner import fixed_sampler
 from worlds.config import LEARNING_NAV
 from worlds.fields import BLOCKED
-from worlds.gridsearch import new_work
+from worlds.gridsearch import SOFT, new_work
 from worlds.heuristics import goal_seeking_policy
 from worlds.maps import GridMap, Task
 from worlds.own_map import (
@@ -22,6 +22,7 @@ from worlds.own_map import (
     FREE,
     ON_PLAN,
     SEEN_BLOCKED,
+    UNKNOWN,
     _set,
     inflate,
     inflation_cells,
@@ -86,13 +87,16 @@ def test_no_inflation_at_1m_cells_is_the_plan_grid():
     assert np.array_equal(inflated(blocked, 0.25, 1.0), blocked)
 
 
-def test_incremental_inflation_equals_inflating_from_scratch():
+@pytest.mark.parametrize("unseen", [0, SOFT], ids=["unseen-free", "prefers-seen"])
+def test_incremental_inflation_equals_inflating_from_scratch(unseen):
+    """The inflated grid followed cell by cell equals the one inflated from the plan grid, whose unseen
+    cells stay ``unseen`` (SOFT: ``subgoal_prefers_seen``) until seen."""
     rng = np.random.default_rng(1)
     h, w, cell = 23, 17, 0.1
     reach = np.array([0.4 / cell, 0.25 / cell])  # the clearance's level, then the radius's
     occ = np.zeros((h, w), np.int8)
     plan = np.zeros((h + 2) * (w + 2), np.uint8)
-    plan_clear(plan, h, w)
+    plan_clear(plan, h, w, unseen)
     wide, near = levels(plan, reach)
     inflate(plan, wide, near, h, w, reach)
     exam = np.zeros(plan.shape, np.int32)
@@ -104,6 +108,11 @@ def test_incremental_inflation_equals_inflating_from_scratch():
             wide2, near2 = levels(plan, reach)
             inflate(plan, wide2, near2, h, w, reach)
             assert np.array_equal(near, near2) and np.array_equal(wide, wide2)
+            inner = plan.reshape(h + 2, w + 2)[1:-1, 1:-1]
+            expected = np.select([occ == SEEN_BLOCKED, occ == FREE], [BLOCKED, 0], unseen)
+            assert np.array_equal(inner, expected)
+            if step == 499:
+                assert (occ == UNKNOWN).any()  # unseen cells were checked too
     assert 0 < (occ == SEEN_BLOCKED).sum() < h * w  # both kinds of change happened
 
 

@@ -202,6 +202,14 @@ class ObservationConfig:
     issue 39: nearly every collision on bigger room maps was at a jamb). On maps of cells finer than
     it, the path itself keeps this far from walls where it can (:mod:`worlds.own_map`: the plan
     grid's soft band)"""
+    subgoal_prefers_seen: bool = False
+    """True: the own map's plan enters a cell the robot has not seen at twice a seen free cell's cost
+    (``1 +`` :data:`worlds.own_map.PENALTY` times the move, the cost of the clearance's band), so an
+    unseen stretch of path counts double and the plan keeps to ways the robot has seen unless an
+    unseen one is clearly shorter. False: unseen cells plan as free (what policies saved before the
+    setting observe). Learned policies use True (issue 39: on 64-cell room maps the timeouts were the
+    optimistic plan sending the robot down one unseen shortcut after another; validation
+    ``static:64`` 97.3 -> 99.3%, docs/navigation-by-size.md section 12)"""
     patch_size: int = 0
     """side of the egocentric, heading-aligned patch of the robot's own map (cells; 0: off), two
     channels: occupancy (1 seen blocked, 0 seen free, 0.5 unknown) and visits (1 - 1/(1+n))"""
@@ -216,7 +224,7 @@ class ObservationConfig:
     Needs a subgoal"""
 
     def __post_init__(self) -> None:
-        for name in ("range_rate", "plan_length"):
+        for name in ("range_rate", "plan_length", "subgoal_prefers_seen"):
             value = getattr(self, name)
             _check(isinstance(value, bool | np.bool_), f"observation.{name}={value!r}: must be True or False")
         _check(
@@ -310,6 +318,7 @@ OBSERVATION_FIELDS = (
     "observation.subgoal",
     "observation.subgoal_distance",
     "observation.subgoal_clearance",
+    "observation.subgoal_prefers_seen",
     "observation.patch_size",
     "observation.range_rate",
     "observation.plan_length",
@@ -327,6 +336,7 @@ LEGACY_OBSERVATION = {
     "observation.subgoal": "none",
     "observation.subgoal_distance": 2.5,
     "observation.subgoal_clearance": 0.0,
+    "observation.subgoal_prefers_seen": False,
     "observation.patch_size": 0,
     "observation.range_rate": False,
     "observation.plan_length": False,
@@ -394,7 +404,7 @@ def _same(a, b) -> bool:
 
 LEARNING_NAV = NavConfig(
     sensors=SensorConfig(n_beams=24, n_rays=96),
-    observation=ObservationConfig(subgoal="own_map", subgoal_clearance=0.4),
+    observation=ObservationConfig(subgoal="own_map", subgoal_clearance=0.4, subgoal_prefers_seen=True),
     rewards=RewardConfig(progress=0.0, geodesic_progress=0.1),
 )
 """the task as learned policies see it by default (``navlearn train --local``, the actors, learner,

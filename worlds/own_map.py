@@ -21,6 +21,14 @@ nothing is inflated (:func:`inflation_cells` is 0) and nothing of the inflation 
 counts, per level and cell, the blocked cells within its reach; :func:`_set` adds or takes one over
 the disk around a cell whose blocked state changed, so the inflated grid follows the own map per
 changed cell, as the plan grid does.
+
+**Unseen cells.** The plan is optimistic: a cell the robot has not seen plans as free. With
+``ObservationConfig.subgoal_prefers_seen`` (learned policies' default) the plan grid starts with every
+cell :data:`~worlds.gridsearch.SOFT` (:func:`plan_clear`) and a cell turns free once a ray sees it free,
+so the search enters an unseen cell at ``1 +`` :data:`PENALTY` times the move, as the clearance's band
+(on an inflated grid the two are the same value): the robot keeps to ways it has seen unless an unseen
+one is clearly shorter, rather than trying one unseen shortcut after another (issue 39: nearly every
+timeout on 64-cell room maps).
 """
 
 from __future__ import annotations
@@ -94,34 +102,35 @@ def _reaches(dr, dc, reach):
 
 
 @njit(cache=True)
-def _value(near, at):
+def _value(near, plan, at):
     """The inflated grid's value of padded map cell ``at`` from the levels' counts ``near``: blocked
-    within the last level's reach (the robot's radius), :data:`SOFT` within another's, else free."""
+    within the last level's reach (the robot's radius), :data:`SOFT` within another's or where the
+    plan grid ``plan`` has it (an unseen cell, :func:`plan_clear`), else free."""
     last = near.shape[0] - 1
     if near[last, at] > 0:
         return BLOCKED
-    return SOFT if last > 0 and near[0, at] > 0 else 0
+    return SOFT if (last > 0 and near[0, at] > 0) or plan[at] == SOFT else 0
 
 
 @njit(cache=True, _nrt=False)
-def _spread(wide, near, level, stride, height, width, r, c, delta, reach, band):
+def _spread(wide, near, plan, level, stride, height, width, r, c, delta, reach, band):
     """Add ``delta`` (+1 or -1) to level ``level``'s count ``near`` of every map cell within ``reach``
     cells (``band``: :func:`inflation_cells`) of the padded cell (r, c) (-1 and height / width are the
-    ring), and set those cells of ``wide`` (:func:`_value`)."""
+    ring), and set those cells of ``wide`` (:func:`_value`, of the plan grid ``plan``)."""
     for rr in range(max(r - band, 0), min(r + band, height - 1) + 1):
         for cc in range(max(c - band, 0), min(c + band, width - 1) + 1):
             if _reaches(rr - r, cc - c, reach):
                 at = (rr + 1) * stride + cc + 1
                 near[level, at] += delta
-                wide[at] = _value(near, at)
+                wide[at] = _value(near, plan, at)
 
 
 @njit(cache=True, _nrt=False)
 def inflate(plan, wide, near, height, width, reach):
     """The inflated grid ``wide`` (and the levels' counts ``near``, one row per level, of reaches
     ``reach`` cells) of the padded plan grid ``plan`` from scratch: the ring blocked, each map cell
-    :func:`_value` of the blocked cells of ``plan`` around it (see the module docstring). Nothing
-    without a grid (``wide`` empty)."""
+    :func:`_value` of the blocked cells of ``plan`` around it and of its own value (see the module
+    docstring). Nothing without a grid (``wide`` empty)."""
     if wide.shape[0] == 0:
         return
     stride = width + 2
@@ -131,25 +140,37 @@ def inflate(plan, wide, near, height, width, reach):
             near[level, at] = 0
     for r in range(height):
         for c in range(width):
-            wide[(r + 1) * stride + c + 1] = 0
+            at = (r + 1) * stride + c + 1
+            wide[at] = SOFT if plan[at] == SOFT else 0
     for level in range(near.shape[0]):
         band = _band(reach[level])
         for r in range(-1, height + 1):
             for c in range(-1, width + 1):
                 if plan[(r + 1) * stride + c + 1] == BLOCKED:
-                    _spread(wide, near, level, stride, height, width, r, c, 1, reach[level], band)
+                    _spread(wide, near, plan, level, stride, height, width, r, c, 1, reach[level], band)
 
 
 @njit(cache=True)
 def _set(occ, plan, exam, exam_id, stride, r, c, state, wide, near, height, reach):
     """Cell (r, c) of the own map becomes ``state``; the plan grid (if tracked: ``plan`` not empty)
     follows, and its inflated grid ``wide`` (empty: none; ``near``, ``reach``: see :func:`inflate`).
-    Returns :data:`CHANGED` | :data:`ON_PLAN` flags."""
+    An unseen cell that the plan grid holds :data:`SOFT` (:func:`plan_clear`) becomes free there once
+    seen free. Returns :data:`CHANGED` | :data:`ON_PLAN` flags."""
     old = occ[r, c]
     occ[r, c] = state
+    at = (r + 1) * stride + c + 1
+    if plan.shape[0] > 0 and plan[at] == SOFT and state == FREE:  # unseen, now seen free
+        plan[at] = 0
+        if wide.shape[0] > 0:
+            wide[at] = _value(near, plan, at)
+        if exam_id < 0:
+            return CHANGED | ON_PLAN
+        for row in (at - stride, at, at + stride):  # the one cell changed: as below, without a band
+            if exam[row - 1] == exam_id or exam[row] == exam_id or exam[row + 1] == exam_id:
+                return CHANGED | ON_PLAN
+        return CHANGED
     if (old == SEEN_BLOCKED) == (state == SEEN_BLOCKED):
         return 0
-    at = (r + 1) * stride + c + 1
     levels = near.shape[0] if wide.shape[0] > 0 else 0
     band = _band(reach[0]) if levels > 0 else 0  # the widest level's
     if plan.shape[0] > 0:
@@ -157,7 +178,7 @@ def _set(occ, plan, exam, exam_id, stride, r, c, state, wide, near, height, reac
         delta = 1 if state == SEEN_BLOCKED else -1
         for level in range(levels):
             lr = reach[level]
-            _spread(wide, near, level, stride, height, stride - 2, r, c, delta, lr, _band(lr))
+            _spread(wide, near, plan, level, stride, height, stride - 2, r, c, delta, lr, _band(lr))
     if exam_id < 0:
         return CHANGED | ON_PLAN
     if band > 0:  # the inflated cells it changed lie within band: next to an expanded cell within band + 1
@@ -228,14 +249,16 @@ def map_rays(occ, visits, plan, exam, exam_id, height, width, cell, x, y, theta,
 
 
 @njit(cache=True, _nrt=False)
-def plan_clear(plan, height, width):
-    """The padded plan grid of an empty own map: every cell free, the ring around it blocked."""
+def plan_clear(plan, height, width, unseen=0):
+    """The padded plan grid of an empty own map: every cell ``unseen`` (0: free; :data:`SOFT`: the
+    plan prefers cells the robot has seen, ``ObservationConfig.subgoal_prefers_seen``), the ring
+    around it blocked."""
     stride = width + 2
     for k in range((height + 2) * stride):
         plan[k] = BLOCKED
     for r in range(height):
         for c in range(width):
-            plan[(r + 1) * stride + c + 1] = 0
+            plan[(r + 1) * stride + c + 1] = unseen
 
 
 @njit(cache=True, _nrt=False)
@@ -280,7 +303,7 @@ def _open(wide, near, plan, stride, height, width, centre, band, opened):
         for c in range(max(c0 - band, 0), min(c0 + band, width - 1) + 1):
             at = (r + 1) * stride + c + 1
             if plan[at] != BLOCKED:
-                wide[at] = SOFT if opened and wide[at] == BLOCKED else _value(near, at)
+                wide[at] = SOFT if opened and wide[at] == BLOCKED else _value(near, plan, at)
 
 
 @njit(cache=True)
@@ -292,7 +315,7 @@ def _move(a, b, stride):
 
 @njit(cache=True, _nrt=False)
 def waypoint(plan, wide, near, reach, height, width, cell, x, y, goal_r, goal_c, along, work, exam, exam_id,
-             clearance=0.0):  # fmt: skip
+             clearance=0.0, unseen=0.0):  # fmt: skip
     """A* (8-connected, no corner cutting) on the padded grid ``plan`` from the robot's cell to the
     goal cell (counted free); the centre of the cell ``along`` metres down the path, or the goal
     itself when the path ends first, the robot is off the map or on a blocked cell, or no path
@@ -314,7 +337,12 @@ def waypoint(plan, wide, near, reach, height, width, cell, x, y, goal_r, goal_c,
     from it lie beyond the reach), and a goal beside a wall is still reached. The waypoint and the
     length are then measured along the path in metres, not in its costs. When it finds no path (a
     gap that the cell rounding closed), the search runs again on ``plan``, so the subgoal is never
-    lost to the inflation. The clearance check reads ``plan`` either way."""
+    lost to the inflation. The clearance check reads ``plan`` either way.
+
+    With ``unseen`` > 0 the search on ``plan`` enters its :data:`SOFT` cells (the cells the robot has
+    not seen, :func:`plan_clear`) at ``1 + unseen`` times a move's cost, and the waypoint and the length
+    are measured in metres, as on the inflated grid (whose :data:`SOFT` cells, the band and the unseen
+    cells alike, cost ``1 +`` :data:`PENALTY`)."""
     g, parent, seen, order, meta = work[0], work[1], work[3], work[7], work[8]
     stride = width + 2
     c, r = int(x / cell), int(y / cell)
@@ -338,8 +366,20 @@ def waypoint(plan, wide, near, reach, height, width, cell, x, y, goal_r, goal_c,
         for k in range(expanded):
             exam[order[k]] = exam_id
         found = seen[goal] == meta[GEN]
-    if found:  # the path's costs are not its length: measure it, then walk back from the goal to the
-        # cell ``along`` metres from the start (the first whose predecessor is nearer than that)
+    measured = found  # the path's costs are not its length: measure it
+    if not found:
+        was = plan[goal]
+        plan[goal] = 0
+        search_start(start, goal, stride, DIAGONAL, *work)
+        expanded = search_run(plan, 0, stride, goal, DIAGONAL, *work, unseen)
+        plan[goal] = was
+        for k in range(expanded):
+            exam[order[k]] = exam_id
+        if seen[goal] != meta[GEN]:
+            return -1, True, -1.0
+        measured = unseen > 0.0  # unseen cells cost more than their length too
+    if measured:  # measure the path, then walk back from the goal to the cell ``along`` metres from
+        # the start (the first whose predecessor is nearer than that)
         total, node = 0.0, goal
         while parent[node] >= 0:
             total += _move(node, parent[node], stride)
@@ -353,15 +393,6 @@ def waypoint(plan, wide, near, reach, height, width, cell, x, y, goal_r, goal_c,
             node = parent[node]
         length = total
     else:
-        was = plan[goal]
-        plan[goal] = 0
-        search_start(start, goal, stride, DIAGONAL, *work)
-        expanded = search_run(plan, 0, stride, goal, DIAGONAL, *work)
-        plan[goal] = was
-        for k in range(expanded):
-            exam[order[k]] = exam_id
-        if seen[goal] != meta[GEN]:
-            return -1, True, -1.0
         # parent links run goal -> start: the node at path length >= along is the last one walking back
         # from the goal whose g is still >= along (g grows along the path from the start)
         node, length = goal, g[goal]

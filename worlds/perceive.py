@@ -16,9 +16,11 @@ import numpy as np
 from numba import njit
 
 from worlds.geodesic import field_distance, start_field
+from worlds.gridsearch import SOFT
 from worlds.own_map import (
     CHANGED,
     ON_PLAN,
+    PENALTY,
     UNKNOWN,
     centre,
     inflate,
@@ -53,6 +55,9 @@ CLEARANCE_PARAM = 13
 RADIUS_PARAM = 14
 """index in :attr:`worlds.perception.Perception.params` of the robot's radius (m), which the plan grid
 is inflated by (:func:`worlds.own_map.inflation_cells`)"""
+SEEN_PARAM = 15
+"""index in :attr:`worlds.perception.Perception.params` of the own map's plan preferring seen cells (1:
+unseen cells :data:`~worlds.gridsearch.SOFT` on the plan grid, :func:`worlds.own_map.plan_clear`)"""
 
 
 @njit(cache=True, _nrt=False)
@@ -97,13 +102,14 @@ def _frame(out, base, x, y, theta, max_range, sub_at, wx, wy, act_at, n_actions,
 
 @njit(cache=True, _nrt=False)
 def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell, along, reuse, plans, work,
-             clearance, wide, near, reach):  # fmt: skip
+             clearance, unseen, wide, near, reach):  # fmt: skip
     """Robot ``i``'s waypoint into ``wpt[i]`` (``plans``). The plan depends on the map, the goal and
     the robot's cell only: it is searched again when one of them changed (``fresh``: a new episode;
     ``dirty``: a cell became blocked or free; ``replan``: one where the last search looked), else
     kept; with ``reuse``, from the plans kept per cell of this plan map, and kept on a new plan map
     when no change lies where the search that made it looked. ``wide``: robot ``i``'s inflated plan
-    grid, empty when its map's cells need none (``near``, ``reach``: its levels' counts and reaches)."""
+    grid, empty when its map's cells need none (``near``, ``reach``: its levels' counts and reaches);
+    ``unseen``: the penalty of the plan grid's unseen cells (:func:`worlds.own_map.waypoint`)."""
     plan, wpt, last, plan_node, stamp, version, exam, exam_id, searches, plan_length, path_length = plans[:11]
     rc, cc = int(y / cell), int(x / cell)
     moved = rc != last[i, 0] or cc != last[i, 1]
@@ -131,7 +137,7 @@ def _subgoal(i, fresh, dirty, replan, x, y, gx, gy, gr, gc, height, width, cell,
         searches[i] += 1
         node, searched, path_length[i] = waypoint(
             plan[i], wide, near, reach, height, width, cell, x, y, gr, gc, along, work, exam[i], searches[i],
-            clearance,
+            clearance, unseen,
         )  # fmt: skip
         exam_id[i] = searches[i] if searched else -1
         if on_map:
@@ -157,13 +163,15 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     patch (-1: absent), patch size, geodesic weight, number of actions, rays per sector, reuse of
     plans (1) or a search at every replan (0: the straightforward program the reuse must equal),
     frame offset of the range rates (-1: absent), of the plan length, the subgoal's clearance, the
-    robot's radius (the plan grid's inflation on this map's cells: :mod:`worlds.own_map`)."""
+    robot's radius (the plan grid's inflation on this map's cells: :mod:`worlds.own_map`), whether the
+    own map's plan prefers seen cells (:data:`SEEN_PARAM`)."""
     max_range, sub_kind, along = params[0], int(params[1]), params[2]
     sub_at, act_at, patch_at = int(params[3]), int(params[4]), int(params[5])
     patch, w_geo, n_actions, per = int(params[6]), params[7], int(params[8]), int(params[9])
     reuse = params[REUSE_PARAM] > 0.0
     rate_at, n_beams = int(params[RATE_PARAM]), ray_c.shape[0] // per
     len_at, clearance = int(params[LENGTH_PARAM]), params[CLEARANCE_PARAM]
+    unseen = PENALTY if params[SEEN_PARAM] > 0.0 else 0.0  # the own map's unseen cells' penalty
     field, moff, mh, mw, mcell = world
     occ, visits, plans, moves, geo, pgeo, stack = mem
     plan, wpt, exam, exam_id, path_length = plans[0], plans[1], plans[6], plans[7], plans[10]
@@ -195,7 +203,7 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
         if sub_kind == SUB_KNOWN:
             plan_from_field(field, at, plan[i], height, width)
         elif sub_kind == SUB_OWN:
-            plan_clear(plan[i], height, width)
+            plan_clear(plan[i], height, width, SOFT if unseen > 0.0 else 0)
         if levels > 0:
             inflate(plan[i], wide, near, height, width, reach)
     elif w_geo > 0.0:
@@ -233,6 +241,7 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
             plans,
             work,
             clearance,
+            unseen,
             wide,
             near,
             reach,

@@ -157,6 +157,7 @@ class Perception:
                 layout.get("plan_length", (-1,))[0],  # worlds.perceive.LENGTH_PARAM
                 o.subgoal_clearance,  # worlds.perceive.CLEARANCE_PARAM
                 config.robot.radius,  # worlds.perceive.RADIUS_PARAM
+                o.subgoal_prefers_seen,  # worlds.perceive.SEEN_PARAM
             ],
             dtype=np.float64,
         )
