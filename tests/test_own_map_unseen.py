@@ -7,10 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from agents.evaluation.runner import fixed_sampler
+from tests.test_own_map_inflation import fine_tasks
 from worlds.config import LEARNING_NAV, LEGACY_OBSERVATION, NavConfig, saved_observation
 from worlds.fields import BLOCKED
 from worlds.gridsearch import SOFT, new_work
 from worlds.own_map import CHANGED, FREE, ON_PLAN, PENALTY, UNKNOWN, _set, map_rays, plan_clear, waypoint
+from worlds.vector_env import NavigationVectorEnv
 
 H, W = 5, 9
 
@@ -83,3 +86,23 @@ def test_learned_policies_prefer_seen_cells_and_older_ones_do_not():
     assert not NavConfig().observation.subgoal_prefers_seen
     assert LEGACY_OBSERVATION["observation.subgoal_prefers_seen"] is False
     assert saved_observation({"observation.subgoal": "own_map"})["observation.subgoal_prefers_seen"] is False
+
+
+@pytest.mark.parametrize(("k", "prefers"), [(1, True), (4, False), (10, False)])
+def test_the_world_prefers_seen_cells_on_maps_of_cells_that_need_no_inflation(k, prefers):
+    """In the world (LEARNING_NAV), a robot's plan grid holds its unseen cells SOFT on 1 m cells, and
+    free on 0.25 and 0.1 m cells, where one traced ray per sector leaves most cells unseen."""
+    tasks = fine_tasks(k)
+    env = NavigationVectorEnv(len(tasks), LEARNING_NAV, maps=fixed_sampler(tasks, f"fine:{k}"), threads=1)
+    env.reset(seed=3, options={"tasks": tasks})
+    for _ in range(3):
+        env.step(np.zeros(len(tasks), np.int64))
+    perception = env.batch.perception
+    for i, task in enumerate(tasks):
+        h, w = task.grid.shape
+        plan = perception.plan[i][: (h + 2) * (w + 2)].reshape(h + 2, w + 2)[1:-1, 1:-1]
+        occ = perception.occ[i][:h, :w]
+        assert (occ == UNKNOWN).any() and (occ == FREE).any()
+        assert np.array_equal(plan == SOFT, (occ == UNKNOWN) if prefers else np.zeros((h, w), bool))
+        assert not (plan[occ == FREE]).any()
+    env.close()

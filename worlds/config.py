@@ -189,8 +189,9 @@ class ObservationConfig:
     """observe the last k frames, newest first (the first frame repeated after a reset)"""
     subgoal: str = "none"
     """"none"; "own_map": distance and bearing to a waypoint ``subgoal_distance`` along the shortest
-    path to the goal on the map the robot built from its own beams (unknown cells free), replanned
-    every step; "known_map": the same path on the true map (a user-supplied map, not learning alone)"""
+    path to the goal on the map the robot built from its own beams (unseen cells passable, see
+    ``subgoal_prefers_seen``), replanned every step; "known_map": the same path on the true map (a
+    user-supplied map, not learning alone)"""
     subgoal_distance: float = 2.5
     """path length from the robot to the subgoal waypoint (m); the goal itself when closer"""
     subgoal_clearance: float = 0.0
@@ -209,7 +210,9 @@ class ObservationConfig:
     unseen one is clearly shorter. False: unseen cells plan as free (what policies saved before the
     setting observe). Learned policies use True (issue 39: on 64-cell room maps the timeouts were the
     optimistic plan sending the robot down one unseen shortcut after another; validation
-    ``static:64`` 97.3 -> 99.3%, docs/navigation-by-size.md section 12)"""
+    ``static:64`` 97.3 -> 99.3%, docs/navigation-by-size.md section 12). It applies on maps whose cells
+    need no inflation (0.8 m and more for the default robot); on finer cells unseen cells stay free
+    (:mod:`worlds.own_map`: there the own map's rays leave most cells unseen)"""
     patch_size: int = 0
     """side of the egocentric, heading-aligned patch of the robot's own map (cells; 0: off), two
     channels: occupancy (1 seen blocked, 0 seen free, 0.5 unknown) and visits (1 - 1/(1+n))"""

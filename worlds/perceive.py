@@ -171,7 +171,6 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
     reuse = params[REUSE_PARAM] > 0.0
     rate_at, n_beams = int(params[RATE_PARAM]), ray_c.shape[0] // per
     len_at, clearance = int(params[LENGTH_PARAM]), params[CLEARANCE_PARAM]
-    unseen = PENALTY if params[SEEN_PARAM] > 0.0 else 0.0  # the own map's unseen cells' penalty
     field, moff, mh, mw, mcell = world
     occ, visits, plans, moves, geo, pgeo, stack = mem
     plan, wpt, exam, exam_id, path_length = plans[0], plans[1], plans[6], plans[7], plans[10]
@@ -189,6 +188,9 @@ def _robot(i, fresh, action, m, x, y, theta, gx, gy, gr, gc, base, rays, out, wo
                 levels += 1
     wide = plans[11][i] if levels > 0 else plans[11][i, :0]
     near, reach = plans[12][i, :levels], reach[:levels]
+    # the penalty of the own map's unseen cells: on maps of cells that need no inflation only (at finer
+    # cells the sectors' traced rays leave most cells between them unseen: worlds.own_map's docstring)
+    unseen = PENALTY if params[SEEN_PARAM] > 0.0 and levels == 0 else 0.0
     uses_map = occ.shape[1] > 0
     shaped, shaping = False, 0.0
     if fresh:
