@@ -85,6 +85,17 @@ def eval_sets(size: int, episodes: int, seed: int) -> dict[str, EvalSet]:
     return {"static": static, "dynamic": dynamic}
 
 
+def named_set(what: str, episodes: int, seed: int) -> EvalSet:
+    """The set ``what`` names: ``static:SIZE`` or ``dynamic:SIZE`` (generated maps, the discs of
+    :func:`discs_for`) or a map file (its pairs, :func:`agents.evaluation.make_map_eval_set`)."""
+    if what.startswith(("static:", "dynamic:")):
+        kind, size = what.split(":")
+        family = "unseen" if kind == "static" else "dynamic"
+        discs = ObstacleConfig(count=discs_for(int(size)))
+        return make_eval_set(family, episodes, seed=seed, size=int(size), obstacles=discs)
+    return make_map_eval_set(what, episodes, seed=seed)
+
+
 def run_expert(eval_set: EvalSet, nav: NavConfig, limit: int) -> dict[str, np.ndarray]:
     """The expert on the first ``limit`` episodes of ``eval_set``: outcome, path length, steps."""
     config = replace(nav, obstacles=eval_set.obstacles)

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import json
 
-from bench.map_sizes import discs_for, eval_sets, main
+from bench.map_sizes import discs_for, eval_sets, main, named_set
+from tests.conftest import ARENA_MAP
 
 
 def test_discs_follow_the_area_past_32_cells():
@@ -93,3 +94,12 @@ def test_map_mode_gives_one_row_per_file_and_method_and_ends_with_its_json(tmp_p
     assert json.loads((tmp_path / "maps.json").read_text())["maps"].keys() == report["maps"].keys()
     assert main(["--map", str(tmp_path / "missing.yaml"), "--episodes", "2"]) == 2
     assert "missing.yaml" in capsys.readouterr().err
+
+
+def test_a_named_set_is_a_generated_size_or_a_map_file():
+    static, dynamic = named_set("static:16", 3, seed=1), named_set("dynamic:48", 3, seed=1)
+    assert (static.family, static.obstacles.count) == ("unseen", 0)
+    assert (dynamic.family, dynamic.obstacles.count) == ("dynamic", discs_for(48))
+    assert static.tasks[0].grid.shape == (16, 16) and dynamic.tasks[0].grid.shape == (48, 48)
+    arena = named_set(str(ARENA_MAP), 2, seed=1)
+    assert len(arena) == 2 and arena.tasks[0].grid.shape == (49, 49)

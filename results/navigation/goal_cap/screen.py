@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from agents.evaluation.policies import load_policy
-from agents.evaluation.runner import evaluate, make_eval_set, make_map_eval_set
-from bench.map_sizes import discs_for
-from worlds.config import LEARNING_NAV, ObstacleConfig
+from agents.evaluation.runner import evaluate
+from bench.map_sizes import named_set
+from worlds.config import LEARNING_NAV
 from worlds.outcomes import Outcome
 
 
@@ -41,14 +41,8 @@ def policy_with_cap(cap: float, where: Path):
 def main() -> None:
     what, n, caps = sys.argv[1], int(sys.argv[2]), [float(c) for c in sys.argv[3:]]
     nav = load_policy("pretrained/nnql").nav_config(LEARNING_NAV)
-    if what.startswith(("static:", "dynamic:")):
-        kind, size = what.split(":")
-        family = "unseen" if kind == "static" else "dynamic"
-        discs = ObstacleConfig(count=discs_for(int(size)))
-        es = make_eval_set(family, n, seed=1, size=int(size), obstacles=discs)
-    else:
-        es = make_map_eval_set(what, n, seed=1)
-        family = es.family
+    es = named_set(what, n, seed=1)
+    family = es.family
     out: dict = {"set": what, "n": n}
     with tempfile.TemporaryDirectory() as tmp:
         for cap in caps:

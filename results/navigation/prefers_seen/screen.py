@@ -5,7 +5,8 @@ the same episodes of validation seed 1.
 
     PYTHONPATH=. python results/navigation/prefers_seen/screen.py SET EPISODES METHODS
 
-SET is ``static:SIZE`` / ``dynamic:SIZE`` (generated maps, discs by ``bench.map_sizes.discs_for``);
+SET is ``static:SIZE`` / ``dynamic:SIZE`` (generated maps, discs by ``bench.map_sizes.discs_for``) or a
+map file (its ``.scen`` pairs);
 METHODS is ``policy`` or ``policy,follower``. One JSON line: per setting and method, success (%),
 timeouts, SPL, each episode's success (``ok``, for paired tests) and the seconds it took. The shipped
 ``pretrained/nnql`` records the chosen setting (on) in its config.json; this script sets each on a copy.
@@ -23,9 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from agents.evaluation.policies import load_policy
-from agents.evaluation.runner import evaluate, make_eval_set
-from bench.map_sizes import discs_for
-from worlds.config import LEARNING_NAV, ObstacleConfig
+from agents.evaluation.runner import evaluate
+from bench.map_sizes import named_set
+from worlds.config import LEARNING_NAV
 from worlds.heuristics import subgoal_scores
 from worlds.outcomes import Outcome
 
@@ -43,10 +44,8 @@ def policy_with(prefers_seen: bool, where: Path):
 
 def main() -> None:
     what, n, methods = sys.argv[1], int(sys.argv[2]), sys.argv[3].split(",")
-    kind, size = what.split(":")
-    family = "unseen" if kind == "static" else "dynamic"
-    discs = ObstacleConfig(count=discs_for(int(size)) if kind == "dynamic" else 0)
-    es = make_eval_set(family, n, seed=1, size=int(size), obstacles=discs)
+    es = named_set(what, n, seed=1)
+    family = es.family
     out: dict = {"set": what, "n": n}
     with tempfile.TemporaryDirectory() as tmp:
         for setting in (False, True):
