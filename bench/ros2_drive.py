@@ -14,7 +14,9 @@ For each of the first ``--episodes`` episodes of the ``unseen`` evaluation set (
 
 It prints one JSON line: episodes, successes in each, successes of the drive among the episodes
 the world solved (the issue's criterion: at least 95%), outcome counts and wall time; with
-``--out`` it also writes one line per episode to ``<out>/episodes.jsonl``.
+``--out`` it also writes one line per episode to ``<out>/episodes.jsonl`` as each ends. Stopped
+(Ctrl-C or SIGTERM), it stops the router, the drive and the sim it started, and keeps the episodes
+written so far.
 
     python -m bench.ros2_drive --episodes 40 --out results/ros2
 """
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 from collections import Counter
@@ -46,6 +49,11 @@ def world_outcomes(policy_dir: str, episodes: int, seed: int) -> list[str]:
     return [OUTCOME_NAMES[r.outcome] for r in result.episodes["unseen"]]
 
 
+def _interrupt(signum: int, _frame) -> None:
+    """SIGTERM unwinds like Ctrl-C, so the ``finally`` blocks stop the processes this run started."""
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -61,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--out", help="directory for episodes.jsonl and the logs")
     args = parser.parse_args(argv)
+    signal.signal(signal.SIGTERM, _interrupt)
 
     started = time.time()
     world = world_outcomes(args.policy, args.episodes, args.seed)
@@ -75,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     drive = spawn(*cli, "drive", "--policy", args.policy, "--max-actions", "200", *FAST, *zenoh,
                   log=open(logs / "drive.log", "w"))  # fmt: skip  # noqa: SIM115
     rows = []
+    episodes_file = open(out / "episodes.jsonl", "w")  # noqa: SIM115 (closed in the finally below)
     try:
         from services.common.transport import ZenohSettings, open_session
         from services.drive.trial import Trial
@@ -93,13 +103,12 @@ def main(argv: list[str] | None = None) -> int:
                     stop(sim, timeout=20)
                 row = {"episode": k, "world": world[k], "drive": result["outcome"], **result}
                 rows.append(row)
+                print(json.dumps(row), file=episodes_file, flush=True)
                 print(json.dumps(row), file=sys.stderr, flush=True)
     finally:
+        episodes_file.close()
         stop(drive, timeout=20)
         stop(router, timeout=20)
-    with open(out / "episodes.jsonl", "w") as f:
-        for row in rows:
-            f.write(json.dumps(row) + "\n")
     world_ok = [r for r in rows if r["world"] == "goal"]
     both = [r for r in world_ok if r["drive"] == "success"]
     summary = {
