@@ -32,8 +32,8 @@ whose cells need no inflation only (0.8 m and more for the default robot): the o
 cells that one traced ray per sector crosses, which at 1 m cells is nearly every cell the robot looked
 at, but at 0.1 m cells leaves most cells between the rays unseen (24 rays 15 degrees apart pass 0.26 m
 apart 1 m out), and there the preference made the robot follow its own rays (validation smoothers_world
-99 -> 95%, docs/navigation-by-size.md section 12). The functions here handle an inflated grid with
-unseen cells all the same (they are :data:`SOFT` there too, the band's value).
+99 -> 95%, docs/navigation-by-size.md section 12). So unseen cells are :data:`SOFT` on the plan
+grid only; an inflated grid (``wide``) does not hold them.
 """
 
 from __future__ import annotations
@@ -107,35 +107,34 @@ def _reaches(dr, dc, reach):
 
 
 @njit(cache=True)
-def _value(near, plan, at):
+def _value(near, at):
     """The inflated grid's value of padded map cell ``at`` from the levels' counts ``near``: blocked
-    within the last level's reach (the robot's radius), :data:`SOFT` within another's or where the
-    plan grid ``plan`` has it (an unseen cell, :func:`plan_clear`), else free."""
+    within the last level's reach (the robot's radius), :data:`SOFT` within another's, else free."""
     last = near.shape[0] - 1
     if near[last, at] > 0:
         return BLOCKED
-    return SOFT if (last > 0 and near[0, at] > 0) or plan[at] == SOFT else 0
+    return SOFT if last > 0 and near[0, at] > 0 else 0
 
 
 @njit(cache=True, _nrt=False)
-def _spread(wide, near, plan, level, stride, height, width, r, c, delta, reach, band):
+def _spread(wide, near, level, stride, height, width, r, c, delta, reach, band):
     """Add ``delta`` (+1 or -1) to level ``level``'s count ``near`` of every map cell within ``reach``
     cells (``band``: :func:`inflation_cells`) of the padded cell (r, c) (-1 and height / width are the
-    ring), and set those cells of ``wide`` (:func:`_value`, of the plan grid ``plan``)."""
+    ring), and set those cells of ``wide`` (:func:`_value`)."""
     for rr in range(max(r - band, 0), min(r + band, height - 1) + 1):
         for cc in range(max(c - band, 0), min(c + band, width - 1) + 1):
             if _reaches(rr - r, cc - c, reach):
                 at = (rr + 1) * stride + cc + 1
                 near[level, at] += delta
-                wide[at] = _value(near, plan, at)
+                wide[at] = _value(near, at)
 
 
 @njit(cache=True, _nrt=False)
 def inflate(plan, wide, near, height, width, reach):
     """The inflated grid ``wide`` (and the levels' counts ``near``, one row per level, of reaches
     ``reach`` cells) of the padded plan grid ``plan`` from scratch: the ring blocked, each map cell
-    :func:`_value` of the blocked cells of ``plan`` around it and of its own value (see the module
-    docstring). Nothing without a grid (``wide`` empty)."""
+    :func:`_value` of the blocked cells of ``plan`` around it (see the module docstring). Nothing
+    without a grid (``wide`` empty)."""
     if wide.shape[0] == 0:
         return
     stride = width + 2
@@ -145,14 +144,13 @@ def inflate(plan, wide, near, height, width, reach):
             near[level, at] = 0
     for r in range(height):
         for c in range(width):
-            at = (r + 1) * stride + c + 1
-            wide[at] = SOFT if plan[at] == SOFT else 0
+            wide[(r + 1) * stride + c + 1] = 0
     for level in range(near.shape[0]):
         band = _band(reach[level])
         for r in range(-1, height + 1):
             for c in range(-1, width + 1):
                 if plan[(r + 1) * stride + c + 1] == BLOCKED:
-                    _spread(wide, near, plan, level, stride, height, width, r, c, 1, reach[level], band)
+                    _spread(wide, near, level, stride, height, width, r, c, 1, reach[level], band)
 
 
 @njit(cache=True)
@@ -164,26 +162,18 @@ def _set(occ, plan, exam, exam_id, stride, r, c, state, wide, near, height, reac
     old = occ[r, c]
     occ[r, c] = state
     at = (r + 1) * stride + c + 1
-    if plan.shape[0] > 0 and plan[at] == SOFT and state == FREE:  # unseen, now seen free
-        plan[at] = 0
-        if wide.shape[0] > 0:
-            wide[at] = _value(near, plan, at)
-        if exam_id < 0:
-            return CHANGED | ON_PLAN
-        for row in (at - stride, at, at + stride):  # the one cell changed: as below, without a band
-            if exam[row - 1] == exam_id or exam[row] == exam_id or exam[row + 1] == exam_id:
-                return CHANGED | ON_PLAN
-        return CHANGED
-    if (old == SEEN_BLOCKED) == (state == SEEN_BLOCKED):
+    flipped = (old == SEEN_BLOCKED) != (state == SEEN_BLOCKED)
+    seen_free = plan.shape[0] > 0 and plan[at] == SOFT and state == FREE  # an unseen plan cell seen free
+    if not (flipped or seen_free):
         return 0
-    levels = near.shape[0] if wide.shape[0] > 0 else 0
+    levels = near.shape[0] if wide.shape[0] > 0 and flipped else 0  # the inflation follows blocked cells
     band = _band(reach[0]) if levels > 0 else 0  # the widest level's
     if plan.shape[0] > 0:
         plan[at] = BLOCKED if state == SEEN_BLOCKED else 0
         delta = 1 if state == SEEN_BLOCKED else -1
         for level in range(levels):
             lr = reach[level]
-            _spread(wide, near, plan, level, stride, height, stride - 2, r, c, delta, lr, _band(lr))
+            _spread(wide, near, level, stride, height, stride - 2, r, c, delta, lr, _band(lr))
     if exam_id < 0:
         return CHANGED | ON_PLAN
     if band > 0:  # the inflated cells it changed lie within band: next to an expanded cell within band + 1
@@ -308,7 +298,7 @@ def _open(wide, near, plan, stride, height, width, centre, band, opened):
         for c in range(max(c0 - band, 0), min(c0 + band, width - 1) + 1):
             at = (r + 1) * stride + c + 1
             if plan[at] != BLOCKED:
-                wide[at] = SOFT if opened and wide[at] == BLOCKED else _value(near, plan, at)
+                wide[at] = SOFT if opened and wide[at] == BLOCKED else _value(near, at)
 
 
 @njit(cache=True)
@@ -346,8 +336,7 @@ def waypoint(plan, wide, near, reach, height, width, cell, x, y, goal_r, goal_c,
 
     With ``unseen`` > 0 the search on ``plan`` enters its :data:`SOFT` cells (the cells the robot has
     not seen, :func:`plan_clear`) at ``1 + unseen`` times a move's cost, and the waypoint and the length
-    are measured in metres, as on the inflated grid (whose :data:`SOFT` cells, the band and the unseen
-    cells alike, cost ``1 +`` :data:`PENALTY`)."""
+    are measured in metres, as on the inflated grid."""
     g, parent, seen, order, meta = work[0], work[1], work[3], work[7], work[8]
     stride = width + 2
     c, r = int(x / cell), int(y / cell)
