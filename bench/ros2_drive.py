@@ -77,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
+    episodes_file = open(out / "episodes.jsonl", "w")  # noqa: SIM115 (closed in the finally below)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     zenoh = ("--connect", endpoint, "--run", "bench")
     cli = ("-m", "services.cli")
@@ -84,7 +85,6 @@ def main(argv: list[str] | None = None) -> int:
     drive = spawn(*cli, "drive", "--policy", args.policy, "--max-actions", "200", *FAST, *zenoh,
                   log=open(logs / "drive.log", "w"))  # fmt: skip  # noqa: SIM115
     rows = []
-    episodes_file = open(out / "episodes.jsonl", "w")  # noqa: SIM115 (closed in the finally below)
     try:
         from services.common.transport import ZenohSettings, open_session
         from services.drive.trial import Trial
