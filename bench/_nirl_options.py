@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from agents.nirl.config import NIRLRun
 from agents.planning.demonstrate import generate_demos
 from worlds.config import NavConfig
 
@@ -48,8 +49,10 @@ def add_policy_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--nirl-discs",
         type=int,
-        default=0,
-        help="0..N moving discs per episode of NIRL's own rounds (NIRLRun.moving_discs)",
+        default=NIRLRun().moving_discs,
+        help="0..N moving discs per episode of NIRL's own rounds (NIRLRun.moving_discs; default "
+        f"{NIRLRun().moving_discs}, `navlearn nirl train`'s; 0: static maps, the rows recorded before issue "
+        "15 part 9 and the runs that omitted the flag until 2026-12-07, whose lines carry no nirl_discs)",
     )
     parser.add_argument("--policy-eval-every", type=int, default=25_000,
                         help="NIRL with policy_steps: robot-steps between keep-best validations")  # fmt: skip

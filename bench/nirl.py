@@ -277,6 +277,7 @@ def run_one(
         # ... or average the last (not in a curve run longer than the tested rounds: its test is a snapshot)
         keep["average_last"] = args.average_last if method == "nirl" and rounds == args.iterations else 0.0
         run = NIRLRun(final_eval_episodes=0, progress=False, **keep, **policy_run(args, set_name, seed))
+        row["nirl_discs"] = run.moving_discs
         result = train_nirl(demos, config, run, nav, on_iteration=on_iteration)
         if result.selected_iteration is not None or result.averaged_rounds:  # the kept round or the average
             tested["policy"], tested["steps"] = result.policy(), int(result.env_steps)
