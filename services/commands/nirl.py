@@ -22,8 +22,8 @@ greedy evaluation on 100 held-out generated maps. The defaults are NIRL's best s
 issue 15 part 15): 100 rounds of 2,048 robot-steps (204,800) with 0..6 moving discs, 512 Q updates per
 round, the reward fixed after round 1, temperature 0.05 to 0.01, NNQL's action-local branch (3) and
 discount (0.98), in the observation learning_plan (the default of --observation here and of
-`navlearn demos generate`, whose sets record it): 97.8% unseen static / 89.2% with 4 moving discs
-from 20 clean demonstrations on the test seed (issue 15 part 15). The policy is
+`navlearn demos generate`, whose sets record it): 97.1% unseen static / 89.5% with 4 moving discs
+from 20 clean demonstrations on the test seed, the network alone, 3 seeds (RESULTS.md, NIRL). The policy is
 the Q-network's weights averaged over the last quarter of the rounds (--average-last 0.25; 0: the
 last round's); --keep-best keeps the round that scored best on the --eval-every validations instead
 (off by default: with 100 static episodes it chose worse rounds than the last).
