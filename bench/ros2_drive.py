@@ -33,16 +33,17 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from agents.evaluation import evaluate, make_eval_set
+from agents.evaluation.policies import load_policy
 from bench._common import free_port, spawn, stop
+from services.common.transport import ZenohSettings, open_session
+from services.drive.trial import Trial
 from tests.drive_helpers import FAST
+from worlds.outcomes import OUTCOME_NAMES
 
 
 def world_outcomes(policy_dir: str, episodes: int, seed: int) -> list[str]:
     """Outcome name of each episode in the world (``navlearn evaluate``'s runner)."""
-    from agents.evaluation import evaluate, make_eval_set
-    from agents.evaluation.policies import load_policy
-    from worlds.outcomes import OUTCOME_NAMES
-
     policy = load_policy(policy_dir)
     policy.use_shield(policy.nav_config())  # both sides act through the reading shield, their default
     result = evaluate(policy, make_eval_set("unseen", episodes, seed=seed))
@@ -86,9 +87,6 @@ def main(argv: list[str] | None = None) -> int:
                   log=open(logs / "drive.log", "w"))  # fmt: skip  # noqa: SIM115
     rows = []
     try:
-        from services.common.transport import ZenohSettings, open_session
-        from services.drive.trial import Trial
-
         session = open_session(ZenohSettings(connect=[endpoint], run="bench", connect_timeout=60))
         with session, Trial(session, "bench") as trial:
             for k in range(args.episodes):
