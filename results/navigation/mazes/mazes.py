@@ -1,16 +1,13 @@
 """Why mazes of 1 m corridors fail (issue 39; docs/navigation-by-size.md section 14): the generated
 ``maze`` family (``worlds.generators``: depth-first mazes of 1-cell corridors, 1 m cells), which the
 training mix (``mixed`` = rects, discs, rooms) and the test sets leave out, at SIZE cells, validation
-seed 1. Each method on the same episodes:
+seed 1. The methods of ``bench.map_sizes`` (:class:`bench.map_sizes.Methods`: the shipped policy through
+its reading shield, the network alone, the goal-seeking heuristic, the subgoal follower through the
+shield, and with ``--expert`` the lattice A* on the true map, the slow one) on the same episodes, and
+``follower_unshielded``: the subgoal's action alone.
 
-- ``policy``: the shipped policy through its reading shield (as ``navlearn evaluate`` runs it);
-- ``network``: the same network without the shield;
-- ``follower``: the own map's subgoal through the same shield, no network; ``follower_unshielded``:
-  the subgoal's action alone;
-- ``expert``: the lattice A* on the true map, replanning (the demonstrations' source), with
-  ``--expert`` only (it is the slow one).
-
-One JSON line: per method success, collisions with walls and timeouts; and ``drift``: of 20,000 robots
+It prints the bench's rows, then one JSON line: per method the bench's figures (success with its
+Wilson interval, collisions, timeouts, SPL; McNemar against the policy); and ``drift``: of 20,000 robots
 driving straight ahead from a 1 m corridor's centreline with the world's motion noise
 (``worlds.robot.move``, ``RobotConfig.rot_noise`` / ``trans_noise``), the share whose centre has left
 the band a robot of its radius has in the corridor (0.25 m either side) within 10, 20 and 40 steps.
@@ -32,20 +29,10 @@ import numpy as np
 
 from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import evaluate, make_eval_set
-from bench.map_sizes import run_expert
+from bench.map_sizes import Methods, compare_on, episode_arrays, figures
 from worlds.config import LEARNING_NAV, RobotConfig
 from worlds.heuristics import subgoal_scores
-from worlds.outcomes import Outcome
 from worlds.robot import move
-
-
-def rates(outcomes: np.ndarray) -> dict:
-    """Success, wall collisions and timeouts of ``outcomes`` (one per episode)."""
-    return {
-        "success": round(float((outcomes == int(Outcome.GOAL)).mean()), 3),
-        "collisions": int((outcomes == int(Outcome.COLLISION_STATIC)).sum()),
-        "timeouts": int((outcomes == int(Outcome.TIMEOUT)).sum()),
-    }
 
 
 def drift(robot: RobotConfig, corridor: float = 1.0, robots: int = 20_000) -> dict[str, float]:
@@ -71,21 +58,13 @@ def main() -> None:
     if "--noiseless" in sys.argv[3:]:
         nav = replace(nav, robot=replace(nav.robot, rot_noise=0.0, trans_noise=0.0))
     es = make_eval_set("unseen", n, seed=1, size=size, families=("maze",))
-    shield = policy.use_shield(nav).shield
+    methods = Methods(policy.use_shield(nav), nav, network=load_policy("pretrained/nnql"))
+    rows = compare_on(es, methods, n if with_expert else 0, f"maze:{size}")
     scores = subgoal_scores(nav)
-    runs = {
-        "policy": policy,
-        "network": lambda obs: policy.outputs(obs).argmax(axis=1),
-        "follower": lambda obs: shield.choose(scores(obs), obs),
-        "follower_unshielded": lambda obs: scores(obs).argmax(axis=1),
-    }
+    unshielded = evaluate(lambda obs: scores(obs).argmax(axis=1), es, nav)
+    rows["follower_unshielded"] = figures(episode_arrays(unshielded, es.family), es.shortest)
     out: dict = {"size": size, "episodes": n, "seed": 1, "family": "maze", "rot_noise": nav.robot.rot_noise}
-    out["astar_m"] = round(float(es.shortest.mean()), 1)
-    for name, run in runs.items():
-        result = evaluate(run, es, nav)
-        out[name] = rates(np.array([e.outcome for e in result.episodes["unseen"]]))
-    if with_expert:
-        out["expert"] = rates(run_expert(es, nav, n)["outcome"])
+    out |= {"astar_m": round(float(es.shortest.mean()), 1), "methods": rows}
     out["drift"] = drift(nav.robot)
     print(json.dumps(out), flush=True)
 

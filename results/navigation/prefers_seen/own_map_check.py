@@ -26,8 +26,8 @@ from worlds.vector_env import NavigationVectorEnv
 def main() -> None:
     n, episodes = int(sys.argv[1]), [int(v) for v in sys.argv[2].split(",")]
     policy = load_policy("pretrained/nnql")
-    shield = policy.use_shield(policy.nav_config(LEARNING_NAV)).shield  # it reads no own map
     nav = policy.nav_config(LEARNING_NAV)
+    shield = policy.use_shield(nav).shield  # it reads no own map
     nav = replace(nav, observation=replace(nav.observation, subgoal_prefers_seen=False))
     scores = subgoal_scores(nav)
     es = make_eval_set("unseen", n, seed=1, size=64)
