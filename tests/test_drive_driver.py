@@ -205,3 +205,30 @@ def test_a_smaller_robot_sees_its_scene_as_the_worlds_robot_and_drives_scaled_st
     assert rigs[1].pose[0] / len(small.seen) == pytest.approx(0.5 * shrink, abs=0.02)  # 0.21 m a step
     with pytest.raises(ValueError, match="--robot-radius must be a positive"):
         Rig(robot_radius=0.0)
+
+
+def test_a_signal_inside_a_tick_leaves_nothing_but_zero_after_it():
+    """The signal handler (``Driver.stop``) can run inside a tick after the motion has computed a
+    moving command and before the tick sends it: that send must be zero too."""
+    rig = Rig()
+    rig.run(0.1)
+    rig.inputs.on_goal((6.0, 0.0), "odom")
+    rig.run(0.5)
+    assert rig.driver.motion is not None and rig.sent[-1][1] > 0  # mid-action, moving
+    motion = rig.driver.motion
+    command = motion.command
+
+    def interrupted(pose, dt):
+        moving = command(pose, dt)
+        assert moving[0] > 0  # the tick is about to send a forward speed ...
+        rig.driver.stop()  # ... when the handler runs
+        return moving
+
+    motion.command = interrupted
+    signalled = len(rig.sent)
+    rig.run(0.02)
+    after = rig.sent[signalled:]
+    assert after and all(v == 0.0 and w == 0.0 for _, v, w in after)
+    motion.command = command
+    rig.run(0.5)  # the loop may tick once more before it sees the stop event: still zero
+    assert all(v == 0.0 and w == 0.0 for _, v, w in rig.sent[signalled:])

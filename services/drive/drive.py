@@ -18,7 +18,8 @@ loop, with no Zenoh in it (the publisher is handed in as ``send``), ticking at `
   action is dropped and zero velocity is sent at every tick until both are fresh again, when the
   policy decides anew on a fresh scan;
 * SIGINT and SIGTERM send zero velocity before anything else (the signal handler itself), and
-  once more on the way out.
+  once more on the way out; after the handler every command is zero, even one a tick the signal
+  interrupted was about to send (:meth:`Driver.stop`).
 
 **A robot of another size** (``--robot-radius R``): the policy's world is the world's robot, a
 0.25 m disc (:data:`worlds.mapfiles.WORLD_RADIUS`). The driver reads the robot's scan, odometry and
@@ -135,6 +136,8 @@ class Driver:
         self.last_tick: float | None = None
         self.stale: list[str] = []
         self.command = (0.0, 0.0)
+        self.stopping = False
+        """set by :meth:`stop`: from then on every command sent is zero"""
         self.counters = {
             "goals_reached": 0,
             "goals_given_up": 0,
@@ -156,12 +159,22 @@ class Driver:
     # ------------------------------------------------------------------ commands
     def send(self, linear: float, angular: float) -> None:
         with self._lock:
+            if self.stopping:
+                linear, angular = 0.0, 0.0
             self.command = (linear, angular)
             self._send(linear, angular)
 
     def halt(self) -> None:
-        """Zero velocity now (the watchdog, a stop, a signal handler)."""
+        """Zero velocity now (the watchdog, the end of a goal, the loop's exit)."""
         self.send(0.0, 0.0)
+
+    def stop(self) -> None:
+        """Zero velocity now and for good: the signal handler's first act. The handler runs on the
+        main thread between two bytecodes of whatever it interrupted, which may be a :meth:`tick`
+        that has computed a moving command and not yet sent it; latching ``stopping`` makes that
+        send a zero too, so nothing but zero follows the handler's."""
+        self.stopping = True
+        self.halt()
 
     # ------------------------------------------------------------------ the loop
     def tick(self, now: float) -> None:
@@ -348,7 +361,7 @@ def run_drive(config, settings, stop: threading.Event) -> int:
             robot_radius=config.robot_radius,
         )
         driver.warm_up()
-        stop_on_signals(first=driver.halt, event=stop)  # from here on a signal sends zero velocity first
+        stop_on_signals(first=driver.stop, event=stop)  # from here on a signal sends zero velocity first
 
         def on_odometry(message, _info) -> None:
             p = message.pose.pose
