@@ -24,8 +24,8 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
 def certs(out: Path) -> dict[str, str]:
     done = subprocess.run(
-        ["python", "-m", "services.cli", "certs", "--out", str(out), "--hosts", "127.0.0.1", "localhost",
-         "--clients", "actor1"],
+        [sys.executable, "-m", "services.cli", "certs", "--out", str(out),
+         "--hosts", "127.0.0.1", "localhost", "--clients", "actor1"],
         capture_output=True, text=True, timeout=60, check=True,
     )  # fmt: skip
     assert "wrote" in done.stdout
