@@ -221,6 +221,13 @@ def test_checkpoint_and_weight_history_round_trip(tmp_path):
         assert np.array_equal(restored.get_weights()[name], value)
     for name, value in learner.reward_weights().items():
         assert np.array_equal(restored.reward_weights()[name], value)
+    probe = torch.as_tensor(obs[:16])
+    for one in (learner, restored):  # the fit's target network is the loss's target parameters
+        loss = one.q.loss
+        with torch.no_grad(), loss.target_value_network_params.to_module(loss.value_network):
+            expected = one.q.network(probe)  # the network run on the target parameters
+        assert not torch.equal(expected, one.q.network(probe))  # 14 soft updates behind, not the net
+        assert torch.equal(one.fit.target_q(probe), expected)
     named = r"dueling head \(dueling=True\).*NIRLConfig\(dueling=True\) \(--dueling\)"
     with pytest.raises(ValueError, match=named):
         NIRLLearner(NIRLConfig(**SMALL, dueling=False)).load_checkpoint(tmp_path / "ckpt")

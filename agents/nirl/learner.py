@@ -3,7 +3,9 @@
 Transport-free, like ``agents.nnql.learner``: the local trainer and the learner service
 feed it experience and demonstrations and ask for updates. The Q-network, its Adam
 optimiser, its target network (TorchRL ``SoftUpdate`` over ``DQNLoss``'s target
-parameters) and the experience replay are ``NNQLLearner``'s. Buffers come in through the
+parameters, stepped and read through NNQL's lean path, ``agents/nnql/lean.py``: the same lerp
+in one foreach call, the same parameters without a ``to_module`` swap) and the experience
+replay are ``NNQLLearner``'s. Buffers come in through the
 constructor, so the learner service can share its NNQL replay (actor experience) and its
 demonstration buffer.
 

@@ -136,7 +136,7 @@ class MaxMarginFit(FitParts):
             )
             loss = loss + coef * margin
         norm = self.clip_step(loss, q.loss.parameters(), q.optimizer)
-        q.target_updater.step()
+        q.lean.update_target()  # SoftUpdate's lerp in one foreach call
         q.updates += 1
         self.after_update()
         return {

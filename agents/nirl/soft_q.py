@@ -104,10 +104,11 @@ class SoftQFit(FitParts):
         return batch.to(device, non_blocking=True), is_expert.to(device, non_blocking=True)
 
     def target_q(self, obs: torch.Tensor) -> torch.Tensor:
-        """Q-values of the target network (DQNLoss's target parameters, Polyak-averaged)."""
-        loss = self.q.loss
-        with torch.no_grad(), loss.target_value_network_params.to_module(loss.value_network):
-            return self.q.network(obs)
+        """Q-values of the target network (DQNLoss's target parameters, Polyak-averaged): the lean
+        path's copy of the network on those very parameters (agents/nnql/lean.py), without a
+        ``to_module`` swap per call."""
+        with torch.no_grad():
+            return self.q.lean.target(obs)
 
     def q_step(self, offline: bool = False) -> dict[str, float]:
         """One Q-network update of the configured core (iq or sqil) on a mixed batch."""
@@ -164,7 +165,7 @@ class SoftQFit(FitParts):
             reward = implicit_reward(q_taken.detach(), next_value, terminated, cfg.gamma)
             metrics["losses/td_loss"] = float(loss.detach())
         norm = self.clip_step(loss, self.q.loss.parameters(), self.q.optimizer)
-        self.q.target_updater.step()
+        self.q.lean.update_target()  # SoftUpdate's lerp in one foreach call
         self.q.updates += 1
         self.after_update()
         metrics.update(self.reward_scale(reward, q_taken.detach(), q_all.detach(), batch, is_expert))
