@@ -208,8 +208,12 @@ def test_sigterm_sends_zero_velocity_first(stack):
     time.sleep(0.3)
     with commands.lock:
         after = [c for c in commands.cmds if c[0] > sent]
-    assert after and after[0][1:] == (0.0, 0.0) and after[-1][1:] == (0.0, 0.0)
-    assert after[0][0] - sent < 0.2
+    # a command whose publish was under way when the signal came may still arrive after `sent` (a
+    # Python handler runs once the native put returns); from the handler's zero on, only zeros
+    zeros = [i for i, c in enumerate(after) if c[1:] == (0.0, 0.0)]
+    assert zeros and zeros[0] <= 1, after[:3]
+    assert all(c[1:] == (0.0, 0.0) for c in after[zeros[0] :]), after
+    assert after[zeros[0]][0] - sent < 0.2
     wait_for_line(stack["drive_lines"], "zero velocity sent", 5)
 
 
