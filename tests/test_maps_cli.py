@@ -57,6 +57,24 @@ def test_evaluate_on_three_map_formats(tmp_path, capsys):
     assert all(1.0 < e["shortest"] < 8.0 for e in report["episodes"]["office"])
 
 
+def test_pairs_drawn_replaces_a_files_own_scenarios(tmp_path, capsys):
+    hall = movingai(tmp_path)
+    argv = ["evaluate", "--policy", "heuristic", "--map", str(hall), "--episodes", "12"]
+    assert main([*argv, "--out", str(tmp_path / "own")]) == 0
+    own = json.loads((tmp_path / "own" / "eval.json").read_text())["episodes"]["hall"]
+    scen = {((y, 2), (y, 17)) for y in (2, 5, 14)}
+    assert len(own) == 12 and {(tuple(e["start"]), tuple(e["goal"])) for e in own} == scen  # repeated
+    assert main([*argv, "--pairs", "drawn", "--out", str(tmp_path / "drawn")]) == 0
+    drawn = json.loads((tmp_path / "drawn" / "eval.json").read_text())["episodes"]["hall"]
+    pairs = {(tuple(e["start"]), tuple(e["goal"])) for e in drawn}
+    assert len(drawn) == 12 and len(pairs) >= 10 and not pairs <= scen
+    assert all(e["shortest"] >= 2.0 for e in drawn)
+    capsys.readouterr()
+    assert main([*argv, "--pairs", "some", "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert "pairs='some'" in err and "own, drawn" in err and "Traceback" not in err
+
+
 def test_evaluate_for_a_smaller_robot(tmp_path, capsys):
     """--robot-radius reads the map scaled for the world's robot, says so, and runs on it."""
     out_dir = tmp_path / "eval"

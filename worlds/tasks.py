@@ -61,6 +61,10 @@ DEFAULT_MAPS = "mixed:16"
 _GENERATED = re.compile(r"^(?P<family>[a-z]+):(?P<h>\d+)(?:x(?P<w>\d+)|-(?P<hi>\d+))?$")
 
 
+PAIRS = ("own", "drawn")
+"""where a map file's start/goal pairs come from (``MapOptions.pairs``)"""
+
+
 @dataclass(frozen=True)
 class MapOptions:
     """How map files are read and their start/goal pairs drawn (the ``key=value`` options of a spec)."""
@@ -79,10 +83,15 @@ class MapOptions:
     """the robot's radius (m): a map for a robot of another radius than the world's is scaled by
     ``WORLD_RADIUS / radius`` (:mod:`worlds.mapfiles`), so the world's robot stands for it; pairs are
     reachable for it, maps must fit it"""
+    pairs: str = "own"
+    """``own``: a file's own start/goal pairs (a MovingAI ``.scen``, an ASCII map's S/G) when it has
+    them, else drawn; ``drawn``: always drawn (:func:`worlds.pairs.draw_pairs`), as many as asked"""
 
     def __post_init__(self) -> None:
         if self.unknown not in UNKNOWN:
             raise ValueError(f"map option unknown={self.unknown!r}; choose one of {', '.join(UNKNOWN)}")
+        if self.pairs not in PAIRS:
+            raise ValueError(f"map option pairs={self.pairs!r}; choose one of {', '.join(PAIRS)}")
         if not (0 <= self.min_distance < self.max_distance):
             raise ValueError(
                 "map options need 0 <= min_distance < max_distance, got "
@@ -213,7 +222,7 @@ def parse_options(items: list[str], spec: str) -> MapOptions:
         key = key.strip()
         if key not in fields:
             raise ValueError(f"map spec {spec!r}: unknown option {key!r}; known: {', '.join(fields)}")
-        if key == "unknown":
+        if key in ("unknown", "pairs"):
             values[key] = raw.strip()
             continue
         try:
@@ -249,11 +258,12 @@ def load_files(paths: list[Path], options: MapOptions) -> list[MapFile]:
 
 def file_tasks(maps: list[MapFile], options: MapOptions, size: int, seed: int) -> list[Task]:
     """``size`` tasks over ``maps`` (split evenly, at least one each): a file's own scenarios in turn
-    when it has them, else pairs drawn by :func:`worlds.pairs.draw_pairs` with ``seed``."""
+    when it has them and ``options.pairs`` is ``own``, else pairs drawn by
+    :func:`worlds.pairs.draw_pairs` with ``seed``."""
     tasks: list[Task] = []
     for k, mf in enumerate(maps):
         share = max(1, size // len(maps) + (1 if k < size % len(maps) else 0))
-        if mf.scenarios:
+        if mf.scenarios and options.pairs == "own":
             picks = np.random.default_rng([seed, k, 7]).permutation(len(mf.scenarios))
             chosen = [mf.scenarios[picks[i % len(picks)]] for i in range(share)]
             tasks += [Task(mf.grid, sc.start, sc.goal, mf.grid.name) for sc in chosen]

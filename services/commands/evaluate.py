@@ -63,6 +63,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="map_server cells of unknown occupancy (default blocked: nobody has seen them)",
     )
     maps.add_argument(
+        "--pairs",
+        metavar="{own,drawn}",
+        help="where the pairs come from (worlds.tasks.PAIRS): own (default): a MovingAI .scen's or an "
+        "ASCII map's S/G pairs when the file has them, else drawn; drawn: always draw pairs by A* "
+        "distance, as many as --episodes (a .scen's few pairs repeat when --episodes asks for more)",
+    )
+    maps.add_argument(
         "--cell-size",
         type=float,
         help="world cell size in metres for map_server maps (default: the largest multiple of the "
@@ -150,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
     map_specs = [
         with_options(
             spec, min_distance=args.min_distance, max_distance=args.max_distance, unknown=args.unknown,
-            cell_size=args.cell_size, radius=args.robot_radius,
+            cell_size=args.cell_size, radius=args.robot_radius, pairs=args.pairs,
         )
         for spec in args.map or []
     ]  # fmt: skip
