@@ -121,9 +121,14 @@ class ReadingShield:
     def choose(self, outputs: np.ndarray, obs: np.ndarray) -> np.ndarray:
         """The argmax of ``outputs`` (N, n_actions) among the actions clear at the first of
         :data:`MARGINS` that leaves one clear; the turn-around where none is clear at any."""
+        return self.pick(outputs, self.room(obs))
+
+    def pick(self, outputs: np.ndarray, room: np.ndarray) -> np.ndarray:
+        """:meth:`choose`'s rule on a ``room`` (``(len(MARGINS), N, n_actions)``, as :meth:`room`
+        gives) however it was judged."""
         action = np.full(len(outputs), self.turn_around, dtype=np.int64)
-        for room in self.room(obs)[::-1]:  # the widest margin, tried first, decides last
-            clear = room >= 0
+        for margin_room in room[::-1]:  # the widest margin, tried first, decides last
+            clear = margin_room >= 0
             best = np.where(clear, outputs, -np.inf).argmax(axis=1)
             action = np.where(clear.any(axis=1), best, action)
         return action

@@ -222,7 +222,7 @@ def parse_options(items: list[str], spec: str) -> MapOptions:
         key = key.strip()
         if key not in fields:
             raise ValueError(f"map spec {spec!r}: unknown option {key!r}; known: {', '.join(fields)}")
-        if key in ("unknown", "pairs"):
+        if fields[key].type == "str":  # a word (unknown, pairs); every other option is metres
             values[key] = raw.strip()
             continue
         try:

@@ -55,7 +55,6 @@ class TwoFrameShield:
         self.phi, self.width = sensors.beam_angles, sensors.fov / sensors.n_beams
         motions = [robot.motion(a) for a in range(robot.n_actions + 1)]  # the turn-around is the last
         self.turn, self.step = (np.array(m) for m in zip(*motions, strict=True))
-        self.turn_around = robot.turn_around
         facing = np.cos(self.phi[None, :] - np.asarray(robot.turns)[:, None]) > 0  # (K, J)
         self.ahead = facing if ahead_only else np.ones_like(facing)
         self.previous: tuple[np.ndarray, np.ndarray] | None = None
@@ -81,12 +80,7 @@ class TwoFrameShield:
         shield = self.shield
         per_action = np.where(self.ahead[None], seen[:, None, :], readings[:, None, :])  # (N, K, J)
         room = (per_action[None] - shield.reach[:, None]).min(axis=3)  # (margins, N, K)
-        action = np.full(len(outputs), shield.turn_around, dtype=np.int64)
-        for margin_room in room[::-1]:
-            clear = margin_room >= 0
-            best = np.where(clear, outputs, -np.inf).argmax(axis=1)
-            action = np.where(clear.any(axis=1), best, action)
-        return action
+        return shield.pick(outputs, room)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         shield = self.shield
@@ -101,7 +95,9 @@ class TwoFrameShield:
         one_frame = shield.choose(outputs, obs)
         self.steps += len(obs)
         self.changed += int((action != one_frame).sum())
-        self.changed_to_turn_around += int(((action != one_frame) & (action == self.turn_around)).sum())
+        self.changed_to_turn_around += int(
+            ((action != one_frame) & (action == self.shield.turn_around)).sum()
+        )
         self.previous = (readings, action)
         return action
 
