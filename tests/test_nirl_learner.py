@@ -67,6 +67,39 @@ def refinement_rates(learner, recorded, expert) -> tuple[float, float]:
     return float(relabelled), float(kept)
 
 
+def test_gather_draws_the_rows_torchrls_sample_draws():
+    """agents.nirl.buffers.gather reads the storage's columns at the indices the buffer's own sampler
+    draws: the same rows as TorchRL's ``buffer.sample`` from the same generator state, draw after
+    draw, only the keys asked for, and a TensorDict of them through ``sample``."""
+    from tensordict import TensorDict
+
+    from agents.nirl.buffers import demo_buffer, gather, sample
+
+    n = 300
+    rows = TensorDict(
+        {
+            "observation": torch.randn(n, 11),
+            "action": torch.randint(0, 5, (n,)),
+            "noise": torch.rand(n),
+            "next": {"observation": torch.randn(n, 11), "terminated": torch.rand(n, 1) < 0.1},
+        },
+        batch_size=[n],
+    )
+    ours, torchrls = demo_buffer(1000, seed=4), demo_buffer(1000, seed=4)
+    ours.extend(rows.clone())
+    torchrls.extend(rows.clone())
+    keys = ("observation", "action", ("next", "observation"), ("next", "terminated"), "to_go")
+    for size in (64, 17, 64):
+        got, expected = gather(ours, size, keys), torchrls.sample(size)
+        assert set(got) == set(keys[:4])  # "to_go" is not held: left out
+        for key, value in got.items():
+            assert torch.equal(value, expected[key]), key
+    whole, expected = sample(ours, 8), torchrls.sample(8)
+    assert whole.batch_size == torch.Size([8])
+    assert set(whole.keys(True, True)) == set(expected.keys(True, True))
+    assert (whole == expected).all()
+
+
 def test_map_refinement_relabels_injected_noise_and_keeps_clean_steps():
     """30% of the recorded actions replaced by another one (known): MAP refinement must give most
     of them back their expert action and leave the clean ones as they were."""

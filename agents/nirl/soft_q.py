@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import torch
 from tensordict import TensorDict
 
-from agents.nirl.buffers import sample
+from agents.nirl.buffers import as_tensordict, gather, sample
 from agents.nirl.fit_parts import FitParts
 from agents.nirl.hindsight import STORED
 from agents.nirl.losses import (
@@ -85,17 +85,16 @@ class SoftQFit(FitParts):
         n_demo = cfg.batch_size
         if not offline and len(self.experience):
             n_demo = max(1, round(cfg.batch_size * cfg.demo_fraction))
-        demos = sample(self.demos, n_demo)
+        n_own = cfg.batch_size - n_demo
+        demos = gather(self.demos, n_demo, keys=(*BATCH_KEYS, "noise", *STORED))
+        own = gather(self.experience, n_own, keys=BATCH_KEYS) if n_own else {}
+        rows = {key: torch.cat([demos[key], own[key]]) if own else demos[key] for key in BATCH_KEYS}
         noise = demos.get("noise", torch.full((n_demo,), cfg.demo_noise))
-        parts = [demos.select(*BATCH_KEYS)]
-        if cfg.batch_size > n_demo:
-            parts.append(sample(self.experience, cfg.batch_size - n_demo).select(*BATCH_KEYS))
-        batch = torch.cat(parts) if len(parts) > 1 else parts[0]
-        batch.set("noise", torch.cat([noise, torch.zeros(cfg.batch_size - n_demo)]))
+        rows["noise"] = torch.cat([noise, torch.zeros(n_own)])
         for key in STORED:  # the hindsight refinement of the demonstrated rows (refine_prior hindsight)
             if key in demos:
-                value = demos[key]
-                batch.set(key, torch.cat([value, torch.zeros(cfg.batch_size - n_demo, dtype=value.dtype)]))
+                rows[key] = torch.cat([demos[key], torch.zeros(n_own, dtype=demos[key].dtype)])
+        batch = as_tensordict(rows, cfg.batch_size)
         is_expert = torch.zeros(cfg.batch_size, dtype=torch.bool)
         is_expert[:n_demo] = True
         device = self.q.device
