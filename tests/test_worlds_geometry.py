@@ -29,6 +29,15 @@ def test_move_hand_computed_poses():
     np.testing.assert_allclose(y, [-math.sqrt(0.5), 0.0, math.sqrt(0.5)])
 
 
+def test_move_from_a_held_heading():
+    """``held_headings``: the heading is turned to the nearest compass heading before the turn."""
+    start = [0.03, math.pi / 4 - 0.3]
+    x, _, th = move([0.0, 0.0], [0.0, 0.0], start, [math.pi / 4, 0.0], 1.0, held_headings=8)
+    np.testing.assert_allclose(th, [math.pi / 4, math.pi / 4])
+    np.testing.assert_allclose(x, [math.sqrt(0.5)] * 2)
+    assert move([0.0], [0.0], [0.03], [math.pi / 4], 1.0)[2][0] == pytest.approx(math.pi / 4 + 0.03)
+
+
 def test_move_noise():
     args = (np.zeros(1000), np.zeros(1000), np.zeros(1000), np.zeros(1000), 0.5)
     exact = move(*args)

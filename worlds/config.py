@@ -32,12 +32,18 @@ class RobotConfig:
     heading_choices: int = 8
     """initial heading drawn uniformly among this many compass directions (0: uniform in [-pi, pi)),
     then turned to the nearest one with a collision-free action if it has none (see worlds.kernel)"""
+    held_headings: int = 0
+    """compass headings the robot holds, as a real base does with its odometry or IMU: before each
+    action its heading is turned to the nearest of this many (8: every 45 degrees, the actions'
+    turns), so one step's heading noise does not carry into the next; 0: not held, the heading
+    noise adds up as a random walk (docs/navigation-by-size.md section 14)"""
 
     def __post_init__(self) -> None:
         _check(self.n_actions >= 1, f"n_actions must be >= 1, got {self.n_actions}")
         _check(self.step > 0 and self.radius > 0, "step and radius must be positive")
         _check(self.trans_noise >= 0 and self.rot_noise >= 0, "noise standard deviations must be >= 0")
         _check(self.heading_choices >= 0, f"heading_choices must be >= 0, got {self.heading_choices}")
+        _check(self.held_headings >= 0, f"held_headings must be >= 0 (0: not held), got {self.held_headings}")
 
     @property
     def turns(self) -> np.ndarray:

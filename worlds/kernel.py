@@ -48,7 +48,7 @@ from worlds.gridsearch import DIAGONAL, GEN, search_run, search_start
 from worlds.obstacles import move_disc, place_discs, swept_contact
 from worlds.outcomes import Outcome
 from worlds.rng import gauss, randint, uniform
-from worlds.robot import capsule_hits_grid
+from worlds.robot import capsule_hits_grid, held
 from worlds.sensors import cast_along, ray_disc, ray_origin, reciprocal
 
 
@@ -78,6 +78,7 @@ P_OCOUNT, P_ORAD, P_OSPEED, P_OPATROL, P_OLENGTH, P_OSPAWN = range(14, 20)
 P_PER = 20  # rays per range reading (sector)
 P_OMIX = 21  # 1.0: each episode draws its disc count from 0..P_OCOUNT
 P_STEPFACTOR = 22  # the step limit's factor on the A* path's steps (worlds.config.step_limit)
+P_HELD = 23  # RobotConfig.held_headings: the heading turned to the nearest of this many before an action
 
 RUNNING, GOAL = int(Outcome.RUNNING), int(Outcome.GOAL)
 HIT_STATIC, HIT_DYNAMIC, TIMEOUT = (
@@ -107,7 +108,7 @@ def make_params(config: NavConfig) -> np.ndarray:
         config.goal_tolerance,
     ]
     values += [o.count, o.radius, o.speed, float(o.mode == "patrol"), o.patrol_length, o.spawn_clearance]
-    values += [s.rays_per_beam, float(o.mix), config.step_factor]
+    values += [s.rays_per_beam, float(o.mix), config.step_factor, r.held_headings]
     return np.asarray(values, dtype=np.float64)
 
 
@@ -187,7 +188,7 @@ def _step(
     off, height, width, cell = moff[m], mh[m], mw[m], mcell[m]
     radius = params[P_RADIUS]
     turn_around = action == turns.shape[0]  # RobotConfig.turn_around: half a turn in place, no drive
-    heading = th[i] + (math.pi if turn_around else turns[action])
+    heading = held(th[i], params[P_HELD]) + (math.pi if turn_around else turns[action])
     if params[P_RNOISE] > 0.0:
         heading += params[P_RNOISE] * gauss(rng, i)
     distance = 0.0 if turn_around else params[P_STEP]

@@ -24,6 +24,17 @@ def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
     return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
 
 
+@njit(cache=True)
+def held(theta: float, headings: float) -> float:
+    """``theta`` turned to the nearest of ``headings`` compass headings (multiples of ``2 pi /
+    headings``), the heading a robot that holds them (``RobotConfig.held_headings``) starts its next
+    action from; ``theta`` itself where ``headings`` is 0 (not held)."""
+    if headings <= 0.0:
+        return theta
+    quantum = 2.0 * math.pi / headings
+    return round(theta / quantum) * quantum
+
+
 def move(
     x: np.ndarray,
     y: np.ndarray,
@@ -33,11 +44,17 @@ def move(
     trans_noise: float = 0.0,
     rot_noise: float = 0.0,
     rng: np.random.Generator | None = None,
+    held_headings: int = 0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Apply one action to a batch of robots: ``theta += turn (+ noise)``, then move
-    ``step (+ noise)`` metres along the new heading (never backwards). Arrays in, arrays out."""
+    ``step (+ noise)`` metres along the new heading (never backwards); with ``held_headings``,
+    ``theta`` is first turned to the nearest of that many compass headings (:func:`held`). Arrays
+    in, arrays out."""
     x, y, theta, turn = (np.asarray(a, dtype=np.float64) for a in (x, y, theta, turn))
     shape = np.broadcast_shapes(x.shape, y.shape, theta.shape, turn.shape)
+    if held_headings > 0:
+        quantum = 2 * np.pi / held_headings
+        theta = np.round(theta / quantum) * quantum
     heading = theta + turn
     distance = np.broadcast_to(np.asarray(step, dtype=np.float64), shape)
     if rot_noise > 0 or trans_noise > 0:
