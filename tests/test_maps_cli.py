@@ -61,10 +61,13 @@ def test_pairs_drawn_replaces_a_files_own_scenarios(tmp_path, capsys):
     hall = movingai(tmp_path)
     argv = ["evaluate", "--policy", "heuristic", "--map", str(hall), "--episodes", "12"]
     assert main([*argv, "--out", str(tmp_path / "own")]) == 0
+    said = "".join(capsys.readouterr())
+    assert "3 scenarios from hall.map.scen" in said and "pairs=drawn" not in said
     own = json.loads((tmp_path / "own" / "eval.json").read_text())["episodes"]["hall"]
     scen = {((y, 2), (y, 17)) for y in (2, 5, 14)}
     assert len(own) == 12 and {(tuple(e["start"]), tuple(e["goal"])) for e in own} == scen  # repeated
     assert main([*argv, "--pairs", "drawn", "--out", str(tmp_path / "drawn")]) == 0
+    assert "3 scenarios from hall.map.scen; not used: pairs=drawn" in "".join(capsys.readouterr())
     drawn = json.loads((tmp_path / "drawn" / "eval.json").read_text())["episodes"]["hall"]
     pairs = {(tuple(e["start"]), tuple(e["goal"])) for e in drawn}
     assert len(drawn) == 12 and len(pairs) >= 10 and not pairs <= scen

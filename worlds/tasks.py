@@ -247,13 +247,19 @@ def with_options(spec: str, **options) -> str:
 def load_files(paths: list[Path], options: MapOptions) -> list[MapFile]:
     """The map files of ``paths`` (directories expanded), each loaded with ``options``."""
     files = [f for p in paths for f in map_paths(p)]
-    return [
+    loaded = [
         load_map_file(
             f, radius=options.radius, cell_size=options.cell_size, unknown=options.unknown,
             resolution=options.resolution,
         )
         for f in files
     ]  # fmt: skip
+    if options.pairs == "drawn":  # the note says where the pairs come from
+        loaded = [
+            dataclasses.replace(mf, note=f"{mf.note}; not used: pairs=drawn") if mf.scenarios else mf
+            for mf in loaded
+        ]
+    return loaded
 
 
 def file_tasks(maps: list[MapFile], options: MapOptions, size: int, seed: int) -> list[Task]:
