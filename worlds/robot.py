@@ -53,8 +53,7 @@ def move(
     x, y, theta, turn = (np.asarray(a, dtype=np.float64) for a in (x, y, theta, turn))
     shape = np.broadcast_shapes(x.shape, y.shape, theta.shape, turn.shape)
     if held_headings > 0:
-        quantum = 2 * np.pi / held_headings
-        theta = np.round(theta / quantum) * quantum
+        theta = np.vectorize(held, otypes=[np.float64])(theta, float(held_headings))
     heading = theta + turn
     distance = np.broadcast_to(np.asarray(step, dtype=np.float64), shape)
     if rot_noise > 0 or trans_noise > 0:
