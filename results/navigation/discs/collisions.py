@@ -47,13 +47,21 @@ def survives(env: NavigationEnv, actions: tuple[int, ...]) -> bool:
     return True
 
 
-def main() -> None:
-    size, n = int(sys.argv[1]), int(sys.argv[2])
+def shipped_on(size: int, n: int):
+    """The shipped policy through its reading shield, its world, validation seed 1's ``dynamic:SIZE``
+    set of ``n`` episodes, and a one-robot env that plays them (``reset`` with each episode's seed and
+    task)."""
     policy = load_policy("pretrained/nnql")
     nav = policy.nav_config(LEARNING_NAV)
     policy.use_shield(nav)
     es = named_set(f"dynamic:{size}", n, seed=1)
     env = NavigationEnv(replace(nav, obstacles=es.obstacles), maps=fixed_sampler(es.tasks, "discs"))
+    return policy, nav, es, env
+
+
+def main() -> None:
+    size, n = int(sys.argv[1]), int(sys.argv[2])
+    policy, nav, es, env = shipped_on(size, n)
     actions = range(nav.robot.n_actions + 1)  # the turn-around is the last
     rows, counts = [], {}
     for episode, (task, seed) in enumerate(zip(es.tasks, es.seeds, strict=True)):

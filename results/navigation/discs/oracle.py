@@ -12,35 +12,23 @@ tracker could only predict. Printed: both runs' success and outcomes, McNemar, a
 oracle changed the action; the last line is one JSON object.
 
     PYTHONPATH=. python results/navigation/discs/oracle.py SIZE EPISODES
+
+The episodes, the world and the copies are ``collisions.py``'s (``shipped_on``, ``survives``).
 """
 
 from __future__ import annotations
 
-import copy
 import json
 import sys
 import time
-from dataclasses import replace
 
 import numpy as np
+from collisions import shipped_on, survives  # this folder's collisions.py: the same world and copies
 
 from agents.evaluation.compare import mcnemar_exact
-from agents.evaluation.policies import load_policy
-from agents.evaluation.runner import fixed_sampler
 from agents.shield import MARGINS
-from bench.map_sizes import named_set
-from worlds.config import LEARNING_NAV
 from worlds.env import NavigationEnv
 from worlds.outcomes import Outcome
-
-COLLISIONS = (int(Outcome.COLLISION_DYNAMIC), int(Outcome.COLLISION_STATIC))
-
-
-def survives(env: NavigationEnv, action: int) -> bool:
-    """Does a copy of ``env`` take ``action`` without a collision?"""
-    trial = copy.deepcopy(env)
-    trial.step(action)
-    return int(trial.batch.outcome[0]) not in COLLISIONS
 
 
 def run(policy, env: NavigationEnv, es, oracle: bool) -> tuple[np.ndarray, dict[str, int]]:
@@ -55,12 +43,12 @@ def run(policy, env: NavigationEnv, es, oracle: bool) -> tuple[np.ndarray, dict[
             action = int(shield.choose(outputs, obs[None])[0])
             if oracle:
                 counts["steps"] += 1
-                if not survives(env, action):
+                if not survives(env, (action,)):
                     room = shield.room(obs[None])[len(MARGINS) - 1, 0]  # the capsule alone
                     order = np.argsort(-outputs[0], kind="stable")
                     tries = [a for a in order if room[a] >= 0] + [a for a in order if room[a] < 0]
                     tries.append(shield.turn_around)
-                    chosen = next((int(a) for a in tries if a != action and survives(env, int(a))), None)
+                    chosen = next((int(a) for a in tries if a != action and survives(env, (int(a),))), None)
                     if chosen is None:
                         counts["none_survives"] += 1
                     else:
@@ -78,11 +66,7 @@ def named(outcomes: np.ndarray) -> dict[str, int]:
 
 def main() -> None:
     size, n = int(sys.argv[1]), int(sys.argv[2])
-    policy = load_policy("pretrained/nnql")
-    nav = policy.nav_config(LEARNING_NAV)
-    policy.use_shield(nav)
-    es = named_set(f"dynamic:{size}", n, seed=1)
-    env = NavigationEnv(replace(nav, obstacles=es.obstacles), maps=fixed_sampler(es.tasks, "discs"))
+    policy, _, es, env = shipped_on(size, n)
     shipped, _ = run(policy, env, es, oracle=False)
     ceiling, counts = run(policy, env, es, oracle=True)
     won, won_oracle = shipped == int(Outcome.GOAL), ceiling == int(Outcome.GOAL)
