@@ -47,14 +47,14 @@ def survives(env: NavigationEnv, actions: tuple[int, ...]) -> bool:
     return True
 
 
-def shipped_on(size: int, n: int):
-    """The shipped policy through its reading shield, its world, validation seed 1's ``dynamic:SIZE``
-    set of ``n`` episodes, and a one-robot env that plays them (``reset`` with each episode's seed and
-    task)."""
+def shipped_on(size: int, n: int, kind: str = "dynamic"):
+    """The shipped policy through its reading shield, its world, validation seed 1's ``KIND:SIZE``
+    set of ``n`` episodes (``dynamic``: with discs; ``static``), and a one-robot env that plays them
+    (``reset`` with each episode's seed and task)."""
     policy = load_policy("pretrained/nnql")
     nav = policy.nav_config(LEARNING_NAV)
     policy.use_shield(nav)
-    es = named_set(f"dynamic:{size}", n, seed=1)
+    es = named_set(f"{kind}:{size}", n, seed=1)
     env = NavigationEnv(replace(nav, obstacles=es.obstacles), maps=fixed_sampler(es.tasks, "discs"))
     return policy, nav, es, env
 
