@@ -59,6 +59,11 @@ def shipped_on(size: int, n: int, kind: str = "dynamic"):
     return policy, nav, es, env
 
 
+def named(outcomes: np.ndarray) -> dict[str, int]:
+    """How many episodes ended each way, by the outcome's name."""
+    return {o.name: int((outcomes == int(o)).sum()) for o in Outcome if (outcomes == int(o)).any()}
+
+
 def main() -> None:
     size, n = int(sys.argv[1]), int(sys.argv[2])
     policy, nav, es, env = shipped_on(size, n)

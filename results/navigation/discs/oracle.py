@@ -23,7 +23,7 @@ import sys
 import time
 
 import numpy as np
-from collisions import shipped_on, survives  # this folder's collisions.py: the same world and copies
+from collisions import named, shipped_on, survives  # this folder's collisions.py: the same world and copies
 
 from agents.evaluation.compare import mcnemar_exact
 from agents.shield import MARGINS
@@ -58,10 +58,6 @@ def run(policy, env: NavigationEnv, es, oracle: bool) -> tuple[np.ndarray, dict[
             done = terminated or truncated
         outcomes.append(int(info["outcome"]))
     return np.asarray(outcomes), counts
-
-
-def named(outcomes: np.ndarray) -> dict[str, int]:
-    return {o.name: int((outcomes == int(o)).sum()) for o in Outcome if (outcomes == int(o)).any()}
 
 
 def main() -> None:

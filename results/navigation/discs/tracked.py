@@ -43,7 +43,7 @@ import sys
 import time
 
 import numpy as np
-from collisions import shipped_on  # this folder's collisions.py: the same episodes and world
+from collisions import named, shipped_on  # this folder's collisions.py: the same episodes and world
 
 from agents.evaluation.compare import mcnemar_exact
 from agents.shield import MARGINS
@@ -197,10 +197,6 @@ def run(policy, nav, env, es, variant: str | None) -> tuple[np.ndarray, dict[str
             done = terminated or truncated
         outcomes.append(int(info["outcome"]))
     return np.asarray(outcomes), counts
-
-
-def named(outcomes: np.ndarray) -> dict[str, int]:
-    return {o.name: int((outcomes == int(o)).sum()) for o in Outcome if (outcomes == int(o)).any()}
 
 
 def main() -> None:
