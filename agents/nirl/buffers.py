@@ -81,11 +81,9 @@ def as_tensordict(rows: dict, n: int) -> TensorDict:
     return TensorDict(nested, batch_size=[n])
 
 
-def sample(
-    buffer: TensorDictReplayBuffer, n: int, device: torch.device | None = None, keys: tuple | None = None
-) -> TensorDict:
-    """:func:`gather` as a TensorDict, whatever batch size the buffer was built with (NIRL draws
-    several batch sizes from the same buffers), moved to ``device`` when it is not the CPU (the
-    buffers stay in host memory)."""
-    batch = as_tensordict(gather(buffer, n, keys), n)
+def sample(buffer: TensorDictReplayBuffer, n: int, device: torch.device | None = None) -> TensorDict:
+    """:func:`gather` of every key as a TensorDict, whatever batch size the buffer was built with
+    (NIRL draws several batch sizes from the same buffers), moved to ``device`` when it is not the
+    CPU (the buffers stay in host memory)."""
+    batch = as_tensordict(gather(buffer, n), n)
     return batch if device is None or device.type == "cpu" else batch.to(device, non_blocking=True)

@@ -27,6 +27,7 @@ FOUND = 0.3
 def main() -> None:
     size, n = int(sys.argv[1]), int(sys.argv[2])
     policy, nav, es, env = shipped_on(size, n)
+    radius = es.obstacles.radius
     found = missed = false = 0
     errors = []
     for task, seed in zip(es.tasks, es.seeds, strict=True):
@@ -38,7 +39,7 @@ def main() -> None:
             c, s = math.cos(theta), math.sin(theta)
             rel = true_discs(env) - [x, y]
             truth = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]], axis=1)
-            seen = scan_discs(batch.rays[0], nav.sensors.ray_angles, 0.3, nav.sensors.max_range)
+            seen = scan_discs(batch.rays[0], nav.sensors.ray_angles, radius, nav.sensors.max_range)
             seen = seen[np.hypot(*seen.T) < NEAR]
             for centre in truth[np.hypot(*truth.T) < NEAR]:
                 gap = np.hypot(*(seen - centre).T).min() if len(seen) else math.inf

@@ -93,10 +93,9 @@ class Tracker:
     """One robot's discs from frame to frame: centres in the robot's frame, velocities from the last
     displacement (two frames)."""
 
-    def __init__(self, nav, detector: str) -> None:
-        self.nav, self.detector = nav, detector
+    def __init__(self, nav, detector: str, radius: float) -> None:
+        self.nav, self.detector, self.radius = nav, detector, radius  # radius: the discs' (the set's)
         self.angles = nav.sensors.ray_angles
-        self.radius = 0.3  # the world's discs (bench.map_sizes' sets: ObstacleConfig's default)
         self.previous: np.ndarray | None = None  # last frame's centres, in the current robot frame
 
     def reset(self) -> None:
@@ -157,7 +156,11 @@ def run(policy, nav, env, es, variant: str | None) -> tuple[np.ndarray, dict[str
     tracker = None
     if variant is not None:
         detector, margin, *rest = variant.split(":")
-        margin, then, tracker = float(margin), (rest or ["others"])[0], Tracker(nav, detector)
+        margin, then, tracker = (
+            float(margin),
+            (rest or ["others"])[0],
+            Tracker(nav, detector, es.obstacles.radius),
+        )
     for task, seed in zip(es.tasks, es.seeds, strict=True):
         obs, info = env.reset(seed=seed, options={"task": task})
         if tracker is not None:
@@ -184,8 +187,10 @@ def run(policy, nav, env, es, variant: str | None) -> tuple[np.ndarray, dict[str
                         if then in ("turn", "margins")
                         else [*others, shield.turn_around]
                     )
-                    clear = (int(a) for a in tries if clear_of(nav, int(a), now, nxt, tracker.radius, margin))
-                    chosen = next((a for a in clear if a != action), None)
+                    alternatives = (int(a) for a in tries if a != action)
+                    chosen = next(
+                        (a for a in alternatives if clear_of(nav, a, now, nxt, tracker.radius, margin)), None
+                    )
                     if chosen is None:
                         counts["none_clear"] += 1
                     else:

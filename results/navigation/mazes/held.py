@@ -28,36 +28,18 @@ import time
 from dataclasses import replace
 
 import numpy as np
+from mazes import drift  # this folder's mazes.py: the same corridor and robots
 
 from agents.evaluation.compare import mcnemar_exact
 from agents.evaluation.policies import load_policy
 from agents.evaluation.runner import evaluate, make_eval_set
 from bench.map_sizes import episode_arrays, figures, named_set
-from worlds.config import LEARNING_NAV, NavConfig
+from worlds.config import LEARNING_NAV
 from worlds.heuristics import subgoal_scores
 from worlds.outcomes import Outcome
-from worlds.robot import move
 
 HELD = 8
 """compass headings held: every 45 degrees, the actions' turns"""
-
-
-def drift(nav: NavConfig, held_headings: int, robots: int = 20_000) -> dict[str, float]:
-    """Share of ``robots`` driving straight ahead from a 1 m corridor's centreline with the world's
-    motion noise whose centre has left the band their radius leaves (0.25 m either side) within 10,
-    20 and 40 steps."""
-    robot, rng = nav.robot, np.random.default_rng(0)
-    band = 0.5 - robot.radius
-    x, y, theta = np.zeros(robots), np.zeros(robots), np.zeros(robots)
-    left, out = np.zeros(robots, bool), {}
-    for k in range(1, 41):
-        x, y, theta = move(
-            x, y, theta, 0.0, robot.step, robot.trans_noise, robot.rot_noise, rng, held_headings=held_headings
-        )
-        left |= np.abs(y) > band
-        if k in (10, 20, 40):
-            out[str(k)] = round(float(left.mean()), 3)
-    return out
 
 
 def eval_set(what: str, episodes: int):
@@ -118,7 +100,7 @@ def main() -> None:
             rows.append(row)
             print(f"{what} {name}:", "; ".join(line(world, row[world]) for world in worlds), flush=True)
     out = {"episodes": episodes, "seed": 1, "held_headings": HELD, "rows": rows}
-    out["drift"] = {world: drift(nav, w.robot.held_headings) for world, w in worlds.items()}
+    out["drift"] = {world: drift(w.robot) for world, w in worlds.items()}
     out["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     print(json.dumps(out), flush=True)
 

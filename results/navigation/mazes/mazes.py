@@ -37,14 +37,17 @@ from worlds.robot import move
 
 def drift(robot: RobotConfig, corridor: float = 1.0, robots: int = 20_000) -> dict[str, float]:
     """Share of ``robots`` driving straight along a ``corridor``-wide corridor whose centre has left
-    the band their radius leaves free within 10, 20 and 40 steps."""
+    the band their radius leaves free within 10, 20 and 40 steps (with ``robot``'s noise and, where
+    it holds its heading, ``held_headings``)."""
     rng = np.random.default_rng(0)
     band = corridor / 2 - robot.radius
     x, y, theta = np.zeros(robots), np.zeros(robots), np.zeros(robots)
     left = np.zeros(robots, bool)
     out = {}
     for k in range(1, 41):
-        x, y, theta = move(x, y, theta, 0.0, robot.step, robot.trans_noise, robot.rot_noise, rng)
+        x, y, theta = move(
+            x, y, theta, 0.0, robot.step, robot.trans_noise, robot.rot_noise, rng, robot.held_headings
+        )
         left |= np.abs(y) > band
         if k in (10, 20, 40):
             out[str(k)] = round(float(left.mean()), 3)
