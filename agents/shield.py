@@ -38,15 +38,24 @@ validation only (``results/navigation/shield/screen_turn_around.jsonl``):
 The sector model is the readings' own: a sector's rays are 3.75 degrees apart (24 sectors of 4 rays),
 so a corner between two rays can stand closer than the sector's reading. The shield is a filter of
 what the robot sees, not a guarantee.
+
+Behind it stands the disc tracker (:mod:`agents.disc_tracker`): moving discs found in two frames of
+the robot's scan and an action's capsule kept clear of where they go next. It needs the scan's rays
+and the robot's own history, so it acts where a batch of robots is driven step by step
+(:meth:`ReadingShield.actor`: ``navlearn evaluate``, ``world show``, ``navlearn drive``,
+``bench/map_sizes.py``); a bare ``choose(outputs, obs)`` is the one-frame shield alone.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from agents.disc_tracker import DiscTracker
 from worlds.config import NavConfig
 from worlds.perception import frame_layout
 
@@ -98,6 +107,22 @@ def reach_table(nav: NavConfig) -> np.ndarray:
     return table
 
 
+ScanActor = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+"""``act(obs (n, obs_dim), rays (n, R) m, fresh (n,) bool) -> actions (n,)``: ``n`` robots driven step
+by step, ``fresh`` marking those whose episode starts"""
+
+
+@runtime_checkable
+class ScanPolicy(Protocol):
+    """A policy that reads the scans as well: ``scan_actor(n)`` gives a :data:`ScanActor` for ``n``
+    robots, or None to be called as a plain ``policy(obs) -> actions``. The evaluation's runner,
+    ``world show`` and ``navlearn drive`` drive such a policy through it."""
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray: ...
+
+    def scan_actor(self, n: int) -> ScanActor | None: ...
+
+
 @dataclass(frozen=True)
 class ReadingShield:
     """The shield of one robot and sensor (:func:`for_nav`): ``choose(outputs, obs)`` -> actions."""
@@ -111,6 +136,15 @@ class ReadingShield:
     """the readings are in units of it (the kernel writes ``range / max_range``)"""
     turn_around: int
     """the robot's turn-around action (``RobotConfig.turn_around``), taken when nothing is clear"""
+    ray_angles: np.ndarray
+    """the directions of the scan's rays (``SensorConfig.ray_angles``), which the disc tracker reads"""
+    moves: np.ndarray
+    """``(n_actions + 1, 2)``: each action's turn (rad) and forward distance (m), the turn-around last"""
+    robot_radius: float
+    disc_radius: float
+    """the radius the tracker takes a moving disc to have (``ObstacleConfig.radius``)"""
+    track_discs: bool = True
+    """act with the disc tracker behind the shield (:meth:`actor`); False: the one-frame shield only"""
 
     def room(self, obs: np.ndarray) -> np.ndarray:
         """``(len(MARGINS), N, n_actions)``: the least ``reading[j] - reach[k, j]`` over the sectors
@@ -133,10 +167,75 @@ class ReadingShield:
             action = np.where(clear.any(axis=1), best, action)
         return action
 
+    def keep_clear(
+        self, action: np.ndarray, outputs: np.ndarray, room: np.ndarray, disc_clear: np.ndarray
+    ) -> np.ndarray:
+        """``action`` where it is disc-clear (``disc_clear`` ``(N, n_actions + 1)``, the tracker's),
+        else the first disc-clear one of: the preference of ``outputs`` among the actions the readings
+        leave clear (the capsule alone, ``room[-1]``), the turn-around, the others; else ``action``."""
+        action = action.copy()
+        for i in np.flatnonzero(~disc_clear[np.arange(len(action)), action]):
+            order = np.argsort(-outputs[i], kind="stable")
+            readings_clear = room[-1, i] >= 0
+            tries = [*order[readings_clear[order]], self.turn_around, *order[~readings_clear[order]]]
+            action[i] = next((a for a in tries if a != action[i] and disc_clear[i, a]), action[i])
+        return action
 
-def for_nav(nav: NavConfig) -> ReadingShield:
-    """The shield of ``nav``'s robot and sensor, reading observations of ``nav``'s layout."""
+    def actor(self, outputs: Callable[[np.ndarray], np.ndarray], n: int) -> ScanActor:
+        """``act(obs, rays, fresh) -> actions`` for ``n`` robots driven step by step: the argmax of
+        ``outputs(obs)`` through the shield and, with :attr:`track_discs`, the disc tracker, which
+        reads the scans ``rays`` ``(n, len(ray_angles))`` (m) and forgets the robots marked ``fresh``
+        (their episode starts)."""
+        radii = (self.robot_radius, self.disc_radius)
+        tracker = DiscTracker(n, self.ray_angles, self.max_range, self.moves, *radii)
+
+        def act(obs: np.ndarray, rays: np.ndarray, fresh: np.ndarray) -> np.ndarray:
+            values, room = outputs(obs), self.room(obs)
+            action = self.pick(values, room)
+            if self.track_discs:
+                tracker.observe(rays, fresh)
+                action = self.keep_clear(action, values, room, tracker.clear())
+                tracker.moved(action)
+            return action
+
+        return act
+
+    def over(self, outputs: Callable[[np.ndarray], np.ndarray]) -> Shielded:
+        """A policy acting on the argmax of ``outputs(obs)`` through this shield (and its tracker)."""
+        return Shielded(self, outputs)
+
+
+@dataclass(frozen=True)
+class Shielded:
+    """``policy(obs) -> actions`` through a shield's one frame; :meth:`scan_actor` with its tracker."""
+
+    shield: ReadingShield
+    outputs: Callable[[np.ndarray], np.ndarray]
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return self.shield.choose(self.outputs(obs), obs)
+
+    def scan_actor(self, n: int) -> ScanActor:
+        """:meth:`ReadingShield.actor` of these outputs, for ``n`` robots."""
+        return self.shield.actor(self.outputs, n)
+
+
+def for_nav(nav: NavConfig, track_discs: bool = True) -> ReadingShield:
+    """The shield of ``nav``'s robot and sensor, reading observations of ``nav``'s layout, with the
+    disc tracker behind it unless ``track_discs`` is False."""
     a, b = frame_layout(nav)["readings"]
     grown = [replace(nav, robot=replace(nav.robot, radius=nav.robot.radius + m)) for m in MARGINS]
     reach = np.stack([reach_table(g) for g in grown])
-    return ReadingShield(reach, slice(a, b), nav.sensors.max_range, nav.robot.turn_around)
+    robot = nav.robot
+    moves = np.array([robot.motion(k) for k in range(robot.n_actions + 1)])
+    return ReadingShield(
+        reach,
+        slice(a, b),
+        nav.sensors.max_range,
+        robot.turn_around,
+        nav.sensors.ray_angles,
+        moves,
+        robot.radius,
+        nav.obstacles.radius,
+        track_discs,
+    )

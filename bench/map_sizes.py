@@ -59,7 +59,7 @@ from worlds.perception import frame_layout
 from worlds.tasks import parse_map_spec
 from worlds.vector_env import NavigationVectorEnv
 
-METHODS = ("policy", "network", "previous", "follower", "heuristic", "expert")
+METHODS = ("policy", "network", "one_frame", "previous", "follower", "heuristic", "expert")
 THROUGHPUT_ROBOTS = 16
 
 
@@ -173,7 +173,8 @@ def throughput(nav: NavConfig, size: int, seconds: float, seed: int, maps=None) 
 class Methods:
     """What the bench runs on every episode: the policy (in its own observation and ``nav``, whose
     step rule everything shares; through its reading shield unless ``--no-shield``), the same network
-    without the shield when the policy has one (``network``: what the shield adds, paired), the
+    without the shield when the policy has one (``network``: what the shield adds, paired) and
+    through the one-frame shield without its disc tracker (``one_frame``: what the tracker adds), the
     goal-seeking heuristic, when given a previous policy (shielded like the policy) and, when the
     policy observes a subgoal and acts through its shield, the subgoal follower (``follower``:
     :func:`worlds.heuristics.subgoal_scores` through the same shield, the classical mapless planner:
@@ -183,6 +184,7 @@ class Methods:
     nav: NavConfig
     previous: object | None = None
     network: object | None = None
+    one_frame: object | None = None
 
     def runs(self, es: EvalSet, expert_episodes: int) -> dict[str, dict[str, np.ndarray]]:
         """Outcome, path length and steps per episode of each method on ``es`` (the expert on the
@@ -195,12 +197,17 @@ class Methods:
                 if self.network
                 else {}
             ),
+            **(
+                {"one_frame": episode_arrays(evaluate(self.one_frame, es, self.nav), es.family)}
+                if self.one_frame
+                else {}
+            ),
             "heuristic": episode_arrays(evaluate(lambda o: heuristic(o[:, :width]), es, self.nav), es.family),
         }
         shield = getattr(self.policy, "shield", None)
         if shield is not None and "subgoal" in frame_layout(self.nav):
             scores = subgoal_scores(self.nav)  # in the policy's observation (self.nav), as the policy
-            follower = evaluate(lambda o: shield.choose(scores(o), o), es, self.nav)
+            follower = evaluate(shield.over(scores), es, self.nav)
             runs["follower"] = episode_arrays(follower, es.family)
         if self.previous is not None:  # its own observation, the same episodes and step rule
             own = replace(
@@ -403,7 +410,8 @@ def main(argv: list[str] | None = None) -> int:
         if previous is not None:
             previous.use_shield(previous.nav_config())
     network = load_policy(args.policy) if args.shield else None
-    methods = Methods(policy, nav, previous, network)
+    one_frame = load_policy(args.policy).use_shield(nav, track_discs=False) if args.shield else None
+    methods = Methods(policy, nav, previous, network, one_frame)
     if args.map:
         return run_maps(args, methods)
     report: dict = {

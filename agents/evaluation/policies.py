@@ -49,7 +49,7 @@ from safetensors.numpy import load_file
 from agents.forward import network_forward
 from agents.mlp import ACTIVATION_NAMES, ARCHITECTURE_KEYS, CONFIG_FILE, KINDS, WEIGHTS_FILE, save_policy
 from agents.nnql.config import RECURRENT_RETIRED
-from agents.shield import ReadingShield
+from agents.shield import ReadingShield, ScanActor
 from agents.shield import for_nav as shield_for
 from worlds.config import NavConfig, check_observation, saved_observation, with_observation
 from worlds.heuristics import goal_seeking_policy
@@ -137,22 +137,30 @@ class GreedyMLPPolicy:
             obs[:, self._goal_columns] = np.minimum(obs[:, self._goal_columns], np.float32(self._goal_read))
         return self.forward(obs)
 
-    def use_shield(self, nav: NavConfig | None) -> GreedyMLPPolicy:
+    def use_shield(self, nav: NavConfig | None, track_discs: bool = True) -> GreedyMLPPolicy:
         """Act through the reading shield of ``nav``'s robot and sensor (:mod:`agents.shield`: never an
-        action the current readings say hits something), or through none when ``nav`` is None;
+        action the current readings say hits something) with its disc tracker behind it (unless
+        ``track_discs`` is False; :mod:`agents.disc_tracker`), or through none when ``nav`` is None;
         returns the policy. ``nav`` must observe what the policy observes."""
         if nav is not None and self.env is not None:
             raise ValueError(f"{self!r} acts in a Gymnasium env; the reading shield is for navlearn's robot")
         if nav is not None:
             check_observation(self.observation, nav)
-        self.shield = None if nav is None else shield_for(nav)
+        self.shield = None if nav is None else shield_for(nav, track_discs)
         return self
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """The actions for one frame: the shield's one-frame choice (no disc tracker, which needs
+        the scans and the robots' history: :meth:`scan_actor`)."""
         outputs = self.outputs(obs)
         if self.shield is None:
             return outputs.argmax(axis=1).astype(np.int64)
         return self.shield.choose(outputs, obs)
+
+    def scan_actor(self, n: int) -> ScanActor | None:
+        """``act(obs, rays, fresh)`` for ``n`` robots driven step by step, through the shield and its
+        disc tracker (:meth:`agents.shield.ReadingShield.actor`); None without a shield."""
+        return None if self.shield is None else self.shield.actor(self.outputs, n)
 
     def __repr__(self) -> str:
         shield = ", shielded" if self.shield is not None else ""

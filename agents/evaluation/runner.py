@@ -39,7 +39,11 @@ process-wide (threadpoolctl) and lifted when ``evaluate`` returns, so a thread t
 torch's BLAS at the same moment in the same process runs on one BLAS thread meanwhile.
 
 A ``Policy`` is any callable mapping an observation batch ``(n, obs_dim)`` float32 to
-actions ``(n,)`` int64, greedy for evaluation (see ``agents.imitation.policy.load_policy``).
+actions ``(n,)`` int64, greedy for evaluation (see ``agents.imitation.policy.load_policy``). A
+policy that also reads the robots' scans and history (:class:`agents.shield.ScanPolicy`: a shielded
+policy, whose disc tracker follows the discs from frame to frame, :mod:`agents.disc_tracker`) is
+driven through its ``scan_actor``: each step it gets the observations, the rays the world cast (m)
+and which robots start an episode.
 """
 
 from __future__ import annotations
@@ -54,6 +58,7 @@ from threadpoolctl import threadpool_limits
 
 from agents.evaluation.metrics import FamilyMetrics, point_clearance, summarize
 from agents.planning.astar import astar
+from agents.shield import ScanPolicy
 from worlds.config import NavConfig, ObstacleConfig, check_observation, with_observation
 from worlds.generators import generate_task
 from worlds.maps import Task, clearance, load_movingai, load_scenarios
@@ -62,6 +67,7 @@ from worlds.tasks import MIXED_FAMILIES, TRAIN_SEEDS, TaskSampler, file_tasks, p
 from worlds.vector_env import NavigationVectorEnv
 
 Policy = Callable[[np.ndarray], np.ndarray]
+
 EVAL_FAMILIES = ("unseen", "dynamic", "movingai")
 HEADLINE_EPISODES = 500
 """episodes per evaluation set for headline figures (a 95% Wilson interval of about +-1.3 points at 98%)"""
@@ -257,10 +263,13 @@ def _run_wave(policy: Policy, config: NavConfig, tasks: list[Task], seeds: list[
         disc_gap = np.array([_disc_gap(env, i, frames[0][i]) for i in range(n)])
         for i in range(n):
             tracks[i].append(env.batch.discs(i).copy())
-    running = np.ones(n, bool)
+    running, fresh = np.ones(n, bool), np.ones(n, bool)
     outcome, length, steps = np.zeros(n, np.int64), np.zeros(n), np.zeros(n, np.int64)
+    act = policy.scan_actor(n) if isinstance(policy, ScanPolicy) else None
     while running.any():
-        obs, _, _, _, info = env.step(np.asarray(policy(obs), dtype=np.int64).reshape(n))
+        actions = policy(obs) if act is None else act(obs, env.batch.rays, fresh)
+        obs, _, _, _, info = env.step(np.asarray(actions, dtype=np.int64).reshape(n))
+        fresh = info["_final_obs"] if info else np.zeros(n, bool)
         poses = env.poses()
         if info:
             ended = running & info["_final_obs"]

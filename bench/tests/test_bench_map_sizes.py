@@ -30,10 +30,8 @@ def test_a_tiny_sweep_prints_every_method_and_ends_with_its_json(tmp_path, capsy
     for size in ("16", "20"):
         for kind in ("static", "dynamic"):
             rows = report["results"][size][kind]
-            assert set(rows) == {"policy", "network", "follower", "heuristic", "expert"}
-            assert (
-                rows["policy"]["episodes"] == rows["network"]["episodes"] == rows["follower"]["episodes"] == 6
-            )
+            assert set(rows) == {"policy", "network", "one_frame", "follower", "heuristic", "expert"}
+            assert {rows[m]["episodes"] for m in ("policy", "network", "one_frame", "follower")} == {6}
             assert rows["expert"]["episodes"] == 3 and rows["network"]["paired"]["episodes"] == 6
             for row in rows.values():
                 total = row["success"] + row["collision_static"] + row["collision_dynamic"] + row["timeout"]

@@ -121,6 +121,7 @@ def show_main(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 2
+    from agents.shield import ScanPolicy
     from worlds.config import LEARNING_NAV, NavConfig, ObstacleConfig, SensorConfig
     from worlds.env import NavigationEnv
     from worlds.heuristics import goal_seeking_policy
@@ -162,9 +163,15 @@ def show_main(args: argparse.Namespace) -> int:
     obs, info = env.reset(seed=args.seed)
     rng = np.random.default_rng(args.seed)
     trajectory = [tuple(info["pose"][:2])]
+    act = policy.scan_actor(1) if isinstance(policy, ScanPolicy) else None  # the shield's disc tracker
     done = False
     while not done:
-        action = int(rng.integers(config.robot.n_actions)) if args.random else int(policy(obs[None])[0])
+        if args.random:
+            action = int(rng.integers(config.robot.n_actions))
+        elif act is not None:
+            action = int(act(obs[None], env.batch.rays, np.array([len(trajectory) == 1]))[0])
+        else:
+            action = int(policy(obs[None])[0])
         obs, _, terminated, truncated, info = env.step(action)
         trajectory.append(tuple(info["pose"][:2]))
         done = terminated or truncated

@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from agents.evaluation.policies import load_policy
+from agents.shield import ScanPolicy
 from protocols import keys
 from protocols.codec import encode as encode_message
 from protocols.messages import StatusReport
@@ -117,6 +118,8 @@ class Driver:
         if not (math.isfinite(robot_radius) and robot_radius > 0):
             raise ValueError(f"--robot-radius must be a positive number of metres, got {robot_radius}")
         self.policy, self.inputs, self._send, self.limits = policy, inputs, send, limits
+        self.act = policy.scan_actor(1) if isinstance(policy, ScanPolicy) else None
+        """the policy with its shield's disc tracker, which reads the scans (None: ``policy(obs)``)"""
         self.nav = policy.nav_config()
         self.observer = LiveObserver(self.nav, snap_hits=True)
         self.robot = self.nav.robot
@@ -276,7 +279,10 @@ class Driver:
         rays = np.where(rays < reach, np.minimum(rays * self.scale, np.nextafter(max_range, 0.0)), max_range)
         at = (*self._world(pose[:2]), pose[2])
         obs = self.observer.observe(rays, at, -1 if self.last_action is None else self.last_action)
-        action = int(np.asarray(self.policy(obs[None, :])).reshape(-1)[0])
+        if self.act is None:
+            action = int(np.asarray(self.policy(obs[None, :])).reshape(-1)[0])
+        else:  # a goal's first action forgets the discs of the last goal
+            action = int(self.act(obs[None, :], rays[None, :], np.array([self.last_action is None]))[0])
         turn, step = self.robot.motion(action)  # the turn-around too
         self.motion = ActionMotion(pose, turn, step / self.scale, self.limits)
         self.last_action, self.actions = action, self.actions + 1
