@@ -114,8 +114,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=True,
         help="a learned policy acts through its reading shield: never an action its current range "
         "readings say hits something (0.1 m to spare first), half a turn in place when every action "
-        "would (agents.shield; the heuristic is never shielded). --no-shield: the network's own choice "
-        "(default: shielded)",
+        "would, and kept clear of where the moving discs it tracks in the scan are going "
+        "(agents.shield, agents.disc_tracker; the heuristic is never shielded). --no-shield: the "
+        "network's own choice (default: shielded)",
     )
     parser.add_argument(
         "--out", help="directory for eval.json and the path plots (with --compare: compare.json)"

@@ -84,8 +84,9 @@ class DriveConfig(RosSettings):
     """give up a goal after this many actions, stopping the robot (0: never; the world's limit is 200)"""
     shield: bool = True
     """act through the policy's reading shield: never an action the current scan's readings say hits
-    something, half a turn in place when every action would (agents.shield; --no-shield: the
-    network's own choice)"""
+    something, half a turn in place when every action would, none that meets a moving object it
+    tracks in the scan where the object is going (agents.shield, agents.disc_tracker; --no-shield:
+    the network's own choice)"""
 
 
 @dataclass
