@@ -97,6 +97,45 @@ def test_the_turn_around_is_half_a_turn_in_place():
     assert math.hypot(rig.pose[0], rig.pose[1]) < 1e-9
 
 
+class ScanStraight(Straight):
+    """A policy that reads the scans too (agents.shield.ScanPolicy, as a shielded one with its disc
+    tracker): records the rays and the episode starts the driver hands it, drives straight ahead."""
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[np.ndarray, bool]] = []
+
+    def __call__(self, obs):
+        raise AssertionError("a scan policy is driven through its scan actor")
+
+    def scan_actor(self, n):
+        assert n == 1
+
+        def act(obs, rays, fresh):
+            assert obs.shape == (1, 30) and rays.shape == (1, len(LEARNING_NAV.sensors.ray_angles))
+            self.seen.append((rays[0].copy(), bool(fresh[0])))
+            return np.array([2])
+
+        return act
+
+
+def test_a_scan_policy_gets_the_scans_rays_and_each_goals_start():
+    wall = np.full(360, np.inf)
+    wall[170:191] = 1.5  # something 1.5 m ahead (the scan starts behind the robot, at -pi)
+    policy = ScanStraight()
+    rig = Rig(scan=wire.laser_scan(wall, -math.pi, 2 * math.pi / 360, 0.1, 8.0, 0, "laser"), policy=policy)
+    rig.run(0.1)
+    rig.inputs.on_goal((3.0, 0.0), "odom")
+    rig.run(2.0)
+    assert len(policy.seen) >= 2 and [f for _, f in policy.seen[:2]] == [True, False]  # a goal starts afresh
+    rays = policy.seen[0][0]
+    angles, max_range = np.abs(LEARNING_NAV.sensors.ray_angles), LEARNING_NAV.sensors.max_range
+    assert np.allclose(rays[angles < 0.05], 1.5, atol=0.1)  # the LaserScan, resampled to the world's rays
+    assert (rays[angles > 0.4] == max_range).all()
+    rig.inputs.on_goal((-3.0, 0.0), "odom")  # a new goal: the tracker forgets the last one's discs
+    rig.run(0.5)
+    assert any(f for _, f in policy.seen[2:])
+
+
 def test_watchdog_stops_within_a_tick_of_the_scan_going_stale_and_drives_on():
     rig = Rig()
     rig.run(0.1)
