@@ -198,7 +198,3 @@ class DiscTracker:
         """The robots took ``actions``: carry this frame's discs into their next frame."""
         actions = np.asarray(actions, np.int64)
         carry(self.centres, self.counts, self.moves, actions, self.previous, self.previous_counts)
-
-    def seen(self) -> np.ndarray:
-        """``(n,)``: discs found in each robot's last scan."""
-        return self.counts.copy()

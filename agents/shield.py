@@ -186,13 +186,15 @@ class ReadingShield:
         ``outputs(obs)`` through the shield and, with :attr:`track_discs`, the disc tracker, which
         reads the scans ``rays`` ``(n, len(ray_angles))`` (m) and forgets the robots marked ``fresh``
         (their episode starts)."""
-        radii = (self.robot_radius, self.disc_radius)
-        tracker = DiscTracker(n, self.ray_angles, self.max_range, self.moves, *radii)
+        tracker = None
+        if self.track_discs:
+            radii = (self.robot_radius, self.disc_radius)
+            tracker = DiscTracker(n, self.ray_angles, self.max_range, self.moves, *radii)
 
         def act(obs: np.ndarray, rays: np.ndarray, fresh: np.ndarray) -> np.ndarray:
             values, room = outputs(obs), self.room(obs)
             action = self.pick(values, room)
-            if self.track_discs:
+            if tracker is not None:
                 tracker.observe(rays, fresh)
                 action = self.keep_clear(action, values, room, tracker.clear())
                 tracker.moved(action)

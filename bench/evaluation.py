@@ -8,7 +8,8 @@ policy call alone on a ``(--batch, 11)`` observation batch with BLAS at its libr
 threads and held to one thread: on a busy machine the difference is what made evaluation slow.
 Then it compares the two policies on the same episodes (``agents.evaluation.compare``: exact
 McNemar, per map family, path ratio on jointly solved episodes) and prints the table. The policy
-acts through its reading shield, as ``navlearn evaluate`` runs it (:mod:`agents.shield`); the same
+acts through its reading shield and the shield's disc tracker, as ``navlearn evaluate`` runs it
+(:mod:`agents.shield`, :mod:`agents.disc_tracker`); the same
 network without the shield (``network``) is run and compared on the same episodes too.
 
     python bench/evaluation.py       # human lines, then one JSON object on the last line

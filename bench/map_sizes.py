@@ -4,8 +4,9 @@ For every map side in ``--sizes`` (default 16, 32, 48, 64 cells of 1 m) two sets
 evaluation (:func:`agents.evaluation.make_eval_set`, generated maps of the ``mixed`` families, never
 trained on): ``static`` and ``dynamic`` with moving discs - 4 up to 32 cells, then scaled with the
 area (:func:`discs_for`: 9 at 48, 16 at 64). On the same episodes (same maps, starts, goals, seeds)
-it runs the policy (default the shipped ``pretrained/nnql``, through its reading shield as
-``navlearn evaluate`` runs it, and its network without the shield: row ``network``), the subgoal
+it runs the policy (default the shipped ``pretrained/nnql``, through its reading shield and the
+shield's disc tracker as ``navlearn evaluate`` runs it; its network without the shield: row
+``network``; the shield without its tracker: row ``one_frame``), the subgoal
 follower (``follower``: turn towards the own map's subgoal through the same shield, the classical
 mapless planner; :func:`worlds.heuristics.subgoal_scores`), the goal-seeking heuristic and the A*
 expert (lattice A* on the true map, the demonstrations' source;
@@ -393,8 +394,9 @@ def main(argv: list[str] | None = None) -> int:
         "--shield",
         action=argparse.BooleanOptionalAction,
         default=True,
-        help="act through the reading shield (agents.shield), as `navlearn evaluate` does; with it the "
-        "same network is also run without it (row 'network'), paired",
+        help="act through the reading shield and its disc tracker (agents.shield), as `navlearn evaluate` "
+        "does; with it the same network is also run without the shield (row 'network') and without the "
+        "tracker (row 'one_frame'), paired",
     )
     args = parser.parse_args(argv)
 
