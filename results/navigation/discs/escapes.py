@@ -97,7 +97,8 @@ def main() -> None:
         for name, p in (("shipped", policy), ("least", Least(policy))):
             runs[name] = np.array([e.outcome for e in evaluate(p, es, nav).episodes[es.family]])
         won = {k: v == int(Outcome.GOAL) for k, v in runs.items()}
-        gained, lost = int((won["least"] & ~won["shipped"]).sum()), int((won["shipped"] & ~won["least"]).sum())
+        gained = int((won["least"] & ~won["shipped"]).sum())
+        lost = int((won["shipped"] & ~won["least"]).sum())
         row = {
             "set": what,
             **{f"{k}_success": float(v.mean()) for k, v in won.items()},
