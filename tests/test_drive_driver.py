@@ -136,6 +136,17 @@ def test_a_scan_policy_gets_the_scans_rays_and_each_goals_start():
     assert any(f for _, f in policy.seen[2:])
 
 
+def test_warm_up_goes_through_the_scan_actor_and_the_first_goal_still_starts_afresh():
+    policy = ScanStraight()
+    rig = Rig(policy=policy)
+    rig.driver.warm_up()
+    assert [f for _, f in policy.seen] == [True]  # the tracker's loops loaded before any goal
+    rig.run(0.1)
+    rig.inputs.on_goal((3.0, 0.0), "odom")
+    rig.run(2.0)
+    assert [f for _, f in policy.seen[1:3]] == [True, False]
+
+
 def test_watchdog_stops_within_a_tick_of_the_scan_going_stale_and_drives_on():
     rig = Rig()
     rig.run(0.1)

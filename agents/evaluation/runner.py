@@ -67,7 +67,6 @@ from worlds.tasks import MIXED_FAMILIES, TRAIN_SEEDS, TaskSampler, file_tasks, p
 from worlds.vector_env import NavigationVectorEnv
 
 Policy = Callable[[np.ndarray], np.ndarray]
-
 EVAL_FAMILIES = ("unseen", "dynamic", "movingai")
 HEADLINE_EPISODES = 500
 """episodes per evaluation set for headline figures (a 95% Wilson interval of about +-1.3 points at 98%)"""

@@ -152,12 +152,17 @@ class Driver:
         self._lock = threading.RLock()
 
     def warm_up(self) -> None:
-        """One observation and one policy call on an empty scene, so that loading the compiled
-        perception and the first forward pass happen before any goal, not in the control loop."""
+        """One observation and one policy call on an empty scene (through the disc tracker when the
+        policy has one), so that loading the compiled perception and tracker and the first forward
+        pass happen before any goal, not in the control loop."""
         observer = LiveObserver(self.nav)
         observer.start(Workspace.around((0.0, 0.0), (3.0, 0.0), self.margin, self.cell), (3.0, 0.0))
         rays = np.full(len(self.nav.sensors.ray_angles), self.nav.sensors.max_range)
-        self.policy(observer.observe(rays, (0.0, 0.0, 0.0))[None, :])
+        obs = observer.observe(rays, (0.0, 0.0, 0.0))[None, :]
+        if self.act is None:
+            self.policy(obs)
+        else:  # the disc tracker's compiled loops too; the first goal's first action starts afresh
+            self.act(obs, rays[None, :], np.array([True]))
 
     # ------------------------------------------------------------------ commands
     def send(self, linear: float, angular: float) -> None:
