@@ -24,11 +24,16 @@ the heuristic driving) - the own map and its A* grow with the map.
     python -m bench.map_sizes --out results/navigation/map_sizes   # + JSON lines and a PNG
     python -m bench.map_sizes --map office.yaml arena.map --episodes 200   # per map file
     python -m bench.map_sizes --map tb3_world.yaml,radius=0.105            # a map for a smaller robot
+    python -m bench.map_sizes --known-map --out results/navigation/map_sizes_known_map   # given the map
 
 With ``--map`` it runs the same three on map files instead (static, the sets of
 :func:`agents.evaluation.make_map_eval_set`: a MovingAI map's own ``.scen`` pairs, else pairs drawn
 reachable for the robot, as ``navlearn evaluate --map``), one row per file and method; ``--episodes``
 is the most per file (a ``.scen`` with fewer pairs gives fewer, stated in the row).
+
+With ``--known-map`` the robot is given its map: the policy's subgoal (and the follower's) is
+planned on the true map instead of the map the robot builds from its readings
+(:meth:`agents.evaluation.policies.GreedyMLPPolicy.use_known_map`), what a user who has the map gets.
 
 Human lines, then one JSON object on the last line. Tune on ``--seed 1`` only; seed 0 is the test
 seed the figures are reported on.
@@ -274,6 +279,7 @@ def report_head(args: argparse.Namespace, methods: Methods, bench: str) -> dict:
         "episodes": args.episodes,
         "expert_episodes": args.expert_episodes,
         "shield": args.shield,
+        "known_map": args.known_map,
         "load_average_before": os.getloadavg()[0],
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
     }
@@ -398,21 +404,33 @@ def main(argv: list[str] | None = None) -> int:
         "does; with it the same network is also run without the shield (row 'network') and without the "
         "tracker (row 'one_frame'), paired",
     )
+    parser.add_argument(
+        "--known-map",
+        action="store_true",
+        help="give the robot its map (`navlearn evaluate --known-map`): the policy's, its network's and the "
+        "follower's subgoal planned on the true map instead of the robot's own map",
+    )
     args = parser.parse_args(argv)
 
-    policy = load_policy(args.policy)
+    def loaded():  # the policy as this run gives it its map
+        policy = load_policy(args.policy)
+        return policy.use_known_map() if args.known_map else policy
+
+    policy = loaded()
     nav = policy.nav_config()
     if args.max_steps:
         nav = replace(nav, max_steps=args.max_steps)
     if args.step_factor is not None:
         nav = replace(nav, step_factor=args.step_factor)
     previous = load_policy(args.previous) if args.previous else None
+    if previous is not None and args.known_map:
+        previous.use_known_map()
     if args.shield:  # both policies as `navlearn evaluate` runs them; the network alone beside them
         policy.use_shield(nav)
         if previous is not None:
             previous.use_shield(previous.nav_config())
-    network = load_policy(args.policy) if args.shield else None
-    one_frame = load_policy(args.policy).use_shield(nav, track_discs=False) if args.shield else None
+    network = loaded() if args.shield else None
+    one_frame = loaded().use_shield(nav, track_discs=False) if args.shield else None
     methods = Methods(policy, nav, previous, network, one_frame)
     if args.map:
         return run_maps(args, methods)
@@ -428,6 +446,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     print(f"{report['policy_name']} against map size: seed {args.seed}, {args.episodes} episodes per set "
           f"(expert {args.expert_episodes}), {step_rule(nav)}, "
+          f"{'the robot given the map' if args.known_map else 'the robot mapping as it goes'}, "
           f"load {report['load_average_before']:.1f}")  # fmt: skip
     print(header(f"{'size':>4} {'set':<8}"))
     for size in args.sizes:

@@ -32,6 +32,11 @@ max_range)``). The shipped ``pretrained/nnql`` reads at most 20 m: trained on ma
 network strays from its own-map subgoal towards the goal's bearing when the goal is much further,
 and on whole 512x512 maps it timed out (docs/navigation-by-size.md, section 11).
 
+``use_known_map`` gives the robot its map: a policy that plans its subgoal on the map it builds from its
+readings (``own_map``) plans it on the true map instead (``known_map``), the same inputs from another
+planner's map, for a user who has the map (``navlearn evaluate --known-map``; docs/navigation-by-size.md,
+section 16).
+
 ``load_policy_or_baseline`` also accepts the name ``heuristic``: the goal-seeking
 baseline of :mod:`worlds.heuristics`, for comparing a learned policy with it.
 """
@@ -149,6 +154,22 @@ class GreedyMLPPolicy:
         self.shield = None if nav is None else shield_for(nav, track_discs)
         return self
 
+    def use_known_map(self) -> GreedyMLPPolicy:
+        """Give the robot its map: the policy's subgoal is planned on the true map (``known_map``)
+        instead of the map it builds from its readings (``own_map``), as nav2's global planner plans
+        on map_server's map; returns the policy. The inputs are the same (the waypoint's distance and
+        bearing, the plan's length), only the planner's map changes; the range readings still drive
+        the network and its shield (call before :meth:`use_shield` and :meth:`nav_config`). A
+        ValueError for a policy that observes no own-map subgoal (nothing would change)."""
+        subgoal = (self.observation or {}).get("observation.subgoal")
+        if subgoal != "own_map":
+            raise ValueError(
+                f"{self!r} observes subgoal={subgoal!r}: a known map changes only a policy that plans "
+                "its subgoal on its own map (observation.subgoal='own_map')"
+            )
+        self.observation = {**self.observation, "observation.subgoal": "known_map"}
+        return self
+
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         """The actions for one frame: the shield's one-frame choice (no disc tracker, which needs
         the scans and the robots' history: :meth:`scan_actor`)."""
@@ -164,8 +185,10 @@ class GreedyMLPPolicy:
 
     def __repr__(self) -> str:
         shield = ", shielded" if self.shield is not None else ""
+        known = ", known map" if (self.observation or {}).get("observation.subgoal") == "known_map" else ""
         return (
-            f"{type(self).__name__}(model={self.model!r}, kind={self.kind!r}, version={self.version}{shield})"
+            f"{type(self).__name__}(model={self.model!r}, kind={self.kind!r}, "
+            f"version={self.version}{shield}{known})"
         )
 
 

@@ -119,6 +119,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "network's own choice (default: shielded)",
     )
     parser.add_argument(
+        "--known-map",
+        action="store_true",
+        help="give the robot its map, as nav2's planner is given map_server's: a learned policy's subgoal "
+        "is planned on the true map (the generated map or your --map file) instead of on the map the "
+        "robot builds from its range readings, which still drive the network and its shield. For "
+        "policies that observe an own-map subgoal, as the shipped ones do (default: the robot does "
+        "not know the map)",
+    )
+    parser.add_argument(
         "--out", help="directory for eval.json and the path plots (with --compare: compare.json)"
     )
     add_options(parser, EnvConfig, "NAVLEARN_ENV", ENV_TITLE + "; default: the env the policy records")
@@ -171,6 +180,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"navlearn evaluate: {exc}", file=sys.stderr)
             return 2
         if getattr(policy, "env", None) is not None or args.opt_env:
+            if args.known_map:
+                print(f"navlearn evaluate: {spec}: --known-map is for navlearn's robot, not a Gymnasium env",
+                      file=sys.stderr)  # fmt: skip
+                return 2
             policies.append(policy)
             continue
         if isinstance(policy, GreedyMLPPolicy) and policy.architecture["n_actions"] != config.robot.n_actions:
@@ -180,6 +193,12 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
             return 2
+        if isinstance(policy, GreedyMLPPolicy) and args.known_map:
+            try:
+                policy.use_known_map()
+            except ValueError as exc:
+                print(f"navlearn evaluate: {spec}: --known-map: {exc}", file=sys.stderr)
+                return 2
         policies.append(policy)
         # a saved policy's env observes what it was trained to (the observation in its config.json)
         configs.append(policy.nav_config(config) if isinstance(policy, GreedyMLPPolicy) else config)
@@ -243,6 +262,7 @@ def run(args: argparse.Namespace) -> int:
             "model": getattr(policy, "model", args.policy),
             "version": getattr(policy, "version", 0),
             "shield": getattr(policy, "shield", None) is not None,
+            "known_map": args.known_map,
             "seed": args.seed,
             **result.to_dict(),
         }
