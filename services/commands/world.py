@@ -72,6 +72,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "rays, drawn as arcs, and the subgoal on the robot's own map, drawn as a star (--beams ignored)",
     )
     show.add_argument(
+        "--known-map",
+        action="store_true",
+        help="give the robot its map (as `navlearn evaluate --known-map`): the subgoal of a --policy, or "
+        "of --learning, is planned on the true map instead of the map the robot builds as it goes",
+    )
+    show.add_argument(
         "--patch",
         type=int,
         default=0,
@@ -130,7 +136,13 @@ def show_main(args: argparse.Namespace) -> int:
     from worlds.render import draw_patch, draw_robot
     from worlds.tasks import parse_map_spec
 
+    if args.known_map and not (args.policy or args.learning):
+        print("navlearn world show: --known-map needs a subgoal to plan: give --policy or --learning",
+              file=sys.stderr)  # fmt: skip
+        return 2
     observation = LEARNING_NAV.observation if args.learning else NavConfig().observation
+    if args.known_map and args.learning:
+        observation = replace(observation, subgoal="known_map")
     config = NavConfig(
         sensors=LEARNING_NAV.sensors if args.learning else replace(SensorConfig(), n_beams=args.beams),
         observation=replace(observation, patch_size=args.patch),
@@ -150,6 +162,8 @@ def show_main(args: argparse.Namespace) -> int:
             except PolicyFormatError as exc:
                 raise ValueError(str(exc)) from None
             if isinstance(policy, GreedyMLPPolicy):  # its env observes what it was trained to
+                if args.known_map:
+                    policy.use_known_map()
                 config = replace(policy.nav_config(config), obstacles=config.obstacles)
                 policy.use_shield(config if args.shield else None)
             driver = f"policy {args.policy}"
