@@ -97,6 +97,10 @@ def test_map_errors_are_one_line(tmp_path, capsys):
     assert main(["evaluate", "--policy", str(PRETRAINED), "--map", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "m.yaml" in err and "field 'image'" in err
+    unknown = ["evaluate", "--policy", "heuristic", "--map", str(office(tmp_path)), "--unknown", "maybe"]
+    assert main(unknown) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "unknown='maybe'" in err and "blocked, free" in err
 
 
 def test_world_show_draws_a_map_file(tmp_path, capsys):

@@ -59,8 +59,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     maps.add_argument(
         "--unknown",
-        choices=("blocked", "free"),
-        help="map_server cells of unknown occupancy (default blocked: nobody has seen them)",
+        metavar="{blocked,free}",
+        help="map_server cells of unknown occupancy (worlds.mapfiles.UNKNOWN; default blocked: nobody has "
+        "seen them)",
     )
     maps.add_argument(
         "--pairs",
