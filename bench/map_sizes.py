@@ -76,6 +76,11 @@ def step_rule(nav: NavConfig) -> str:
     return f"step limit max({nav.max_steps}, ceil({nav.step_factor:g} x the A* path's steps))"
 
 
+def knowing(known_map: bool) -> str:
+    """What the robot knows of the map, in words (``--known-map``)."""
+    return "the robot given the map" if known_map else "the robot mapping as it goes"
+
+
 def discs_for(size: int) -> int:
     """Moving discs of the dynamic set at ``size`` cells a side: 4 up to 32 cells (the dynamic set's
     crowd, as on 16x16 maps), then 4 per 32x32 cells of area (9 at 48, 16 at 64)."""
@@ -293,7 +298,7 @@ def run_maps(args: argparse.Namespace, methods: Methods) -> int:
         "maps": {},
     }
     print(f"{report['policy_name']} on map files: seed {args.seed}, at most {args.episodes} episodes per "
-          f"map (expert {args.expert_episodes}), {report['step_rule']}, "
+          f"map (expert {args.expert_episodes}), {report['step_rule']}, {knowing(args.known_map)}, "
           f"load {report['load_average_before']:.1f}")  # fmt: skip
     sets = []
     for spec in args.map:
@@ -446,7 +451,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     print(f"{report['policy_name']} against map size: seed {args.seed}, {args.episodes} episodes per set "
           f"(expert {args.expert_episodes}), {step_rule(nav)}, "
-          f"{'the robot given the map' if args.known_map else 'the robot mapping as it goes'}, "
+          f"{knowing(args.known_map)}, "
           f"load {report['load_average_before']:.1f}")  # fmt: skip
     print(header(f"{'size':>4} {'set':<8}"))
     for size in args.sizes:

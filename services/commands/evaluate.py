@@ -122,11 +122,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--known-map",
         action="store_true",
-        help="give the robot its map, as nav2's planner is given map_server's: a learned policy's subgoal "
-        "is planned on the true map (the generated map or your --map file) instead of on the map the "
-        "robot builds from its range readings, which still drive the network and its shield. For "
-        "policies that observe an own-map subgoal, as the shipped ones do (default: the robot does "
-        "not know the map)",
+        help="give the robot its map, as a robot localised in it: a learned policy's subgoal is planned on "
+        "the true map (the generated map or your --map file) instead of on the map the robot builds from "
+        "its range readings, which still drive the network and its shield. For policies that observe an "
+        "own-map subgoal, as the shipped ones do; it shortens paths on maps of about 1 m cells, not on "
+        "0.1 m map_server maps (docs/navigation-by-size.md section 16; default: the robot does not know "
+        "the map)",
     )
     parser.add_argument(
         "--out", help="directory for eval.json and the path plots (with --compare: compare.json)"
