@@ -38,6 +38,7 @@ def test_a_known_map_changes_the_subgoals_map_and_nothing_else(tmp_path):
     with pytest.raises(ValueError, match=r"subgoal='none'.*observation\.subgoal='own_map'"):
         load_policy(tmp_path / "old").use_known_map()
     assert main(["evaluate", "--policy", str(tmp_path / "old"), "--known-map", "--episodes", "2"]) == 2
+    assert main(["evaluate", "--policy", "heuristic", "--known-map", "--episodes", "2"]) == 2
 
 
 def test_evaluate_with_the_known_map_drives_shorter_paths_on_the_same_episodes(tmp_path, capsys):
@@ -65,3 +66,6 @@ def test_world_show_draws_a_run_given_the_map(tmp_path, capsys):
     assert "policy" in capsys.readouterr().out
     assert main(["world", "show", "--known-map", "--out", str(tmp_path / "none.png")]) == 2
     assert "--known-map needs a subgoal to plan" in capsys.readouterr().err
+    heuristic = ["world", "show", "--policy", "heuristic", "--known-map"]
+    assert main([*heuristic, "--out", str(tmp_path / "h.png")]) == 2
+    assert "the heuristic plans none" in capsys.readouterr().err

@@ -210,6 +210,10 @@ def run(args: argparse.Namespace) -> int:
             except ValueError as exc:
                 print(f"navlearn evaluate: {spec}: {exc}", file=sys.stderr)
                 return 2
+    if args.known_map and not any(isinstance(p, GreedyMLPPolicy) for p in policies):
+        print("navlearn evaluate: --known-map changes a learned policy's subgoal; the heuristic plans none",
+              file=sys.stderr)  # fmt: skip
+        return 2
     if len(configs) < len(policies):  # a Gymnasium env: its own episodes, not navlearn's map sets
         return evaluate_on_env(args, specs, policies)
     try:

@@ -166,6 +166,8 @@ def show_main(args: argparse.Namespace) -> int:
                     policy.use_known_map()
                 config = replace(policy.nav_config(config), obstacles=config.obstacles)
                 policy.use_shield(config if args.shield else None)
+            elif args.known_map and not args.learning:
+                raise ValueError("--known-map changes a learned policy's subgoal; the heuristic plans none")
             driver = f"policy {args.policy}"
         sampler = parse_map_spec(args.map)
         for mf in sampler.maps:
