@@ -3,7 +3,6 @@ shipped policy's subgoal planned on the true map instead of its own, through the
 
 from __future__ import annotations
 
-import itertools
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -13,6 +12,7 @@ import pytest
 
 from agents.evaluation.policies import load_policy, save_policy
 from services.cli import main
+from tests.test_evaluation_policies import ARCH, _weights
 from worlds.config import LEARNING_NAV
 from worlds.perception import observation_dim
 
@@ -28,13 +28,7 @@ def test_a_known_map_changes_the_subgoals_map_and_nothing_else(tmp_path):
     assert observation_dim(known) == policy.obs_dim and "known map" in repr(policy)
     policy.use_shield(known)  # the shield takes the policy in its new observation
     # a policy that plans no subgoal (saved before observation records: 8 beams and the goal)
-    sizes, rng = [11, 16, 5], np.random.default_rng(0)
-    weights = {}
-    for k, (i, o) in enumerate(itertools.pairwise(sizes)):
-        weights[f"{2 * k}.weight"] = rng.normal(size=(o, i)).astype(np.float32)
-        weights[f"{2 * k}.bias"] = rng.normal(size=o).astype(np.float32)
-    arch = {"obs_dim": 11, "n_actions": 5, "hidden_sizes": [16], "activation": "relu"}
-    save_policy(tmp_path / "old", weights, arch, model="nnql", kind="q_network")
+    save_policy(tmp_path / "old", _weights(np.random.default_rng(0)), ARCH, model="nnql", kind="q_network")
     with pytest.raises(ValueError, match=r"subgoal='none'.*observation\.subgoal='own_map'"):
         load_policy(tmp_path / "old").use_known_map()
     assert main(["evaluate", "--policy", str(tmp_path / "old"), "--known-map", "--episodes", "2"]) == 2

@@ -156,8 +156,8 @@ class GreedyMLPPolicy:
 
     def use_known_map(self) -> GreedyMLPPolicy:
         """Give the robot its map: the policy's subgoal is planned on the true map (``known_map``)
-        instead of the map it builds from its readings (``own_map``), as nav2's global planner plans
-        on map_server's map; returns the policy. The inputs are the same (the waypoint's distance and
+        instead of the map it builds from its readings (``own_map``), as a robot localised in its map
+        plans on it; returns the policy. The inputs are the same (the waypoint's distance and
         bearing, the plan's length), only the planner's map changes; the range readings still drive
         the network and its shield (call before :meth:`use_shield` and :meth:`nav_config`). A
         ValueError for a policy that observes no own-map subgoal (nothing would change)."""
